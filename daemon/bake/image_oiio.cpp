@@ -1,0 +1,1 @@
+extern "C" { int lc_image_stub; }

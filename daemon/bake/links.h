@@ -1,0 +1,40 @@
+/* links: for each cache, the links_per_cache most important hierarchy nodes by visible
+ * solid angle, chosen by refining a cut top-down (the node with the largest estimated
+ * visible solid angle is split first). Visibility by Embree shadow rays to sampled surfels.
+ * Each link stores node, factor = visible solid angle / (pi * node area), the mean
+ * direction and a cone whose band-1 ratio matches the spread of the visible samples. */
+#ifndef LC_LINKS_H
+#define LC_LINKS_H
+#include <stdint.h>
+
+#include "bake/hierarchy.h"
+#include "bake/rt.h"
+#include "lcb/lcb.h"
+
+typedef struct lc_link_params {
+    uint32_t links_per_cache; /* n_L */
+    uint32_t node_samples;    /* surfels sampled per node while refining */
+    uint32_t final_samples;   /* surfels sampled per linked node for the final factor */
+    uint32_t sh_bands;        /* > 0: also project each link's transport into SH (LKSH) */
+    uint64_t seed;
+} lc_link_params;
+
+typedef struct lc_link_stats {
+    double mean_links_used;   /* links with factor > 0, mean over caches */
+    double mean_solid_angle;  /* sum of link solid angles per cache, mean */
+    uint64_t rays;
+} lc_link_stats;
+
+/* links: n_caches * links_per_cache records (caller allocates). link_sh: NULL or
+ * n_caches * links_per_cache * sh_bands^2 halves. Caches flagged LC_CACHE_INSIDE get
+ * padding links only. Deterministic for a seed regardless of thread count. */
+int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_surfels, const lc_hierarchy *h,
+                   const lc_lcb_cache *caches, uint32_t n_caches, const lc_link_params *params, lc_lcb_link *links,
+                   uint16_t *link_sh, lc_link_stats *stats);
+
+/* Visible solid angle of surfel s seen from point p (disc approximation, no visibility):
+ * cos(theta_s) * 2 pi (1 - d / sqrt(d^2 + A / pi)); 0 when the surfel faces away.
+ * For texel caches (normal n != 0) also 0 when the surfel lies behind the cache's plane. */
+double lc_links_surfel_solid_angle(const lc_lcb_surfel *s, const float p[3], const float n[3]);
+
+#endif

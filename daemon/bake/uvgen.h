@@ -1,0 +1,34 @@
+/* uvgen: lightmap UVs. Splits the mesh into charts (by normal and connectivity), projects
+ * each chart to its plane, packs all charts into one atlas with padding, and rewrites the
+ * mesh with vertices split along chart seams and mesh.uv1 filled. */
+#ifndef LC_UVGEN_H
+#define LC_UVGEN_H
+#include <stddef.h>
+#include <stdint.h>
+
+#include "bake/scene.h"
+
+typedef struct lc_uv_params {
+    double texels_per_metre; /* > 0: density mode; the atlas grows to fit */
+    uint32_t atlas_size;     /* > 0 (and density 0): fit into atlas_size x atlas_size, density chosen */
+    uint32_t padding;        /* empty texels between charts and at the border, >= 2 */
+    double chart_angle_deg;  /* max normal deviation from the chart's seed normal, (0, 90) */
+} lc_uv_params;
+
+typedef struct lc_uv_stats {
+    uint32_t n_charts;
+    uint32_t width, height;  /* atlas in texels */
+    double texels_per_metre; /* the density used */
+    double usage;            /* texels covered by charts' footprints / atlas texels, in (0, 1] */
+} lc_uv_stats;
+
+/* Generates lightmap UVs (replacing any existing uv1). Returns 0 or -1 with err set (e.g.
+ * the charts cannot fit the requested atlas even at the minimum density). */
+int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char *err, size_t errlen);
+
+/* For meshes that already have uv1 from the asset: chooses the atlas size for the density or
+ * takes atlas_size, and fills stats (usage from rasterized coverage). */
+int lc_uvgen_measure(const lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char *err,
+                     size_t errlen);
+
+#endif

@@ -1,0 +1,271 @@
+/* lcb: the bake file (.lcb) — a versioned, checksummed, mmap-able container.
+ *
+ * Layout (all little-endian):
+ *   [0, 64)            lc_lcb_header
+ *   [64, 64+48*n)      section table, n = header.section_count
+ *   sections           each at a 64-byte aligned offset, covered by its CRC-32
+ * A reader rejects: wrong magic, another major version, a header/table CRC mismatch, a
+ * section outside the file or misaligned or overlapping, a section CRC mismatch (named),
+ * a record size or count that disagrees with the metadata, and any index that points
+ * outside its target array. After lc_lcb_open() succeeds every index in the view is valid
+ * and every float is finite, so consumers need no further checks.
+ *
+ * Sections (fourcc, record):
+ *   META  JSON text: settings, statistics, lightmap/grid dimensions, initial lights, assets
+ *   MATL  lc_lcb_material      per material
+ *   VERT  lc_lcb_vertex        static geometry vertices (with lightmap UV)
+ *   TRIS  lc_lcb_triangle      static geometry triangles
+ *   SURF  lc_lcb_surfel        surfels, in hierarchy leaf order
+ *   NODE  lc_lcb_node          hierarchy, BFS order: node 0 = root, children after parents
+ *   LEVL  uint32_t             BFS level start offsets into NODE (n_levels + 1 entries)
+ *   CACH  lc_lcb_cache         caches: texel caches first, then grid caches
+ *   LMAP  uint32_t             lightmap W*H, row 0 = top (v = 0): cache index or LC_NONE;
+ *                              a texel owns its cache when cache.index == texel index,
+ *                              otherwise it is a dilated copy of a neighbour
+ *   GRID  uint32_t             grid samples dims[0]*dims[1]*dims[2] (x fastest): cache index
+ *   LINK  lc_lcb_link          links_per_cache per cache, cache-major
+ *   LKSH  uint16_t (half)      optional: per link, bands^2 projected SH transport
+ *   ASET  lc_lcb_asset         dynamic-object assets
+ *   AVRT  lc_lcb_asset_vertex  asset vertices (asset-local, metres)
+ *   AIDX  uint32_t[3]          asset triangles (indices relative to the asset's first vertex)
+ */
+#ifndef LC_LCB_H
+#define LC_LCB_H
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#define LC_LCB_MAGIC "LUCENTB\x1a"
+#define LC_LCB_VERSION_MAJOR 1
+#define LC_LCB_VERSION_MINOR 0
+#define LC_LCB_ALIGN 64
+#define LC_LCB_MAX_SECTIONS 64
+#ifndef LC_NONE
+#define LC_NONE 0xFFFFFFFFu
+#endif
+
+typedef struct lc_lcb_header {
+    char magic[8];
+    uint16_t version_major, version_minor;
+    uint32_t section_count;
+    uint64_t file_size;
+    uint64_t table_offset; /* 64 */
+    uint32_t table_crc;    /* CRC-32 of the section table */
+    uint32_t flags;        /* 0 */
+    uint8_t reserved[20];
+    uint32_t header_crc;   /* CRC-32 of bytes [0, 60) */
+} lc_lcb_header;
+
+typedef struct lc_lcb_section {
+    char id[4];
+    uint32_t record_size; /* bytes per record; 1 for text */
+    uint64_t offset;      /* from file start, multiple of LC_LCB_ALIGN */
+    uint64_t size;        /* bytes = count * record_size */
+    uint64_t count;
+    uint32_t crc;         /* CRC-32 of the section bytes */
+    uint32_t flags;
+    uint8_t reserved[8];
+} lc_lcb_section;
+
+typedef struct lc_lcb_material {
+    char name[64];       /* NUL-terminated */
+    float base_color[3]; /* linear */
+    float emission[3];   /* nits */
+    uint32_t flags;      /* bit 0: textured base colour */
+    uint32_t reserved;
+} lc_lcb_material;
+
+typedef struct lc_lcb_vertex {
+    float position[3];
+    float normal[3];
+    float uv1[2]; /* lightmap UV, glTF convention */
+} lc_lcb_vertex;
+
+typedef struct lc_lcb_triangle {
+    uint32_t v[3];
+    uint32_t material;
+} lc_lcb_triangle;
+
+typedef struct lc_lcb_surfel {
+    float position[3];
+    float normal[3];
+    float albedo[3];
+    float emission[3]; /* nits, as baked (material emission x texture) */
+    float area;        /* m^2 */
+    uint32_t material;
+    uint32_t cache;    /* nearest cache (for multi-bounce feedback), LC_NONE if none */
+    uint32_t reserved;
+} lc_lcb_surfel;
+
+typedef struct lc_lcb_node {
+    float center[3]; /* area-weighted centroid */
+    float area;      /* sum of surfel areas below */
+    float normal[3]; /* area-weighted mean normal, NOT renormalised: length = coherence */
+    float radius;    /* bounding sphere radius around center */
+    uint32_t child[2];     /* LC_NONE for leaves */
+    uint32_t first_surfel; /* subtree surfels are [first_surfel, first_surfel + surfel_count) */
+    uint32_t surfel_count;
+} lc_lcb_node;
+
+enum {
+    LC_CACHE_TEXEL = 1u << 0,
+    LC_CACHE_GRID = 1u << 1,
+    LC_CACHE_MOVED = 1u << 2,  /* relocated out of geometry */
+    LC_CACHE_INSIDE = 1u << 3, /* inside geometry and could not be moved: no links */
+};
+
+typedef struct lc_lcb_cache {
+    float position[3];
+    float normal[3]; /* texel caches: surface normal; grid caches: zero (full sphere) */
+    float albedo[3]; /* texel caches: surface albedo; grid: zero */
+    uint32_t flags;
+    uint32_t index;  /* texel index (y*W + x) or grid sample index */
+    uint32_t reserved;
+} lc_lcb_cache;
+
+/* A link for runtime projection: cache radiance SH gains
+ *   L_lm += flux(node) * factor * h_l(cos alpha) * y_lm(dir)
+ * with h_l from lc_sh_cone_ratio(). factor = visible solid angle / (pi * node area).
+ * Padding links (when fewer visible nodes than links_per_cache) have factor 0, node 0. */
+typedef struct lc_lcb_link {
+    uint32_t node;
+    float factor;
+    uint32_t dir_cone; /* bits 0-11, 12-23: octahedral direction; bits 24-31: alpha/pi*255 */
+} lc_lcb_link;
+
+typedef struct lc_lcb_asset {
+    char name[64];
+    uint32_t first_vertex, vertex_count;
+    uint32_t first_triangle, triangle_count;
+    float bounds_min[3], bounds_max[3];
+    float albedo[3]; /* area-weighted mean */
+    uint32_t reserved;
+} lc_lcb_asset;
+
+typedef struct lc_lcb_asset_vertex {
+    float position[3];
+    float normal[3];
+    float albedo[3];
+} lc_lcb_asset_vertex;
+
+_Static_assert(sizeof(lc_lcb_header) == 64, "header layout");
+_Static_assert(sizeof(lc_lcb_section) == 48, "section layout");
+_Static_assert(sizeof(lc_lcb_material) == 96, "material layout");
+_Static_assert(sizeof(lc_lcb_vertex) == 32, "vertex layout");
+_Static_assert(sizeof(lc_lcb_triangle) == 16, "triangle layout");
+_Static_assert(sizeof(lc_lcb_surfel) == 64, "surfel layout");
+_Static_assert(sizeof(lc_lcb_node) == 48, "node layout");
+_Static_assert(sizeof(lc_lcb_cache) == 48, "cache layout");
+_Static_assert(sizeof(lc_lcb_link) == 12, "link layout");
+_Static_assert(sizeof(lc_lcb_asset) == 120, "asset layout");
+_Static_assert(sizeof(lc_lcb_asset_vertex) == 36, "asset vertex layout");
+
+/* --- link direction/cone packing ------------------------------------------------------- */
+
+/* Octahedral encoding of a unit vector to two 12-bit values. */
+static inline uint32_t lc_link_pack(const float dir[3], float alpha) {
+    float ax = fabsf(dir[0]), ay = fabsf(dir[1]), az = fabsf(dir[2]);
+    float s = ax + ay + az;
+    float u = s > 0 ? dir[0] / s : 0, v = s > 0 ? dir[1] / s : 0;
+    if (dir[2] < 0) {
+        float uu = (1 - fabsf(v)) * (u >= 0 ? 1 : -1);
+        float vv = (1 - fabsf(u)) * (v >= 0 ? 1 : -1);
+        u = uu;
+        v = vv;
+    }
+    uint32_t qu = (uint32_t)lrintf((u * 0.5f + 0.5f) * 4095.0f);
+    uint32_t qv = (uint32_t)lrintf((v * 0.5f + 0.5f) * 4095.0f);
+    if (alpha < 0) alpha = 0;
+    if (alpha > (float)M_PI) alpha = (float)M_PI;
+    uint32_t qa = (uint32_t)lrintf(alpha / (float)M_PI * 255.0f);
+    return (qu & 0xFFFu) | (qv & 0xFFFu) << 12 | qa << 24;
+}
+
+static inline void lc_link_unpack(uint32_t packed, float dir[3], float *cos_alpha) {
+    float u = (float)(packed & 0xFFFu) / 4095.0f * 2.0f - 1.0f;
+    float v = (float)((packed >> 12) & 0xFFFu) / 4095.0f * 2.0f - 1.0f;
+    float z = 1.0f - fabsf(u) - fabsf(v);
+    if (z < 0) {
+        float uu = (1 - fabsf(v)) * (u >= 0 ? 1 : -1);
+        float vv = (1 - fabsf(u)) * (v >= 0 ? 1 : -1);
+        u = uu;
+        v = vv;
+    }
+    float len = sqrtf(u * u + v * v + z * z);
+    dir[0] = u / len;
+    dir[1] = v / len;
+    dir[2] = z / len;
+    *cos_alpha = cosf((float)(packed >> 24) / 255.0f * (float)M_PI);
+}
+
+/* --- writer ------------------------------------------------------------------------------ */
+
+typedef struct lc_lcb_writer lc_lcb_writer;
+
+lc_lcb_writer *lc_lcb_writer_create(void);
+/* Adds a section. `data` is borrowed until lc_lcb_writer_write() returns. size must equal
+ * count * record_size. Returns 0, or -1 (too many sections, duplicate id). */
+int lc_lcb_writer_add(lc_lcb_writer *w, const char id[4], uint32_t record_size, const void *data,
+                      uint64_t count);
+/* Writes the file atomically (temp + fsync + rename). Returns 0 or -1 with err set. */
+int lc_lcb_writer_write(lc_lcb_writer *w, const char *path, char *err, size_t errlen);
+void lc_lcb_writer_release(lc_lcb_writer *w);
+
+/* --- reader ------------------------------------------------------------------------------ */
+
+typedef struct lc_lcb lc_lcb; /* owns the mapping and the parsed metadata */
+
+typedef struct lc_lcb_view {
+    uint16_t version_major, version_minor;
+    const char *meta_json; /* NUL-terminated copy of META */
+    size_t meta_len;
+    uint32_t sh_bands;     /* default output bands from the bake settings */
+    const lc_lcb_material *materials;
+    uint32_t n_materials;
+    const lc_lcb_vertex *vertices;
+    uint32_t n_vertices;
+    const lc_lcb_triangle *triangles;
+    uint32_t n_triangles;
+    const lc_lcb_surfel *surfels;
+    uint32_t n_surfels;
+    const lc_lcb_node *nodes;
+    uint32_t n_nodes;
+    const uint32_t *levels; /* n_levels + 1 offsets */
+    uint32_t n_levels;
+    const lc_lcb_cache *caches;
+    uint32_t n_caches, n_texel_caches; /* texel caches are [0, n_texel_caches) */
+    const uint32_t *lightmap;
+    uint32_t lightmap_width, lightmap_height;
+    const uint32_t *grid;
+    uint32_t grid_dims[3];
+    float grid_origin[3]; /* position of sample (0,0,0); sample i at origin + i * cell */
+    float grid_cell;
+    const lc_lcb_link *links;
+    uint32_t links_per_cache;
+    const uint16_t *link_sh; /* NULL when absent */
+    uint32_t link_sh_bands;
+    const lc_lcb_asset *assets;
+    uint32_t n_assets;
+    const lc_lcb_asset_vertex *asset_vertices;
+    uint32_t n_asset_vertices;
+    const uint32_t *asset_indices; /* 3 per asset triangle */
+    uint32_t n_asset_triangles;
+} lc_lcb_view;
+
+/* Maps and validates a bake file. Errors name the section and the check that failed, e.g.
+ * "LINK: CRC mismatch (file corrupted?)". Returns 0 or -1 with err set; never crashes on
+ * any input. */
+int lc_lcb_open(const char *path, lc_lcb **out, char *err, size_t errlen);
+/* Same, over a caller buffer that must outlive the handle (used by fuzzing and tests). */
+int lc_lcb_open_memory(const void *data, size_t len, lc_lcb **out, char *err, size_t errlen);
+const lc_lcb_view *lc_lcb_get(const lc_lcb *f);
+/* Section table access for `info`. */
+uint32_t lc_lcb_section_count(const lc_lcb *f);
+const lc_lcb_section *lc_lcb_section_at(const lc_lcb *f, uint32_t i);
+void lc_lcb_close(lc_lcb *f);
+
+/* `lucent-bake info`: prints counts, sizes per section and settings (human or JSON). */
+#include <stdio.h>
+void lc_lcb_print_info(const lc_lcb *f, const char *path, int json, FILE *out);
+
+#endif
