@@ -1,1 +1,775 @@
-/* stub: being written */
+/* bake: the lucent-bake pipeline and its option table. Runs on the main thread; the stages
+ * parallelise internally (lc_parallel_for, Embree's TBB pool). */
+#include "bake/bake.h"
+
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <time.h>
+
+#include "bake/grid.h"
+#include "bake/hierarchy.h"
+#include "bake/links.h"
+#include "bake/relocate.h"
+#include "bake/rt.h"
+#include "bake/scene.h"
+#include "bake/surfels.h"
+#include "bake/texels.h"
+#include "bake/uvgen.h"
+#include "lcb/lcb.h"
+#include "util/fsutil.h"
+#include "util/log.h"
+#include "util/parallel.h"
+#include "util/progress.h"
+#include "util/vec.h"
+
+#define LC_BAKE_VERSION "0.1.0"
+
+/* --- options ---------------------------------------------------------------------------- */
+
+static int bake_add_asset(void *settings, const char *value, char *err, size_t errlen) {
+    lc_bake_settings *s = settings;
+    const char *eq = strchr(value, '=');
+    if (!eq || eq == value || !eq[1]) {
+        lc_set_err(err, errlen, "--asset: expected NAME=PATH, got '%s'", value);
+        return -1;
+    }
+    size_t nlen = (size_t)(eq - value);
+    if (nlen >= sizeof s->assets[0].name || strlen(eq + 1) >= sizeof s->assets[0].path) {
+        lc_set_err(err, errlen, "--asset: name (max 63) or path (max %d) too long", LC_BAKE_PATH_MAX - 1);
+        return -1;
+    }
+    for (size_t i = 0; i < nlen; i++) {
+        char c = value[i];
+        if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '-' ||
+              c == '.')) {
+            lc_set_err(err, errlen, "--asset: name '%.*s' may only use letters, digits, '_', '-', '.'", (int)nlen,
+                       value);
+            return -1;
+        }
+    }
+    if (s->n_assets >= LC_BAKE_MAX_ASSETS) {
+        lc_set_err(err, errlen, "--asset: at most %d assets", LC_BAKE_MAX_ASSETS);
+        return -1;
+    }
+    for (int i = 0; i < s->n_assets; i++)
+        if (strlen(s->assets[i].name) == nlen && strncmp(s->assets[i].name, value, nlen) == 0) {
+            lc_set_err(err, errlen, "--asset: name '%.*s' given twice", (int)nlen, value);
+            return -1;
+        }
+    lc_bake_asset_arg *a = &s->assets[s->n_assets++];
+    memcpy(a->name, value, nlen);
+    a->name[nlen] = 0;
+    snprintf(a->path, sizeof a->path, "%s", eq + 1);
+    return 0;
+}
+
+#define OFF(f) offsetof(lc_bake_settings, f)
+static const lc_opt bake_options[] = {
+    {"output", LC_OPT_STRING, OFF(output), 1, LC_BAKE_PATH_MAX, NULL, NULL,
+     "output bake file (default: input name with .lcb)", "PATH", NULL},
+    {"glb", LC_OPT_STRING, OFF(glb), 0, LC_BAKE_PATH_MAX, NULL, NULL,
+     "also write the scene with lightmap UVs as binary glTF for viewers", "PATH", NULL},
+    {"quality", LC_OPT_ENUM, OFF(quality), 0, 0, "moderate", "draft|moderate|high",
+     "preset for every parameter below (flags given explicitly win)", NULL, NULL},
+    {"scale", LC_OPT_FLOAT, OFF(scale), 1e-9, 1e6, "1", NULL, "multiply positions (scene units -> metres)", NULL,
+     NULL},
+    {"flip-winding", LC_OPT_BOOL, OFF(flip_winding), 0, 1, "false", NULL, "treat clockwise faces as front faces",
+     NULL, NULL},
+    {"texel-density", LC_OPT_FLOAT, OFF(texel_density), 0, 10000, "0", NULL,
+     "lightmap texels per metre (0 = fit --atlas-size)", NULL, NULL},
+    {"atlas-size", LC_OPT_INT, OFF(atlas_size), 16, 8192, "128", NULL, "lightmap atlas width and height in texels",
+     NULL, NULL},
+    {"padding", LC_OPT_INT, OFF(padding), 2, 16, "2", NULL, "empty texels between lightmap charts", NULL, NULL},
+    {"chart-angle", LC_OPT_FLOAT, OFF(chart_angle), 1, 89, "45", NULL, "max normal deviation inside a chart (degrees)",
+     NULL, NULL},
+    {"dilate", LC_OPT_INT, OFF(dilate), 0, 16, "2", NULL, "lightmap seam dilation passes", NULL, NULL},
+    {"surfels", LC_OPT_INT, OFF(surfels), 16, 4194304, "32768", NULL, "number of surfels", NULL, NULL},
+    {"relax", LC_OPT_INT, OFF(relax), 0, 64, "4", NULL, "surfel relaxation iterations", NULL, NULL},
+    {"hierarchy", LC_OPT_ENUM, OFF(hierarchy), 0, 0, "aac", "aac|kdtree",
+     "surfel hierarchy: agglomerative clustering (PIC metric) or kd-tree", NULL, NULL},
+    {"links", LC_OPT_INT, OFF(links), 1, 1024, "128", NULL, "links per cache (n_L)", NULL, NULL},
+    {"node-samples", LC_OPT_INT, OFF(node_samples), 1, 256, "8", NULL,
+     "visibility rays per node while refining the cut", NULL, NULL},
+    {"final-samples", LC_OPT_INT, OFF(final_samples), 1, 1024, "16", NULL,
+     "visibility rays per linked node for its final factor", NULL, NULL},
+    {"bands", LC_OPT_INT, OFF(bands), 1, 8, "3", NULL, "SH bands of the output caches", NULL, NULL},
+    {"link-sh", LC_OPT_BOOL, OFF(link_sh), 0, 1, "false", NULL,
+     "also store each link's transport projected into --bands SH (LKSH)", NULL, NULL},
+    {"grid-cell", LC_OPT_FLOAT, OFF(grid_cell), 0, 1e4, "0", NULL,
+     "SH grid spacing in metres (0 = from --grid-max-dim)", NULL, NULL},
+    {"grid-max-dim", LC_OPT_INT, OFF(grid_max_dim), 2, 512, "24", NULL, "SH grid samples along the longest axis",
+     NULL, NULL},
+    {"grid-max-samples", LC_OPT_INT, OFF(grid_max_samples), 8, 4194304, "262144", NULL,
+     "cap on SH grid samples", NULL, NULL},
+    {"reloc-rays", LC_OPT_INT, OFF(reloc_rays), 4, 1024, "32", NULL,
+     "test rays per cache for moving caches out of geometry", NULL, NULL},
+    {"reloc-offset", LC_OPT_FLOAT, OFF(reloc_offset), 0, 1, "0.005", NULL,
+     "metres past the back face a moved cache ends", NULL, NULL},
+    {"asset", LC_OPT_CALLBACK, 0, 0, 0, NULL, NULL,
+     "bake a dynamic-object asset (repeatable)", "NAME=PATH", bake_add_asset},
+    {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "random seed (same seed, same bytes)", NULL, NULL},
+    {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", NULL, NULL},
+    {"stats-json", LC_OPT_STRING, OFF(stats_json), 0, LC_BAKE_PATH_MAX, NULL, NULL,
+     "write per-stage timings, peak memory and sizes as JSON", "PATH", NULL},
+    {"quiet", LC_OPT_BOOL, OFF(quiet), 0, 1, "false", NULL, "no progress output", NULL, NULL},
+    {NULL, 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL},
+};
+#undef OFF
+
+const lc_opt *lc_bake_options(void) { return bake_options; }
+
+void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
+    /* moderate ~ the paper's moderate setting (32k surfels, 128 links, 3 bands);
+     * high ~ its high setting (128k surfels, 254 links, 4 bands). Caches stay the same, as
+     * in the paper, so the two presets differ in transport detail, not lightmap resolution. */
+    typedef struct {
+        int atlas, surfels, links, bands, node_samples, final_samples, grid_max_dim, relax, reloc_rays;
+    } bake_preset;
+    static const bake_preset presets[] = {
+        {64, 8192, 64, 2, 4, 8, 16, 2, 16},
+        {128, 32768, 128, 3, 8, 16, 24, 4, 32},
+        {128, 131072, 254, 4, 8, 16, 24, 4, 32},
+    };
+    const bake_preset *p = &presets[q];
+    s->quality = (int)q;
+    s->atlas_size = p->atlas;
+    s->surfels = p->surfels;
+    s->links = p->links;
+    s->bands = p->bands;
+    s->node_samples = p->node_samples;
+    s->final_samples = p->final_samples;
+    s->grid_max_dim = p->grid_max_dim;
+    s->relax = p->relax;
+    s->reloc_rays = p->reloc_rays;
+}
+
+int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, char **positional, int max_pos,
+                       char *err, size_t errlen) {
+    memset(s, 0, sizeof *s);
+    if (lc_opt_defaults(bake_options, s, err, errlen) != 0) return -1;
+    /* First pass: only --quality, so the preset sits under every explicit flag. */
+    lc_bake_settings probe;
+    memset(&probe, 0, sizeof probe);
+    if (lc_opt_defaults(bake_options, &probe, err, errlen) != 0) return -1;
+    char *scratch[256];
+    int n = lc_opt_parse(bake_options, &probe, argc, argv, start, scratch, 256, err, errlen);
+    if (n < 0) return -1;
+    lc_bake_apply_preset(s, (lc_bake_quality)probe.quality);
+    int npos = lc_opt_parse(bake_options, s, argc, argv, start, positional, max_pos, err, errlen);
+    if (npos < 0) return -1;
+    if ((double)s->links > 2.0 * s->surfels - 1) {
+        lc_set_err(err, errlen, "--links %d exceeds the hierarchy's %d nodes (raise --surfels)", s->links,
+                   2 * s->surfels - 1);
+        return -1;
+    }
+    return npos;
+}
+
+/* --- helpers ------------------------------------------------------------------------------ */
+
+static double bake_now(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static void bake_stage(lc_bake_report *r, const char *name, double *t0) {
+    double t = bake_now();
+    if (r->n_stages < LC_BAKE_MAX_STAGES) {
+        r->stages[r->n_stages].name = name;
+        r->stages[r->n_stages].seconds = t - *t0;
+        r->n_stages++;
+    }
+    lc_debug("bake", "%s: %.3f s", name, t - *t0);
+    *t0 = t;
+}
+
+static cJSON *bake_vec3(const float v[3]) {
+    double d[3] = {v[0], v[1], v[2]};
+    return cJSON_CreateDoubleArray(d, 3);
+}
+
+/* Barycentrics of p projected onto triangle tri (clamped inside). */
+static void bake_barycentric(const lc_mesh *m, uint32_t tri, const float p[3], float *b1, float *b2) {
+    const uint32_t *ix = m->index + 3 * (size_t)tri;
+    lc_vec3 a = lc_v3_load(m->position + 3 * (size_t)ix[0]);
+    lc_vec3 e1 = lc_v3_sub(lc_v3_load(m->position + 3 * (size_t)ix[1]), a);
+    lc_vec3 e2 = lc_v3_sub(lc_v3_load(m->position + 3 * (size_t)ix[2]), a);
+    lc_vec3 d = lc_v3_sub(lc_v3_load(p), a);
+    double d11 = lc_v3_dot(e1, e1), d12 = lc_v3_dot(e1, e2), d22 = lc_v3_dot(e2, e2);
+    double d1 = lc_v3_dot(d, e1), d2 = lc_v3_dot(d, e2);
+    double den = d11 * d22 - d12 * d12;
+    double u = den > 0 ? (d22 * d1 - d12 * d2) / den : 0, v = den > 0 ? (d11 * d2 - d12 * d1) / den : 0;
+    if (u < 0) u = 0;
+    if (v < 0) v = 0;
+    if (u + v > 1) {
+        double s = u + v;
+        u /= s;
+        v /= s;
+    }
+    *b1 = (float)u;
+    *b2 = (float)v;
+}
+
+/* Each surfel's nearest cache: the lightmap texel under it (after dilation), else the
+ * nearest grid sample that is not inside geometry. Used by multi-bounce feedback. */
+static void bake_surfel_caches(const lc_scene *scene, const lc_lightmap *lm, const lc_grid *grid,
+                               const uint32_t *cell_cache, const lc_lcb_cache *caches, lc_lcb_surfel *surfels,
+                               const uint32_t *surfel_tri, uint32_t n_surfels) {
+    const lc_mesh *m = &scene->mesh;
+    for (uint32_t i = 0; i < n_surfels; i++) {
+        lc_lcb_surfel *s = &surfels[i];
+        uint32_t tri = surfel_tri[i];
+        float b1, b2;
+        bake_barycentric(m, tri, s->position, &b1, &b2);
+        const uint32_t *ix = m->index + 3 * (size_t)tri;
+        float b0 = 1 - b1 - b2;
+        float u = m->uv1[2 * ix[0]] * b0 + m->uv1[2 * ix[1]] * b1 + m->uv1[2 * ix[2]] * b2;
+        float v = m->uv1[2 * ix[0] + 1] * b0 + m->uv1[2 * ix[1] + 1] * b1 + m->uv1[2 * ix[2] + 1] * b2;
+        long x = lrintf(u * lm->width - 0.5f), y = lrintf(v * lm->height - 0.5f);
+        if (x < 0) x = 0;
+        if (y < 0) y = 0;
+        if (x >= (long)lm->width) x = lm->width - 1;
+        if (y >= (long)lm->height) y = lm->height - 1;
+        s->cache = lm->texel_cache[(size_t)y * lm->width + x];
+        if (s->cache != LC_NONE) continue;
+        long g[3];
+        for (int k = 0; k < 3; k++) {
+            g[k] = lrintf((s->position[k] - grid->origin[k]) / grid->cell);
+            if (g[k] < 0) g[k] = 0;
+            if (g[k] >= (long)grid->dims[k]) g[k] = grid->dims[k] - 1;
+        }
+        uint32_t c = cell_cache[(size_t)g[0] + grid->dims[0] * ((size_t)g[1] + grid->dims[1] * (size_t)g[2])];
+        s->cache = (caches[c].flags & LC_CACHE_INSIDE) ? LC_NONE : c;
+    }
+}
+
+/* Dynamic-object assets: geometry in asset space (scaled like the scene), per-vertex albedo. */
+typedef struct bake_assets {
+    lc_lcb_asset *assets;
+    lc_lcb_asset_vertex *vertices;
+    uint32_t *indices;
+    uint32_t n_assets, n_vertices, n_triangles;
+} bake_assets;
+
+static void bake_assets_release(bake_assets *a) {
+    free(a->assets);
+    free(a->vertices);
+    free(a->indices);
+    memset(a, 0, sizeof *a);
+}
+
+static int bake_assets_import(const lc_bake_settings *s, bake_assets *out, char *err, size_t errlen) {
+    memset(out, 0, sizeof *out);
+    if (s->n_assets == 0) return 0;
+    out->assets = calloc((size_t)s->n_assets, sizeof *out->assets);
+    if (!out->assets) goto oom;
+    for (int i = 0; i < s->n_assets; i++) {
+        lc_scene sc;
+        lc_import_params ip = {.scale = s->scale, .flip_winding = s->flip_winding};
+        char ierr[512];
+        if (lc_scene_import(s->assets[i].path, &ip, &sc, ierr, sizeof ierr) != 0) {
+            lc_set_err(err, errlen, "--asset %s: %s", s->assets[i].name, ierr);
+            goto err;
+        }
+        const lc_mesh *m = &sc.mesh;
+        uint64_t nv = (uint64_t)out->n_vertices + m->n_vertices, nt = (uint64_t)out->n_triangles + m->n_triangles;
+        if (nv > 16u << 20 || nt > 16u << 20) {
+            lc_scene_release(&sc);
+            lc_set_err(err, errlen, "--asset %s: assets exceed 16M vertices/triangles in total", s->assets[i].name);
+            goto err;
+        }
+        lc_lcb_asset_vertex *nvb = realloc(out->vertices, nv * sizeof *nvb);
+        uint32_t *nib = nvb ? realloc(out->indices, nt * 3 * sizeof *nib) : NULL;
+        if (nvb) out->vertices = nvb;
+        if (nib) out->indices = nib;
+        if (!nvb || !nib) {
+            lc_scene_release(&sc);
+            goto oom;
+        }
+        lc_lcb_asset *a = &out->assets[i];
+        snprintf(a->name, sizeof a->name, "%s", s->assets[i].name);
+        a->first_vertex = out->n_vertices;
+        a->vertex_count = m->n_vertices;
+        a->first_triangle = out->n_triangles;
+        a->triangle_count = m->n_triangles;
+        memcpy(a->bounds_min, sc.bounds_min, sizeof a->bounds_min);
+        memcpy(a->bounds_max, sc.bounds_max, sizeof a->bounds_max);
+        for (uint32_t v = 0; v < m->n_vertices; v++) {
+            lc_lcb_asset_vertex *dst = &out->vertices[a->first_vertex + v];
+            memcpy(dst->position, m->position + 3 * (size_t)v, sizeof dst->position);
+            memcpy(dst->normal, m->normal + 3 * (size_t)v, sizeof dst->normal);
+            dst->albedo[0] = dst->albedo[1] = dst->albedo[2] = 0;
+        }
+        double albedo_sum[3] = {0, 0, 0}, area_sum = 0;
+        for (uint32_t t = 0; t < m->n_triangles; t++) {
+            static const float corner_b[3][2] = {{0, 0}, {1, 0}, {0, 1}};
+            for (int k = 0; k < 3; k++) {
+                uint32_t v = m->index[3 * (size_t)t + k];
+                out->indices[3 * ((size_t)a->first_triangle + t) + k] = v;
+                lc_scene_albedo(&sc, t, corner_b[k][0], corner_b[k][1], out->vertices[a->first_vertex + v].albedo);
+            }
+            float c[3];
+            double area = lc_mesh_triangle_area(m, t);
+            lc_scene_albedo(&sc, t, 1.0f / 3, 1.0f / 3, c);
+            for (int k = 0; k < 3; k++) albedo_sum[k] += c[k] * area;
+            area_sum += area;
+        }
+        for (int k = 0; k < 3; k++) a->albedo[k] = area_sum > 0 ? (float)(albedo_sum[k] / area_sum) : 0;
+        out->n_vertices = (uint32_t)nv;
+        out->n_triangles = (uint32_t)nt;
+        out->n_assets = (uint32_t)i + 1;
+        lc_scene_release(&sc);
+    }
+    return 0;
+oom:
+    lc_set_err(err, errlen, "out of memory importing assets");
+err:
+    bake_assets_release(out);
+    return -1;
+}
+
+static const char *bake_light_type_name(lc_light_type t) {
+    switch (t) {
+    case LC_LIGHT_POINT: return "point";
+    case LC_LIGHT_SPOT: return "spot";
+    case LC_LIGHT_DIRECTIONAL: return "directional";
+    case LC_LIGHT_AREA: return "area";
+    }
+    return "point";
+}
+
+/* Initial state for the daemon: the scene's lights and emissive materials. */
+static cJSON *bake_lights_json(const lc_scene *scene) {
+    cJSON *arr = cJSON_CreateArray();
+    for (uint32_t i = 0; i < scene->n_lights; i++) {
+        const lc_light *l = &scene->lights[i];
+        cJSON *o = cJSON_CreateObject();
+        char id[80];
+        if (l->name[0]) snprintf(id, sizeof id, "%s", l->name);
+        else snprintf(id, sizeof id, "light%u", i);
+        cJSON_AddStringToObject(o, "id", id);
+        cJSON_AddStringToObject(o, "type", bake_light_type_name(l->type));
+        cJSON_AddItemToObject(o, "color", bake_vec3(l->color));
+        cJSON_AddNumberToObject(o, "intensity", l->intensity);
+        if (l->range > 0) cJSON_AddNumberToObject(o, "range", l->range);
+        if (l->type != LC_LIGHT_DIRECTIONAL) cJSON_AddItemToObject(o, "position", bake_vec3(l->position));
+        if (l->type != LC_LIGHT_POINT) cJSON_AddItemToObject(o, "direction", bake_vec3(l->direction));
+        if (l->type == LC_LIGHT_SPOT) {
+            cJSON_AddNumberToObject(o, "innerConeAngle", l->inner_cone);
+            cJSON_AddNumberToObject(o, "outerConeAngle", l->outer_cone);
+        }
+        cJSON_AddItemToArray(arr, o);
+    }
+    return arr;
+}
+
+static cJSON *bake_settings_json(const lc_bake_settings *s) {
+    cJSON *o = cJSON_CreateObject();
+    for (const lc_opt *opt = bake_options; opt->name; opt++) {
+        const char *field = (const char *)s + opt->offset;
+        /* Output paths and run-time knobs do not describe the bake's content. */
+        if (!strcmp(opt->name, "output") || !strcmp(opt->name, "glb") || !strcmp(opt->name, "stats-json") ||
+            !strcmp(opt->name, "threads") || !strcmp(opt->name, "quiet"))
+            continue;
+        switch (opt->type) {
+        case LC_OPT_INT: cJSON_AddNumberToObject(o, opt->name, *(const int *)field); break;
+        case LC_OPT_FLOAT: cJSON_AddNumberToObject(o, opt->name, *(const double *)field); break;
+        case LC_OPT_BOOL: cJSON_AddBoolToObject(o, opt->name, *(const int *)field); break;
+        case LC_OPT_STRING: cJSON_AddStringToObject(o, opt->name, field); break;
+        case LC_OPT_ENUM: {
+            int idx = *(const int *)field;
+            const char *p = opt->choices;
+            for (int k = 0; k < idx && p; k++) {
+                p = strchr(p, '|');
+                if (p) p++;
+            }
+            char buf[64];
+            size_t len = p ? strcspn(p, "|") : 0;
+            if (len >= sizeof buf) len = sizeof buf - 1;
+            memcpy(buf, p ? p : "", len);
+            buf[len] = 0;
+            cJSON_AddStringToObject(o, opt->name, buf);
+            break;
+        }
+        case LC_OPT_CALLBACK: break;
+        }
+    }
+    cJSON *assets = cJSON_CreateArray();
+    for (int i = 0; i < s->n_assets; i++) {
+        cJSON *a = cJSON_CreateObject();
+        cJSON_AddStringToObject(a, "name", s->assets[i].name);
+        cJSON_AddStringToObject(a, "path", s->assets[i].path);
+        cJSON_AddItemToArray(assets, a);
+    }
+    cJSON_AddItemToObject(o, "asset", assets);
+    return o;
+}
+
+/* --- the pipeline --------------------------------------------------------------------------- */
+
+int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, size_t errlen) {
+    int rc = 1;
+    lc_scene scene;
+    memset(&scene, 0, sizeof scene);
+    lc_rt *rt = NULL;
+    lc_lightmap lm;
+    memset(&lm, 0, sizeof lm);
+    lc_lcb_cache *caches = NULL;
+    uint32_t n_caches = 0, n_texel_caches = 0, *cell_cache = NULL;
+    lc_lcb_surfel *surfels = NULL;
+    uint32_t *surfel_tri = NULL, *perm = NULL, *tri_sorted = NULL, n_surfels = 0;
+    lc_hierarchy hier;
+    memset(&hier, 0, sizeof hier);
+    lc_lcb_link *links = NULL;
+    uint16_t *link_sh = NULL;
+    lc_lcb_material *mats = NULL;
+    lc_lcb_vertex *verts = NULL;
+    lc_lcb_triangle *tris = NULL;
+    bake_assets assets;
+    memset(&assets, 0, sizeof assets);
+    cJSON *meta = NULL;
+    char *meta_text = NULL;
+    lc_lcb_writer *w = NULL;
+    lc_bake_report local_report;
+    lc_bake_report *r = report ? report : &local_report;
+    memset(r, 0, sizeof *r);
+
+    lc_parallel_set_threads(s->threads);
+    lc_progress_set_enabled(!s->quiet);
+    double t_start = bake_now(), t0 = t_start;
+
+    /* 1. import */
+    lc_import_params ip = {.scale = s->scale, .flip_winding = s->flip_winding};
+    if (lc_scene_import(s->input, &ip, &scene, err, errlen) != 0) goto err;
+    if (scene.n_degenerate_dropped)
+        lc_warn("bake", "%u degenerate or non-finite triangles dropped", scene.n_degenerate_dropped);
+    if (!s->quiet)
+        lc_info("bake", "imported %s: %u triangles, %u materials, %u textures, %u lights", s->input,
+                scene.mesh.n_triangles, scene.n_materials, scene.n_textures, scene.n_lights);
+    bake_stage(r, "import", &t0);
+
+    /* 2. lightmap UVs */
+    lc_uv_params uvp = {.texels_per_metre = s->texel_density,
+                        .atlas_size = s->texel_density > 0 ? 0 : (uint32_t)s->atlas_size,
+                        .padding = (uint32_t)s->padding,
+                        .chart_angle_deg = s->chart_angle};
+    lc_uv_stats uvs;
+    memset(&uvs, 0, sizeof uvs);
+    if (scene.has_lightmap_uv) {
+        if (lc_uvgen_measure(&scene.mesh, &uvp, &uvs, err, errlen) != 0) goto err;
+    } else if (lc_uvgen(&scene.mesh, &uvp, &uvs, err, errlen) != 0) {
+        goto err;
+    }
+    if (!s->quiet)
+        lc_info("bake", "lightmap %ux%u, %u charts, %.1f texels/m, atlas usage %.1f%%", uvs.width, uvs.height,
+                uvs.n_charts, uvs.texels_per_metre, uvs.usage * 100);
+    bake_stage(r, "lightmap-uv", &t0);
+
+    /* 3. ray tracing structure */
+    rt = lc_rt_create(&scene.mesh, s->threads, err, errlen);
+    if (!rt) goto err;
+    bake_stage(r, "bvh", &t0);
+
+    /* 4. texel caches, dilation */
+    if (lc_texels_rasterize(&scene, uvs.width, uvs.height, &lm, &caches, &n_caches, err, errlen) != 0) goto err;
+    if (n_caches == 0) {
+        lc_set_err(err, errlen, "no lightmap texel is covered; raise --atlas-size or --texel-density");
+        goto err;
+    }
+    lc_texels_dilate(&lm, (uint32_t)s->dilate);
+    n_texel_caches = n_caches;
+    bake_stage(r, "texels", &t0);
+
+    /* 5. grid caches */
+    lc_grid grid;
+    if (lc_grid_layout(scene.bounds_min, scene.bounds_max, s->grid_cell, (uint32_t)s->grid_max_dim,
+                       (uint32_t)s->grid_max_samples, &grid, err, errlen) != 0)
+        goto err;
+    if (lc_grid_place(&grid, &caches, &n_caches, &cell_cache, err, errlen) != 0) goto err;
+    bake_stage(r, "grid", &t0);
+
+    /* 6. move caches out of geometry */
+    lc_relocate_params rp = {.rays = (uint32_t)s->reloc_rays,
+                             .texel_fraction = 0.6,
+                             .grid_fraction = 0.8,
+                             .offset = s->reloc_offset,
+                             .seed = (uint64_t)s->seed};
+    lc_relocate_stats rs;
+    memset(&rs, 0, sizeof rs);
+    lc_relocate_caches(rt, caches, n_caches, &rp, &rs);
+    bake_stage(r, "relocate", &t0);
+
+    /* 7. surfels */
+    lc_surfel_params sp = {.target_count = (uint32_t)s->surfels,
+                           .relax_iterations = (uint32_t)s->relax,
+                           .seed = (uint64_t)s->seed};
+    if (lc_surfels_generate(&scene, &sp, &surfels, &surfel_tri, &n_surfels, err, errlen) != 0) goto err;
+    bake_stage(r, "surfels", &t0);
+
+    /* 8. hierarchy (reorders surfels) */
+    if (lc_hierarchy_build(surfels, n_surfels, (lc_hierarchy_method)s->hierarchy, &hier, &perm, err, errlen) != 0)
+        goto err;
+    tri_sorted = malloc((size_t)n_surfels * sizeof *tri_sorted);
+    if (!tri_sorted) goto oom;
+    for (uint32_t i = 0; i < n_surfels; i++) tri_sorted[i] = surfel_tri[perm[i]];
+    bake_surfel_caches(&scene, &lm, &grid, cell_cache, caches, surfels, tri_sorted, n_surfels);
+    bake_stage(r, "hierarchy", &t0);
+
+    /* 9. links */
+    uint64_t n_links = (uint64_t)n_caches * (uint64_t)s->links;
+    if (n_links > (1ull << 31) / sizeof(lc_lcb_link)) {
+        lc_set_err(err, errlen, "%u caches x %d links is over 2 GiB of links; lower --links or --atlas-size",
+                   n_caches, s->links);
+        goto err;
+    }
+    links = calloc(n_links, sizeof *links);
+    if (!links) goto oom;
+    if (s->link_sh) {
+        link_sh = calloc(n_links * (uint64_t)s->bands * s->bands, sizeof *link_sh);
+        if (!link_sh) goto oom;
+    }
+    lc_link_params lp = {.links_per_cache = (uint32_t)s->links,
+                         .node_samples = (uint32_t)s->node_samples,
+                         .final_samples = (uint32_t)s->final_samples,
+                         .sh_bands = s->link_sh ? (uint32_t)s->bands : 0,
+                         .seed = (uint64_t)s->seed};
+    lc_link_stats ls;
+    memset(&ls, 0, sizeof ls);
+    if (lc_links_build(rt, surfels, n_surfels, &hier, caches, n_caches, &lp, links, link_sh, &ls) != 0) {
+        lc_set_err(err, errlen, "link generation failed (out of memory?)");
+        goto err;
+    }
+    bake_stage(r, "links", &t0);
+
+    /* 10. assets */
+    if (bake_assets_import(s, &assets, err, errlen) != 0) goto err;
+    bake_stage(r, "assets", &t0);
+
+    /* 11. write */
+    const lc_mesh *m = &scene.mesh;
+    mats = calloc(scene.n_materials ? scene.n_materials : 1, sizeof *mats);
+    verts = calloc(m->n_vertices, sizeof *verts);
+    tris = calloc(m->n_triangles, sizeof *tris);
+    if (!mats || !verts || !tris) goto oom;
+    for (uint32_t i = 0; i < scene.n_materials; i++) {
+        snprintf(mats[i].name, sizeof mats[i].name, "%s", scene.materials[i].name);
+        memcpy(mats[i].base_color, scene.materials[i].base_color, sizeof mats[i].base_color);
+        memcpy(mats[i].emission, scene.materials[i].emission, sizeof mats[i].emission);
+        mats[i].flags = scene.materials[i].base_texture >= 0 ? 1u : 0u;
+    }
+    for (uint32_t i = 0; i < m->n_vertices; i++) {
+        memcpy(verts[i].position, m->position + 3 * (size_t)i, sizeof verts[i].position);
+        memcpy(verts[i].normal, m->normal + 3 * (size_t)i, sizeof verts[i].normal);
+        memcpy(verts[i].uv1, m->uv1 + 2 * (size_t)i, sizeof verts[i].uv1);
+    }
+    for (uint32_t i = 0; i < m->n_triangles; i++) {
+        memcpy(tris[i].v, m->index + 3 * (size_t)i, sizeof tris[i].v);
+        tris[i].material = m->material[i];
+    }
+
+    meta = cJSON_CreateObject();
+    if (!meta) goto oom;
+    cJSON_AddStringToObject(meta, "format", "lucent-bake");
+    cJSON_AddStringToObject(meta, "generator", "lucent-bake " LC_BAKE_VERSION);
+    cJSON_AddStringToObject(meta, "source", s->input);
+    cJSON_AddItemToObject(meta, "settings", bake_settings_json(s));
+    cJSON_AddNumberToObject(meta, "sh_bands", s->bands);
+    double area = lc_mesh_total_area(m);
+    cJSON *js = cJSON_AddObjectToObject(meta, "scene");
+    cJSON_AddNumberToObject(js, "triangles", m->n_triangles);
+    cJSON_AddNumberToObject(js, "vertices", m->n_vertices);
+    cJSON_AddNumberToObject(js, "materials", scene.n_materials);
+    cJSON_AddNumberToObject(js, "textures", scene.n_textures);
+    cJSON_AddNumberToObject(js, "degenerate_dropped", scene.n_degenerate_dropped);
+    cJSON_AddNumberToObject(js, "area", area);
+    cJSON_AddItemToObject(js, "bounds_min", bake_vec3(scene.bounds_min));
+    cJSON_AddItemToObject(js, "bounds_max", bake_vec3(scene.bounds_max));
+    cJSON *jl = cJSON_AddObjectToObject(meta, "lightmap");
+    cJSON_AddNumberToObject(jl, "width", lm.width);
+    cJSON_AddNumberToObject(jl, "height", lm.height);
+    cJSON_AddNumberToObject(jl, "texels_per_metre", uvs.texels_per_metre);
+    cJSON_AddNumberToObject(jl, "usage", uvs.usage);
+    cJSON_AddNumberToObject(jl, "charts", uvs.n_charts);
+    cJSON_AddNumberToObject(jl, "covered", lm.n_covered);
+    cJSON_AddNumberToObject(jl, "dilated", lm.n_dilated);
+    cJSON_AddStringToObject(jl, "uv_source", scene.has_lightmap_uv ? "asset" : "generated");
+    cJSON *jg = cJSON_AddObjectToObject(meta, "grid");
+    cJSON_AddItemToObject(jg, "origin", bake_vec3(grid.origin));
+    cJSON_AddNumberToObject(jg, "cell", grid.cell);
+    double dims[3] = {grid.dims[0], grid.dims[1], grid.dims[2]};
+    cJSON_AddItemToObject(jg, "dims", cJSON_CreateDoubleArray(dims, 3));
+    cJSON *jsu = cJSON_AddObjectToObject(meta, "surfels");
+    cJSON_AddNumberToObject(jsu, "count", n_surfels);
+    cJSON_AddNumberToObject(jsu, "area", n_surfels ? surfels[0].area : 0);
+    cJSON *jh = cJSON_AddObjectToObject(meta, "hierarchy");
+    cJSON_AddStringToObject(jh, "method", s->hierarchy == LC_HIERARCHY_AAC ? "aac" : "kdtree");
+    cJSON_AddNumberToObject(jh, "nodes", hier.n_nodes);
+    cJSON_AddNumberToObject(jh, "levels", hier.n_levels);
+    cJSON_AddNumberToObject(jh, "quality", lc_hierarchy_quality(surfels, &hier));
+    cJSON *jc = cJSON_AddObjectToObject(meta, "caches");
+    cJSON_AddNumberToObject(jc, "count", n_caches);
+    cJSON_AddNumberToObject(jc, "texel", n_texel_caches);
+    cJSON_AddNumberToObject(jc, "grid", n_caches - n_texel_caches);
+    cJSON_AddNumberToObject(jc, "moved", rs.moved);
+    cJSON_AddNumberToObject(jc, "inside", rs.inside);
+    cJSON *jk = cJSON_AddObjectToObject(meta, "links");
+    cJSON_AddNumberToObject(jk, "per_cache", s->links);
+    cJSON_AddNumberToObject(jk, "sh_bands", s->link_sh ? s->bands : 0);
+    cJSON_AddNumberToObject(jk, "mean_used", ls.mean_links_used);
+    cJSON_AddNumberToObject(jk, "mean_solid_angle", ls.mean_solid_angle);
+    cJSON_AddNumberToObject(jk, "rays", (double)ls.rays);
+    cJSON_AddItemToObject(meta, "lights", bake_lights_json(&scene));
+    cJSON *jem = cJSON_AddArrayToObject(meta, "emitters");
+    for (uint32_t i = 0; i < scene.n_materials; i++) {
+        const float *e = scene.materials[i].emission;
+        if (e[0] <= 0 && e[1] <= 0 && e[2] <= 0) continue;
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "material", scene.materials[i].name);
+        cJSON_AddItemToObject(o, "emission", bake_vec3(e));
+        cJSON_AddItemToArray(jem, o);
+    }
+    cJSON *ja = cJSON_AddArrayToObject(meta, "assets");
+    for (uint32_t i = 0; i < assets.n_assets; i++) {
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "name", assets.assets[i].name);
+        cJSON_AddNumberToObject(o, "triangles", assets.assets[i].triangle_count);
+        cJSON_AddItemToObject(o, "bounds_min", bake_vec3(assets.assets[i].bounds_min));
+        cJSON_AddItemToObject(o, "bounds_max", bake_vec3(assets.assets[i].bounds_max));
+        cJSON_AddItemToArray(ja, o);
+    }
+    meta_text = cJSON_PrintUnformatted(meta);
+    if (!meta_text) goto oom;
+
+    w = lc_lcb_writer_create();
+    if (!w) goto oom;
+    int add_rc = 0;
+    add_rc |= lc_lcb_writer_add(w, "META", 1, meta_text, strlen(meta_text));
+    add_rc |= lc_lcb_writer_add(w, "MATL", sizeof(lc_lcb_material), mats, scene.n_materials);
+    add_rc |= lc_lcb_writer_add(w, "VERT", sizeof(lc_lcb_vertex), verts, m->n_vertices);
+    add_rc |= lc_lcb_writer_add(w, "TRIS", sizeof(lc_lcb_triangle), tris, m->n_triangles);
+    add_rc |= lc_lcb_writer_add(w, "SURF", sizeof(lc_lcb_surfel), surfels, n_surfels);
+    add_rc |= lc_lcb_writer_add(w, "NODE", sizeof(lc_lcb_node), hier.nodes, hier.n_nodes);
+    add_rc |= lc_lcb_writer_add(w, "LEVL", sizeof(uint32_t), hier.levels, (uint64_t)hier.n_levels + 1);
+    add_rc |= lc_lcb_writer_add(w, "CACH", sizeof(lc_lcb_cache), caches, n_caches);
+    add_rc |= lc_lcb_writer_add(w, "LMAP", sizeof(uint32_t), lm.texel_cache, (uint64_t)lm.width * lm.height);
+    add_rc |= lc_lcb_writer_add(w, "GRID", sizeof(uint32_t), cell_cache,
+                                (uint64_t)grid.dims[0] * grid.dims[1] * grid.dims[2]);
+    add_rc |= lc_lcb_writer_add(w, "LINK", sizeof(lc_lcb_link), links, n_links);
+    if (link_sh) add_rc |= lc_lcb_writer_add(w, "LKSH", sizeof(uint16_t), link_sh, n_links * s->bands * s->bands);
+    if (assets.n_assets) {
+        add_rc |= lc_lcb_writer_add(w, "ASET", sizeof(lc_lcb_asset), assets.assets, assets.n_assets);
+        add_rc |= lc_lcb_writer_add(w, "AVRT", sizeof(lc_lcb_asset_vertex), assets.vertices, assets.n_vertices);
+        add_rc |= lc_lcb_writer_add(w, "AIDX", 3 * sizeof(uint32_t), assets.indices, assets.n_triangles);
+    }
+    if (add_rc) {
+        lc_set_err(err, errlen, "internal error assembling the bake file sections");
+        goto err;
+    }
+    if (lc_lcb_writer_write(w, s->output, err, errlen) != 0) {
+        rc = 3;
+        goto err;
+    }
+    if (s->glb[0] && lc_glb_write(s->glb, &scene, err, errlen) != 0) {
+        rc = 3;
+        goto err;
+    }
+    bake_stage(r, "write", &t0);
+
+    struct stat st;
+    r->file_bytes = stat(s->output, &st) == 0 ? (unsigned long long)st.st_size : 0;
+    r->total_seconds = bake_now() - t_start;
+    struct rusage ru;
+    getrusage(RUSAGE_SELF, &ru);
+    r->peak_rss_kib = ru.ru_maxrss;
+    r->triangles = m->n_triangles;
+    r->surfels = n_surfels;
+    r->caches = n_caches;
+    r->texel_caches = n_texel_caches;
+    r->grid_caches = n_caches - n_texel_caches;
+    r->links_per_cache = (unsigned)s->links;
+    r->charts = uvs.n_charts;
+    r->lightmap_width = lm.width;
+    r->lightmap_height = lm.height;
+    r->atlas_usage = uvs.usage;
+    r->texel_density = uvs.texels_per_metre;
+    rc = 0;
+    goto done;
+oom:
+    lc_set_err(err, errlen, "out of memory (lower --surfels, --links or --atlas-size)");
+err:
+done:
+    lc_lcb_writer_release(w);
+    cJSON_free(meta_text);
+    cJSON_Delete(meta);
+    bake_assets_release(&assets);
+    free(mats);
+    free(verts);
+    free(tris);
+    free(links);
+    free(link_sh);
+    lc_hierarchy_release(&hier);
+    free(perm);
+    free(tri_sorted);
+    free(surfel_tri);
+    free(surfels);
+    free(cell_cache);
+    free(caches);
+    lc_lightmap_release(&lm);
+    lc_rt_release(rt);
+    lc_scene_release(&scene);
+    return rc;
+}
+
+/* --- report --------------------------------------------------------------------------------- */
+
+void lc_bake_report_print(const lc_bake_report *r, FILE *out) {
+    fprintf(out, "%-14s %10s\n", "stage", "seconds");
+    for (int i = 0; i < r->n_stages; i++) fprintf(out, "%-14s %10.3f\n", r->stages[i].name, r->stages[i].seconds);
+    fprintf(out, "%-14s %10.3f\n", "total", r->total_seconds);
+    fprintf(out, "peak memory    %10.1f MiB\n", r->peak_rss_kib / 1024.0);
+    fprintf(out, "file size      %10.1f MiB\n", r->file_bytes / (1024.0 * 1024.0));
+    fprintf(out, "triangles %u, surfels %u, caches %u (%u texel, %u grid), links/cache %u\n", r->triangles, r->surfels,
+            r->caches, r->texel_caches, r->grid_caches, r->links_per_cache);
+    fprintf(out, "lightmap %ux%u, %u charts, %.1f texels/m, atlas usage %.1f%%\n", r->lightmap_width,
+            r->lightmap_height, r->charts, r->texel_density, r->atlas_usage * 100);
+}
+
+int lc_bake_report_write_json(const lc_bake_report *r, const lc_bake_settings *s, const char *path, char *err,
+                              size_t errlen) {
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "input", s->input);
+    cJSON_AddStringToObject(o, "output", s->output);
+    static const char *qualities[] = {"draft", "moderate", "high"};
+    cJSON_AddStringToObject(o, "quality", qualities[s->quality]);
+    cJSON *st = cJSON_AddObjectToObject(o, "stages_s");
+    for (int i = 0; i < r->n_stages; i++) cJSON_AddNumberToObject(st, r->stages[i].name, r->stages[i].seconds);
+    cJSON_AddNumberToObject(o, "total_s", r->total_seconds);
+    cJSON_AddNumberToObject(o, "peak_rss_mib", r->peak_rss_kib / 1024.0);
+    cJSON_AddNumberToObject(o, "file_bytes", (double)r->file_bytes);
+    cJSON_AddNumberToObject(o, "triangles", r->triangles);
+    cJSON_AddNumberToObject(o, "surfels", r->surfels);
+    cJSON_AddNumberToObject(o, "caches", r->caches);
+    cJSON_AddNumberToObject(o, "texel_caches", r->texel_caches);
+    cJSON_AddNumberToObject(o, "grid_caches", r->grid_caches);
+    cJSON_AddNumberToObject(o, "links_per_cache", r->links_per_cache);
+    cJSON_AddNumberToObject(o, "charts", r->charts);
+    cJSON_AddNumberToObject(o, "lightmap_width", r->lightmap_width);
+    cJSON_AddNumberToObject(o, "lightmap_height", r->lightmap_height);
+    cJSON_AddNumberToObject(o, "atlas_usage", r->atlas_usage);
+    cJSON_AddNumberToObject(o, "texels_per_metre", r->texel_density);
+    char *text = cJSON_Print(o);
+    cJSON_Delete(o);
+    if (!text) {
+        lc_set_err(err, errlen, "out of memory");
+        return -1;
+    }
+    int rc = lc_fs_write_atomic(path, text, strlen(text), err, errlen);
+    cJSON_free(text);
+    return rc;
+}

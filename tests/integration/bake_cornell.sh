@@ -1,0 +1,56 @@
+# Bakes the embedded Cornell box (draft preset + an asset) and checks what the file holds.
+. "$(dirname "$0")/lib.sh"
+
+# A small dynamic-object asset: a unit cube, as OBJ.
+cat > "$TMP/cube.obj" <<'OBJ'
+v -0.05 0 -0.05
+v 0.05 0 -0.05
+v 0.05 0.1 -0.05
+v -0.05 0.1 -0.05
+v -0.05 0 0.05
+v 0.05 0 0.05
+v 0.05 0.1 0.05
+v -0.05 0.1 0.05
+f 1 4 3 2
+f 5 6 7 8
+f 1 2 6 5
+f 4 8 7 3
+f 1 5 8 4
+f 2 3 7 6
+OBJ
+expect_exit 0 "" "$BAKE" bake "$CORNELL" -o "$TMP/cornell.lcb" --glb "$TMP/cornell.glb" --quality draft \
+  --asset cube="$TMP/cube.obj" --stats-json "$TMP/stats.json"
+[ -s "$TMP/cornell.glb" ] || fail "no glb written"
+expect_exit 0 "" "$BAKE" verify "$TMP/cornell.lcb"
+"$BAKE" info "$TMP/cornell.lcb" --json > "$TMP/info.json" || fail "info --json failed"
+"$BAKE" info "$TMP/cornell.lcb" > "$TMP/info.txt" || fail "info failed"
+grep -q "LINK" "$TMP/info.txt" || fail "info does not list the LINK section"
+$PY - "$TMP/info.json" "$TMP/stats.json" <<'PY' || fail "info/stats content"
+import json, sys
+info = json.load(open(sys.argv[1])); stats = json.load(open(sys.argv[2]))
+m = info["meta"]
+def check(cond, msg):
+    if not cond:
+        print("check failed:", msg); sys.exit(1)
+check(m["format"] == "lucent-bake", "format")
+check(m["scene"]["triangles"] == 38, "38 triangles, got %s" % m["scene"]["triangles"])
+check(abs(m["scene"]["area"] - stats.get("area", m["scene"]["area"])) < 1e-9, "area")
+check(m["surfels"]["count"] == 8192, "draft surfels")
+check(abs(m["surfels"]["count"] * m["surfels"]["area"] - m["scene"]["area"]) < 1e-4 * m["scene"]["area"],
+      "surfel area sum equals surface area")
+check(m["hierarchy"]["nodes"] == 2 * 8192 - 1, "hierarchy nodes")
+check(m["links"]["per_cache"] == 64, "draft links")
+check(m["sh_bands"] == 2, "draft bands")
+check(m["lightmap"]["width"] == 64 and m["lightmap"]["height"] == 64, "draft atlas 64")
+check(0.2 < m["lightmap"]["usage"] <= 1.0, "atlas usage %s" % m["lightmap"]["usage"])
+check(m["caches"]["texel"] > 500, "texel caches")
+check(any(e["material"] == "light" and e["emission"] == [17, 12, 4] for e in m["emitters"]), "light emitter")
+check([a["name"] for a in m["assets"]] == ["cube"], "asset listed")
+check(m["assets"][0]["triangles"] == 12, "cube triangles")
+ids = [s["id"] for s in info["sections"]]
+for sid in ["META","MATL","VERT","TRIS","SURF","NODE","LEVL","CACH","LMAP","GRID","LINK","ASET","AVRT","AIDX"]:
+    check(sid in ids, "section " + sid)
+check(stats["total_s"] > 0 and stats["peak_rss_mib"] > 0, "stats")
+check(stats["stages_s"].keys() >= {"import","lightmap-uv","texels","surfels","hierarchy","links","write"}, "stages")
+PY
+finish

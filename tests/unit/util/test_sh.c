@@ -1,0 +1,86 @@
+/* SH helpers against closed forms and numeric integration. */
+#include <math.h>
+
+#include "check.h"
+#include "util/rng.h"
+#include "util/sh.h"
+
+/* Spherical Fibonacci lattice: N nearly uniform directions, each with weight 4pi/N. */
+static void fib_dir(int i, int n, float d[3]) {
+    double z = 1.0 - (2.0 * i + 1.0) / n;
+    double r = sqrt(fmax(0.0, 1.0 - z * z));
+    double phi = i * M_PI * (3.0 - sqrt(5.0));
+    d[0] = (float)(r * cos(phi));
+    d[1] = (float)(r * sin(phi));
+    d[2] = (float)z;
+}
+
+int main(void) {
+    enum { N = 200000, B = 8, C = B * B };
+    /* Orthonormality: int y_i y_j dw = delta_ij. */
+    static double gram[C][C];
+    float y[C];
+    for (int i = 0; i < N; i++) {
+        float d[3];
+        fib_dir(i, N, d);
+        lc_sh_eval(B, d, y);
+        for (int a = 0; a < C; a++)
+            for (int b = a; b < C; b++) gram[a][b] += (double)y[a] * y[b] * (4 * M_PI / N);
+    }
+    double worst = 0;
+    for (int a = 0; a < C; a++)
+        for (int b = a; b < C; b++) worst = fmax(worst, fabs(gram[a][b] - (a == b ? 1.0 : 0.0)));
+    CHECK(worst < 2e-3, "SH basis not orthonormal: worst Gram error %g", worst);
+
+    /* Convention: band 1 = sqrt(3/4pi) (y, z, x); y_2^0 = sqrt(5/16pi)(3z^2 - 1). */
+    float d[3] = {0.36f, 0.48f, 0.8f};
+    lc_sh_eval(3, d, y);
+    double k1 = sqrt(3 / (4 * M_PI));
+    CHECK_NEAR(y[0], 0.5 / sqrt(M_PI), 1e-6);
+    CHECK_NEAR(y[1], k1 * d[1], 1e-6);
+    CHECK_NEAR(y[2], k1 * d[2], 1e-6);
+    CHECK_NEAR(y[3], k1 * d[0], 1e-6);
+    CHECK_NEAR(y[6], sqrt(5 / (16 * M_PI)) * (3 * d[2] * d[2] - 1), 1e-6);
+    CHECK_NEAR(y[4], 0.5 * sqrt(15 / M_PI) * d[0] * d[1], 1e-6);
+    CHECK_NEAR(y[8], 0.25 * sqrt(15 / M_PI) * (d[0] * d[0] - d[1] * d[1]), 1e-6);
+
+    /* Cone ratio h_l vs numeric integration over a cone around +z. */
+    double alphas[] = {0.01, 0.3, 1.0, M_PI / 2, 2.5};
+    for (int ai = 0; ai < 5; ai++) {
+        double ca = cos(alphas[ai]);
+        for (int l = 0; l < B; l++) {
+            double num = 0, omega = 0;
+            const int M = 200000;
+            for (int i = 0; i < M; i++) { /* midpoint rule in cos(theta) */
+                double t = ca + (1 - ca) * (i + 0.5) / M;
+                num += lc_sh_legendre(l, t);
+                omega += 1;
+            }
+            double h = num / omega;
+            CHECK(fabs(lc_sh_cone_ratio(l, ca) - h) < 1e-5, "cone ratio l=%d alpha=%g: %g vs %g", l, alphas[ai],
+                  lc_sh_cone_ratio(l, ca), h);
+        }
+    }
+    CHECK_NEAR(lc_sh_cone_ratio(1, 0.2), 0.6, 1e-12);
+
+    /* Clamped-cosine factors: A_l = 2pi int_0^1 P_l(t) t dt. */
+    for (int l = 0; l < B; l++) {
+        const int M = 100000;
+        double a = 0;
+        for (int i = 0; i < M; i++) {
+            double t = (i + 0.5) / M;
+            a += lc_sh_legendre(l, t) * t / M;
+        }
+        a *= 2 * M_PI;
+        CHECK(fabs(lc_sh_cosine_factor(l) - a) < 1e-6, "A_%d = %g, numeric %g", l, lc_sh_cosine_factor(l), a);
+    }
+    CHECK_NEAR(lc_sh_cosine_factor(2), M_PI / 4, 1e-12);
+    CHECK_NEAR(lc_sh_cosine_factor(4), -M_PI / 24, 1e-12);
+
+    /* Irradiance of a uniform sky L=1 through SH: E = pi for any normal. */
+    float n[3] = {0, 1, 0};
+    lc_sh_eval(3, n, y);
+    double e = lc_sh_cosine_factor(0) * (1.0 * sqrt(4 * M_PI)) * y[0];
+    CHECK_NEAR(e, M_PI, 1e-6);
+    CHECK_DONE();
+}
