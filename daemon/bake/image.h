@@ -5,6 +5,10 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /* Reads an image as float RGB (channels beyond 3 dropped, grey replicated), row 0 = top.
  * Values as stored in the file (no colour-space conversion). *pixels is malloc'd (caller frees).
  * Refuses images larger than max_pixels. Returns 0 or -1 with err set. */
@@ -16,5 +20,9 @@ int lc_image_read_rgb(const char *path, uint64_t max_pixels, uint32_t *width, ui
  * Returns 0 or -1 with err set. */
 int lc_image_write(const char *path, uint32_t width, uint32_t height, int nch, const float *pixels,
                    char *err, size_t errlen);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

@@ -71,11 +71,12 @@ typedef struct lc_import_params {
 } lc_import_params;
 
 /* Imports glTF 2.0 (.gltf/.glb), OBJ+MTL or PLY through Assimp, flattening the node tree
- * to world space. Textures are read through OpenImageIO; a texture whose exact file name is
- * missing is resolved case-insensitively in its directory. Degenerate and non-finite
- * triangles are dropped (counted). Fails with a message naming the file and the cause for:
- * missing file, unsupported format, no triangles, non-finite scale, unreadable texture
- * (a missing texture is a warning: base colour factor only).
+ * to world space (mirroring transforms flip the winding). Textures are read through
+ * OpenImageIO; a texture whose exact file name is missing is resolved case-insensitively in
+ * its directory; embedded glTF textures have path "*N". Degenerate and non-finite triangles
+ * are dropped (counted). Fails with a message naming the file and the cause for: missing
+ * file, unsupported format, no triangles, non-finite or non-positive scale. A missing or
+ * unreadable texture is a warning: the material keeps its base colour factor.
  * On success returns 0 and fills *out (release with lc_scene_release). */
 int lc_scene_import(const char *path, const lc_import_params *params, lc_scene *out, char *err,
                     size_t errlen);
