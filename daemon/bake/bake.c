@@ -93,9 +93,9 @@ static const lc_opt bake_options[] = {
     {"hierarchy", LC_OPT_ENUM, OFF(hierarchy), 0, 0, "aac", "aac|kdtree",
      "surfel hierarchy: agglomerative clustering (PIC metric) or kd-tree", NULL, NULL},
     {"links", LC_OPT_INT, OFF(links), 1, 1024, "128", NULL, "links per cache (n_L)", NULL, NULL},
-    {"node-samples", LC_OPT_INT, OFF(node_samples), 1, 256, "8", NULL,
+    {"node-samples", LC_OPT_INT, OFF(node_samples), 1, 256, "16", NULL,
      "visibility rays per node while refining the cut", NULL, NULL},
-    {"final-samples", LC_OPT_INT, OFF(final_samples), 1, 1024, "16", NULL,
+    {"final-samples", LC_OPT_INT, OFF(final_samples), 1, 1024, "32", NULL,
      "visibility rays per linked node for its final factor", NULL, NULL},
     {"bands", LC_OPT_INT, OFF(bands), 1, 8, "3", NULL, "SH bands of the output caches", NULL, NULL},
     {"link-sh", LC_OPT_BOOL, OFF(link_sh), 0, 1, "false", NULL,
@@ -126,14 +126,16 @@ const lc_opt *lc_bake_options(void) { return bake_options; }
 void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     /* moderate ~ the paper's moderate setting (32k surfels, 128 links, 3 bands);
      * high ~ its high setting (128k surfels, 254 links, 4 bands). Caches stay the same, as
-     * in the paper, so the two presets differ in transport detail, not lightmap resolution. */
+     * in the paper, so the two presets differ in transport detail, not lightmap resolution.
+     * 16/32 visibility samples per node: with 8/16 the per-cache visible solid angle on
+     * Sponza was off by 20-24% on average (vs 8% at 16/32) for 1.35x the link time. */
     typedef struct {
         int atlas, surfels, links, bands, node_samples, final_samples, grid_max_dim, relax, reloc_rays;
     } bake_preset;
     static const bake_preset presets[] = {
         {64, 8192, 64, 2, 4, 8, 16, 2, 16},
-        {128, 32768, 128, 3, 8, 16, 24, 4, 32},
-        {128, 131072, 254, 4, 8, 16, 24, 4, 32},
+        {128, 32768, 128, 3, 16, 32, 24, 4, 32},
+        {128, 131072, 254, 4, 16, 32, 24, 4, 32},
     };
     const bake_preset *p = &presets[q];
     s->quality = (int)q;

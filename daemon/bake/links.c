@@ -1,1 +1,396 @@
-/* stub: being written */
+#include "bake/links.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "util/half.h"
+#include "util/log.h"
+#include "util/parallel.h"
+#include "util/progress.h"
+#include "util/rng.h"
+#include "util/sh.h"
+#include "util/vec.h"
+
+/* Priority of a node whose samples were all occluded but which has unsampled surfels: a
+ * fraction of its unoccluded estimate, so it is refined only when budget is left over. */
+#define LINKS_OCCLUDED_PRIORITY 0.05
+
+/* Stream salts: refinement and the final estimate use independent jitter. */
+#define LINKS_PASS_REFINE 0x5EF1E5ull
+#define LINKS_PASS_FINAL 0xF17A1ull
+
+double lc_links_surfel_solid_angle(const lc_lcb_surfel *s, const float p[3], const float n[3]) {
+    double v[3] = {(double)s->position[0] - p[0], (double)s->position[1] - p[1], (double)s->position[2] - p[2]};
+    double d2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if (!(d2 > 0) || !(s->area > 0)) return 0;
+    double d = sqrt(d2);
+    /* The surfel faces p when its normal points toward p. */
+    double cos_s = -(v[0] * s->normal[0] + v[1] * s->normal[1] + v[2] * s->normal[2]) / d;
+    if (cos_s <= 0) return 0;
+    if (n[0] != 0 || n[1] != 0 || n[2] != 0) {
+        /* Same-surface surfels sit in the cache plane up to float noise; keep them out. */
+        double pm = fmax(fabs(p[0]), fmax(fabs(p[1]), fabs(p[2])));
+        double eps = 1e-5 * (1.0 + pm);
+        double nl = sqrt((double)n[0] * n[0] + (double)n[1] * n[1] + (double)n[2] * n[2]);
+        if ((v[0] * n[0] + v[1] * n[1] + v[2] * n[2]) / nl <= eps) return 0;
+    }
+    double r2 = s->area / M_PI;
+    double h = sqrt(d2 + r2);
+    /* 1 - d/h written without cancellation for distant surfels. */
+    return cos_s * 2.0 * M_PI * r2 / (h * (h + d));
+}
+
+/* --- per-cache estimation ------------------------------------------------------------------ */
+
+typedef struct {
+    double omega;   /* estimated visible solid angle */
+    double unocc;   /* the same without visibility */
+    double m[3];    /* sum of w * h1 * dir over visible samples */
+    double wsum;    /* sum of visible w (unscaled) */
+} links_est;
+
+typedef struct {
+    double prio;
+    uint32_t node;
+    links_est est;
+} links_item;
+
+typedef struct {
+    links_item *heap; /* refinable (internal) nodes of the cut */
+    uint32_t n_heap;
+    links_item *done; /* leaves of the cut */
+    uint32_t n_done;
+    lc_lcb_link *tmp_links;
+    float *tmp_sh;
+    uint32_t *order;
+} links_scratch;
+
+typedef struct {
+    const lc_rt *rt;
+    const lc_lcb_surfel *surfels;
+    uint32_t n_surfels;
+    const lc_hierarchy *h;
+    const lc_lcb_cache *caches;
+    const lc_link_params *prm;
+    lc_lcb_link *links;
+    uint16_t *link_sh;
+    links_scratch *scratch; /* one per thread */
+    uint32_t *used;         /* per cache: links with factor > 0 */
+    double *omega;          /* per cache: sum of link solid angles */
+    uint64_t *rays;         /* per cache */
+    float eps_base;
+    lc_progress *progress;
+} links_ctx;
+
+typedef struct {
+    float p[3];   /* cache position (solid-angle reference) */
+    float n[3];   /* unit normal, zero for grid caches */
+    float org[3]; /* ray origin */
+    uint32_t cache;
+    uint64_t rays;
+} links_cache;
+
+/* Estimates the visible solid angle of node from the cache with k stratified surfel samples.
+ * sh (optional, bands^2 doubles) receives sum of w * h_l * y_lm(dir), scaled like omega. */
+static links_est links_estimate(const links_ctx *ctx, links_cache *lc, uint32_t node, uint32_t k, uint64_t pass,
+                                double *sh, int bands) {
+    links_est e = {0};
+    const lc_lcb_node *nd = &ctx->h->nodes[node];
+    uint32_t first = nd->first_surfel, count = nd->surfel_count;
+    if (first >= ctx->n_surfels) return e;
+    if (count > ctx->n_surfels - first) count = ctx->n_surfels - first;
+    if (count == 0 || k == 0) return e;
+    uint32_t taken = count <= k ? count : k;
+    lc_rng rng = lc_rng_seed(ctx->prm->seed ^ pass, ((uint64_t)lc->cache << 32) | node);
+    double stratum = (double)count / (double)taken;
+    double sum_unocc = 0;
+    if (sh) memset(sh, 0, (size_t)bands * bands * sizeof *sh);
+    for (uint32_t j = 0; j < taken; j++) {
+        uint32_t idx = j;
+        if (taken < count) {
+            idx = (uint32_t)(((double)j + lc_rng_float(&rng)) * stratum);
+            if (idx >= count) idx = count - 1;
+        }
+        const lc_lcb_surfel *s = &ctx->surfels[first + idx];
+        double w = lc_links_surfel_solid_angle(s, lc->p, lc->n);
+        if (w <= 0) continue;
+        sum_unocc += w;
+        float dir[3] = {s->position[0] - lc->org[0], s->position[1] - lc->org[1], s->position[2] - lc->org[2]};
+        float dist = sqrtf(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+        if (!(dist > 0)) continue;
+        dir[0] /= dist, dir[1] /= dist, dir[2] /= dist;
+        /* Stop short of the surfel so its own surface (and its neighbours at grazing angles)
+         * does not count as a blocker. */
+        float tfar = dist - fmaxf(ctx->eps_base, 1e-3f * dist);
+        lc->rays++;
+        if (tfar > 0 && lc_rt_occluded(ctx->rt, lc->org, dir, 0.0f, tfar)) continue;
+        /* The surfel as a uniform cone of the same solid angle: its band-1 ratio keeps the
+         * mean direction length honest for surfels close to the cache. */
+        double cos_a = 1.0 - w / (2.0 * M_PI);
+        if (cos_a < -1) cos_a = -1;
+        double h1 = 0.5 * (1.0 + cos_a);
+        e.wsum += w;
+        for (int a = 0; a < 3; a++) e.m[a] += w * h1 * dir[a];
+        if (sh) {
+            float y[LC_SH_MAX_COEFFS];
+            lc_sh_eval(bands, dir, y);
+            for (int l = 0; l < bands; l++) {
+                double hl = w * lc_sh_cone_ratio(l, cos_a);
+                for (int i = l * l; i < (l + 1) * (l + 1); i++) sh[i] += hl * y[i];
+            }
+        }
+    }
+    e.omega = e.wsum * stratum;
+    e.unocc = sum_unocc * stratum;
+    if (sh)
+        for (int i = 0; i < bands * bands; i++) sh[i] *= stratum;
+    return e;
+}
+
+/* Max-heap on priority; ties go to the smaller node index so the cut is deterministic. */
+static int links_before(const links_item *a, const links_item *b) {
+    return a->prio > b->prio || (a->prio == b->prio && a->node < b->node);
+}
+
+static void links_heap_push(links_scratch *sc, const links_item *it) {
+    uint32_t i = sc->n_heap++;
+    sc->heap[i] = *it;
+    while (i > 0) {
+        uint32_t parent = (i - 1) / 2;
+        if (!links_before(&sc->heap[i], &sc->heap[parent])) break;
+        links_item t = sc->heap[i];
+        sc->heap[i] = sc->heap[parent];
+        sc->heap[parent] = t;
+        i = parent;
+    }
+}
+
+static links_item links_heap_pop(links_scratch *sc) {
+    links_item top = sc->heap[0];
+    sc->heap[0] = sc->heap[--sc->n_heap];
+    uint32_t i = 0;
+    for (;;) {
+        uint32_t l = 2 * i + 1, r = l + 1, best = i;
+        if (l < sc->n_heap && links_before(&sc->heap[l], &sc->heap[best])) best = l;
+        if (r < sc->n_heap && links_before(&sc->heap[r], &sc->heap[best])) best = r;
+        if (best == i) break;
+        links_item t = sc->heap[i];
+        sc->heap[i] = sc->heap[best];
+        sc->heap[best] = t;
+        i = best;
+    }
+    return top;
+}
+
+/* Adds node to the cut (heap if refinable, else done list). Returns 1 when kept. */
+static int links_consider(const links_ctx *ctx, links_scratch *sc, links_cache *lc, uint32_t node) {
+    const lc_lcb_node *nd = &ctx->h->nodes[node];
+    if (lc->n[0] != 0 || lc->n[1] != 0 || lc->n[2] != 0) {
+        /* Whole bounding sphere behind the cache plane: every surfel gets w = 0. */
+        double dz = (nd->center[0] - lc->p[0]) * lc->n[0] + (nd->center[1] - lc->p[1]) * lc->n[1] +
+                    (nd->center[2] - lc->p[2]) * lc->n[2];
+        if (dz + nd->radius <= 0) return 0;
+    }
+    uint32_t k = ctx->prm->node_samples;
+    links_item it = {0, node, links_estimate(ctx, lc, node, k, LINKS_PASS_REFINE, NULL, 0)};
+    int internal = nd->child[0] != LC_NONE && nd->child[1] != LC_NONE && nd->child[0] < ctx->h->n_nodes &&
+                   nd->child[1] < ctx->h->n_nodes;
+    int exhaustive = nd->surfel_count <= k;
+    if (it.est.omega > 0) {
+        it.prio = it.est.omega;
+    } else {
+        if (exhaustive || !internal) return 0; /* every surfel was tested and none is visible */
+        it.prio = LINKS_OCCLUDED_PRIORITY * it.est.unocc;
+    }
+    if (internal)
+        links_heap_push(sc, &it);
+    else
+        sc->done[sc->n_done++] = it;
+    return 1;
+}
+
+static int links_by_node(const void *a, const void *b) {
+    uint32_t x = ((const lc_lcb_link *)a)->node, y = ((const lc_lcb_link *)b)->node;
+    return (x > y) - (x < y);
+}
+
+static void links_one_cache(const links_ctx *ctx, links_scratch *sc, uint32_t ci) {
+    const lc_link_params *prm = ctx->prm;
+    const uint32_t L = prm->links_per_cache;
+    const int bands = (int)prm->sh_bands;
+    const int nsh = bands * bands;
+    lc_lcb_link *out = &ctx->links[(size_t)ci * L];
+    uint16_t *out_sh = ctx->link_sh ? &ctx->link_sh[(size_t)ci * L * nsh] : NULL;
+    const lc_lcb_cache *c = &ctx->caches[ci];
+    for (uint32_t i = 0; i < L; i++) out[i] = (lc_lcb_link){0, 0.0f, 0};
+    if (out_sh) memset(out_sh, 0, (size_t)L * nsh * sizeof *out_sh);
+    ctx->used[ci] = 0;
+    ctx->omega[ci] = 0;
+    ctx->rays[ci] = 0;
+    if ((c->flags & LC_CACHE_INSIDE) || ctx->h->n_nodes == 0 || ctx->n_surfels == 0) return;
+
+    links_cache lc = {.cache = ci};
+    lc_vec3 p = lc_v3_load(c->position), n = lc_v3_load(c->normal);
+    float nlen = lc_v3_len(n);
+    n = nlen > 1e-6f ? lc_v3_scale(n, 1.0f / nlen) : lc_v3(0, 0, 0);
+    float pm = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
+    /* Texel caches sit on their surface: lift the ray origin off it (float noise grows with |p|). */
+    float lift = ctx->eps_base + 1e-6f * pm;
+    lc_v3_store(lc.p, p);
+    lc_v3_store(lc.n, n);
+    lc_v3_store(lc.org, lc_v3_add(p, lc_v3_scale(n, lift)));
+
+    sc->n_heap = sc->n_done = 0;
+    uint32_t cut = links_consider(ctx, sc, &lc, 0);
+    while (sc->n_heap > 0 && cut < L) {
+        links_item it = links_heap_pop(sc);
+        const lc_lcb_node *nd = &ctx->h->nodes[it.node];
+        cut--;
+        cut += (uint32_t)links_consider(ctx, sc, &lc, nd->child[0]);
+        cut += (uint32_t)links_consider(ctx, sc, &lc, nd->child[1]);
+    }
+    /* The cut is heap + done. Every node in it is re-estimated with fresh samples: the cut keeps
+     * exactly the nodes whose refinement estimate came out low, so summing those estimates
+     * (or skipping the unseen nodes) would bias the total low. A node whose refinement
+     * estimate used every surfel (and no SH is wanted) is already exact and is reused. */
+    for (uint32_t i = 0; i < sc->n_heap; i++) sc->done[sc->n_done++] = sc->heap[i];
+    sc->n_heap = 0;
+    uint32_t used = 0;
+    double omega_sum = 0;
+    double sh[LC_SH_MAX_COEFFS];
+    for (uint32_t i = 0; i < sc->n_done; i++) {
+        const links_item *it = &sc->done[i];
+        const lc_lcb_node *nd = &ctx->h->nodes[it->node];
+        links_est e = it->est;
+        int exact = nd->surfel_count <= prm->node_samples && nd->surfel_count <= prm->final_samples;
+        if (!exact || out_sh)
+            e = links_estimate(ctx, &lc, it->node, prm->final_samples, LINKS_PASS_FINAL, out_sh ? sh : NULL,
+                               bands);
+        if (!(e.omega > 0) || !(nd->area > 0)) continue;
+        double mlen = sqrt(e.m[0] * e.m[0] + e.m[1] * e.m[1] + e.m[2] * e.m[2]) / e.wsum;
+        float dir[3] = {0, 0, 1};
+        if (mlen > 0) {
+            double inv = 1.0 / (mlen * e.wsum);
+            for (int a = 0; a < 3; a++) dir[a] = (float)(e.m[a] * inv);
+        }
+        /* A uniform cone of half-angle alpha has mean resultant length (1 + cos alpha) / 2. */
+        double cos_a = 2.0 * mlen - 1.0;
+        if (cos_a > 1) cos_a = 1;
+        if (cos_a < -1) cos_a = -1;
+        double norm = 1.0 / (M_PI * nd->area);
+        lc_lcb_link *lk = &sc->tmp_links[used];
+        lk->node = it->node;
+        lk->factor = (float)(e.omega * norm);
+        lk->dir_cone = lc_link_pack(dir, (float)acos(cos_a));
+        if (!(lk->factor > 0)) continue; /* underflowed to zero: a padding link in all but name */
+        if (out_sh)
+            for (int j = 0; j < nsh; j++) sc->tmp_sh[(size_t)used * nsh + j] = (float)(sh[j] * norm);
+        omega_sum += e.omega;
+        used++;
+    }
+    /* Node order for memory locality at runtime; SH rows follow through a permutation. */
+    if (out_sh) {
+        for (uint32_t i = 0; i < used; i++) sc->order[i] = i;
+        for (uint32_t i = 1; i < used; i++) { /* insertion sort by node: n_L is small */
+            uint32_t v = sc->order[i], j = i;
+            while (j > 0 && sc->tmp_links[sc->order[j - 1]].node > sc->tmp_links[v].node) {
+                sc->order[j] = sc->order[j - 1];
+                j--;
+            }
+            sc->order[j] = v;
+        }
+        for (uint32_t i = 0; i < used; i++) {
+            out[i] = sc->tmp_links[sc->order[i]];
+            for (int j = 0; j < nsh; j++)
+                out_sh[(size_t)i * nsh + j] = lc_half_from_float(sc->tmp_sh[(size_t)sc->order[i] * nsh + j]);
+        }
+    } else {
+        qsort(sc->tmp_links, used, sizeof *sc->tmp_links, links_by_node);
+        memcpy(out, sc->tmp_links, (size_t)used * sizeof *out);
+    }
+    ctx->used[ci] = used;
+    ctx->omega[ci] = omega_sum;
+    ctx->rays[ci] = lc.rays;
+}
+
+static void links_range(void *arg, size_t begin, size_t end, int thread) {
+    const links_ctx *ctx = arg;
+    for (size_t i = begin; i < end; i++) links_one_cache(ctx, &ctx->scratch[thread], (uint32_t)i);
+    lc_progress_add(ctx->progress, end - begin);
+}
+
+int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_surfels, const lc_hierarchy *h,
+                   const lc_lcb_cache *caches, uint32_t n_caches, const lc_link_params *params, lc_lcb_link *links,
+                   uint16_t *link_sh, lc_link_stats *stats) {
+    links_ctx ctx = {0};
+    int threads = lc_parallel_threads(), rc = -1;
+    if (stats) memset(stats, 0, sizeof *stats);
+    if (!rt || !h || !params || (!links && n_caches) || (!surfels && n_surfels) || (!caches && n_caches)) {
+        lc_error("links", "lc_links_build: NULL argument");
+        return -1;
+    }
+    if (params->links_per_cache == 0 || params->node_samples == 0 || params->final_samples == 0) {
+        lc_error("links", "links_per_cache, node_samples and final_samples must be > 0 (got %u, %u, %u)",
+                 params->links_per_cache, params->node_samples, params->final_samples);
+        return -1;
+    }
+    if (link_sh && (params->sh_bands < 1 || params->sh_bands > LC_SH_MAX_BANDS)) {
+        lc_error("links", "sh_bands must be in 1..%d when link SH is requested (got %u)", LC_SH_MAX_BANDS,
+                 params->sh_bands);
+        return -1;
+    }
+    const uint32_t L = params->links_per_cache;
+    const size_t nsh = link_sh ? (size_t)params->sh_bands * params->sh_bands : 0;
+    ctx = (links_ctx){rt, surfels, n_surfels, h, caches, params, links, link_sh, NULL, NULL, NULL, NULL, 1e-4f, NULL};
+    ctx.scratch = calloc((size_t)threads, sizeof *ctx.scratch);
+    ctx.used = calloc(n_caches ? n_caches : 1, sizeof *ctx.used);
+    ctx.omega = calloc(n_caches ? n_caches : 1, sizeof *ctx.omega);
+    ctx.rays = calloc(n_caches ? n_caches : 1, sizeof *ctx.rays);
+    if (!ctx.scratch || !ctx.used || !ctx.omega || !ctx.rays) {
+        lc_error("links", "out of memory for per-cache results (%u caches)", n_caches);
+        goto err;
+    }
+    for (int t = 0; t < threads; t++) {
+        links_scratch *sc = &ctx.scratch[t];
+        /* Each split removes one node and adds at most two: the cut never exceeds L + 1. */
+        sc->heap = malloc((size_t)(L + 2) * sizeof *sc->heap);
+        sc->done = malloc((size_t)(L + 2) * sizeof *sc->done);
+        sc->tmp_links = malloc((size_t)(L + 2) * sizeof *sc->tmp_links);
+        sc->order = malloc((size_t)(L + 2) * sizeof *sc->order);
+        sc->tmp_sh = nsh ? malloc((size_t)(L + 2) * nsh * sizeof *sc->tmp_sh) : NULL;
+        if (!sc->heap || !sc->done || !sc->tmp_links || !sc->order || (nsh && !sc->tmp_sh)) {
+            lc_error("links", "out of memory for link scratch (%u links per cache)", L);
+            goto err;
+        }
+    }
+    ctx.progress = lc_progress_begin("links", n_caches);
+    lc_parallel_for(n_caches, 16, links_range, &ctx);
+    lc_progress_end(ctx.progress);
+    if (stats && n_caches) {
+        double used = 0, omega = 0;
+        for (uint32_t i = 0; i < n_caches; i++) {
+            used += ctx.used[i];
+            omega += ctx.omega[i];
+            stats->rays += ctx.rays[i];
+        }
+        stats->mean_links_used = used / n_caches;
+        stats->mean_solid_angle = omega / n_caches;
+    }
+    rc = 0;
+err: /* also the success path: scratch is freed either way */
+    if (ctx.scratch)
+        for (int t = 0; t < threads; t++) {
+            free(ctx.scratch[t].heap);
+            free(ctx.scratch[t].done);
+            free(ctx.scratch[t].tmp_links);
+            free(ctx.scratch[t].order);
+            free(ctx.scratch[t].tmp_sh);
+        }
+    free(ctx.scratch);
+    free(ctx.used);
+    free(ctx.omega);
+    free(ctx.rays);
+    return rc;
+}
