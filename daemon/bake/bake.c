@@ -102,9 +102,9 @@ static const lc_opt bake_options[] = {
      "also store each link's transport projected into --bands SH (LKSH)", NULL, NULL},
     {"grid-cell", LC_OPT_FLOAT, OFF(grid_cell), 0, 1e4, "0", NULL,
      "SH grid spacing in metres (0 = from --grid-max-dim)", NULL, NULL},
-    {"grid-max-dim", LC_OPT_INT, OFF(grid_max_dim), 2, 512, "24", NULL, "SH grid samples along the longest axis",
+    {"grid-max-dim", LC_OPT_INT, OFF(grid_max_dim), 3, 512, "24", NULL, "SH grid samples along the longest axis",
      NULL, NULL},
-    {"grid-max-samples", LC_OPT_INT, OFF(grid_max_samples), 8, 4194304, "262144", NULL,
+    {"grid-max-samples", LC_OPT_INT, OFF(grid_max_samples), 8, 4194304, "4096", NULL,
      "cap on SH grid samples", NULL, NULL},
     {"reloc-rays", LC_OPT_INT, OFF(reloc_rays), 4, 1024, "32", NULL,
      "test rays per cache for moving caches out of geometry", NULL, NULL},
@@ -130,12 +130,15 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
      * 16/32 visibility samples per node: with 8/16 the per-cache visible solid angle on
      * Sponza was off by 20-24% on average (vs 8% at 16/32) for 1.35x the link time. */
     typedef struct {
-        int atlas, surfels, links, bands, node_samples, final_samples, grid_max_dim, relax, reloc_rays;
+        int atlas, surfels, links, bands, node_samples, final_samples, grid_max_dim, grid_max_samples, relax,
+            reloc_rays;
     } bake_preset;
+    /* Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
+     * so a cube-shaped room does not get 24^3 grid caches (more than its texel caches). */
     static const bake_preset presets[] = {
-        {64, 8192, 64, 2, 4, 8, 16, 2, 16},
-        {128, 32768, 128, 3, 16, 32, 24, 4, 32},
-        {128, 131072, 254, 4, 16, 32, 24, 4, 32},
+        {64, 8192, 64, 2, 4, 8, 16, 1024, 2, 16},
+        {128, 32768, 128, 3, 16, 32, 24, 4096, 4, 32},
+        {128, 131072, 254, 4, 16, 32, 24, 8192, 4, 32},
     };
     const bake_preset *p = &presets[q];
     s->quality = (int)q;
@@ -146,6 +149,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     s->node_samples = p->node_samples;
     s->final_samples = p->final_samples;
     s->grid_max_dim = p->grid_max_dim;
+    s->grid_max_samples = p->grid_max_samples;
     s->relax = p->relax;
     s->reloc_rays = p->reloc_rays;
 }

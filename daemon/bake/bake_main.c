@@ -16,7 +16,7 @@ enum { EXIT_OK = 0, EXIT_FAIL = 1, EXIT_USAGE = 2, EXIT_OUTPUT = 3 };
 
 static void usage(FILE *out) {
     fprintf(out,
-            "usage: lucent-bake bake SCENE [options]   bake a glTF/OBJ/PLY scene into a .lcb file\n"
+            "usage: lucent-bake bake SCENE [-o OUT.lcb] [options]   bake a glTF/OBJ/PLY scene\n"
             "       lucent-bake info FILE [--json]     validate a bake file and print its contents\n"
             "       lucent-bake verify FILE            validate a bake file (exit 0 valid, 1 invalid)\n"
             "       lucent-bake --version\n\n"
@@ -29,11 +29,13 @@ static int cmd_bake(int argc, char **argv) {
     static lc_bake_settings s; /* large (asset paths); static keeps it off the stack */
     char err[1024] = "";
     char *pos[2];
-    for (int i = 2; i < argc; i++)
+    for (int i = 2; i < argc; i++) {
         if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
             usage(stdout);
             return EXIT_OK;
         }
+        if (!strcmp(argv[i], "-o")) argv[i] = "--output"; /* the one short flag, by habit */
+    }
     int npos = lc_bake_parse_args(&s, argc, argv, 2, pos, 2, err, sizeof err);
     if (npos < 0) {
         fprintf(stderr, "lucent-bake: %s\n", err);

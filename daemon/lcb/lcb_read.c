@@ -1,1 +1,780 @@
-/* stub: being written */
+/* lcb_read: maps a bake file and validates it completely before handing out a view, so the
+ * daemon can index every array without further checks (see lcb.h for the guarantees).
+ *
+ * Order: header -> section table -> each section's placement and CRC -> required sections
+ * and record sizes -> META (JSON) and its counts against the sections -> referential
+ * integrity of every index and finiteness of every float. Every error names the section
+ * (or "header") and says what to do.
+ *
+ * Alignment: the file variant is mmapped (page-aligned) and sections sit at 64-byte offsets,
+ * so every record is naturally aligned. lc_lcb_open_memory() borrows the caller's buffer when
+ * it is 8-byte aligned (malloc'd buffers always are) and otherwise validates an aligned copy,
+ * so no record is ever read through a misaligned pointer. */
+#include <errno.h>
+#include <fcntl.h>
+#include <float.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cjson/cJSON.h>
+
+#include "lcb/lcb.h"
+#include "util/crc32.h"
+#include "util/log.h"
+
+#define LCB_CORRUPT " — the file is corrupted; re-run lucent-bake"
+#define LCB_INCONSISTENT " — the bake is inconsistent; re-run lucent-bake"
+#define LCB_META_MAX (16u << 20)
+#define LCB_JSON_DEPTH_MAX 64
+#define LCB_GRID_CELLS_MAX (1u << 26)
+
+struct lc_lcb {
+    void *map;             /* file variant: the mapping */
+    size_t map_len;
+    void *copy;            /* memory variant with a misaligned buffer: our aligned copy */
+    const uint8_t *base;
+    size_t size;
+    lc_lcb_section table[LC_LCB_MAX_SECTIONS];
+    uint32_t n_sections;
+    char *meta_text;       /* NUL-terminated copy of META */
+    lc_lcb_view view;
+};
+
+/* Sections this reader knows; anything else is skipped (forward compatibility). */
+enum {
+    S_META, S_MATL, S_VERT, S_TRIS, S_SURF, S_NODE, S_LEVL, S_CACH, S_LMAP, S_GRID, S_LINK,
+    S_LKSH, S_ASET, S_AVRT, S_AIDX, S_COUNT
+};
+static const struct {
+    char id[5];
+    uint32_t record;
+    int required;
+    const char *what; /* the record type, for the record-size message */
+} lcb_known[S_COUNT] = {
+    {"META", 1, 1, "JSON text"},
+    {"MATL", sizeof(lc_lcb_material), 1, "lc_lcb_material"},
+    {"VERT", sizeof(lc_lcb_vertex), 1, "lc_lcb_vertex"},
+    {"TRIS", sizeof(lc_lcb_triangle), 1, "lc_lcb_triangle"},
+    {"SURF", sizeof(lc_lcb_surfel), 1, "lc_lcb_surfel"},
+    {"NODE", sizeof(lc_lcb_node), 1, "lc_lcb_node"},
+    {"LEVL", sizeof(uint32_t), 1, "uint32_t"},
+    {"CACH", sizeof(lc_lcb_cache), 1, "lc_lcb_cache"},
+    {"LMAP", sizeof(uint32_t), 1, "uint32_t"},
+    {"GRID", sizeof(uint32_t), 1, "uint32_t"},
+    {"LINK", sizeof(lc_lcb_link), 1, "lc_lcb_link"},
+    {"LKSH", sizeof(uint16_t), 0, "half"},
+    {"ASET", sizeof(lc_lcb_asset), 0, "lc_lcb_asset"},
+    {"AVRT", sizeof(lc_lcb_asset_vertex), 0, "lc_lcb_asset_vertex"},
+    {"AIDX", 3 * sizeof(uint32_t), 0, "uint32_t[3]"},
+};
+
+/* What META says; the sections are checked against it. */
+typedef struct lcb_meta {
+    uint32_t sh_bands;
+    uint32_t lm_w, lm_h;
+    float origin[3], cell;
+    uint32_t dims[3];
+    uint64_t surfels, nodes, levels, caches, texel, per_cache, link_sh;
+} lcb_meta;
+
+typedef struct lcb_ctx {
+    const uint8_t *base;
+    size_t size;
+    const lc_lcb_section *sec[S_COUNT];
+    lcb_meta m;
+    char *err;
+    size_t errlen;
+} lcb_ctx;
+
+__attribute__((format(printf, 2, 3))) static int lcb_fail(lcb_ctx *c, const char *fmt, ...) {
+    if (c->err && c->errlen) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(c->err, c->errlen, fmt, ap);
+        va_end(ap);
+    }
+    return -1;
+}
+
+/* Section ids come from the file: print non-printable bytes as '?'. */
+static const char *lcb_idstr(const char id[4], char buf[5]) {
+    for (int i = 0; i < 4; i++) buf[i] = (id[i] >= 0x20 && id[i] < 0x7f) ? id[i] : '?';
+    buf[4] = 0;
+    return buf;
+}
+
+static const void *lcb_data(const lcb_ctx *c, int k) { return c->base + c->sec[k]->offset; }
+static uint64_t lcb_count(const lcb_ctx *c, int k) { return c->sec[k] ? c->sec[k]->count : 0; }
+
+static int lcb_finite(const float *v, int n) {
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+/* --- 1 + 2: header, table, section placement ------------------------------------------- */
+
+static int lcb_check_header(lcb_ctx *c, lc_lcb *f) {
+    if (c->size < sizeof(lc_lcb_header))
+        return lcb_fail(c, "header: truncated: file is %zu bytes, smaller than the 64-byte header — not a complete "
+                           "lucent bake; re-run lucent-bake", c->size);
+    lc_lcb_header h;
+    memcpy(&h, c->base, sizeof h);
+    if (memcmp(h.magic, LC_LCB_MAGIC, 8) != 0)
+        return lcb_fail(c, "header: bad magic — not a lucent bake (.lcb) file");
+    if (h.version_major != LC_LCB_VERSION_MAJOR) {
+        if (h.version_major > LC_LCB_VERSION_MAJOR)
+            return lcb_fail(c, "header: format version %u.%u is newer than this build supports (%d.x); upgrade lucent",
+                            h.version_major, h.version_minor, LC_LCB_VERSION_MAJOR);
+        return lcb_fail(c, "header: format version %u.%u is older than this build supports (%d.x); re-run lucent-bake",
+                        h.version_major, h.version_minor, LC_LCB_VERSION_MAJOR);
+    }
+    if (lc_crc32(0, c->base, offsetof(lc_lcb_header, header_crc)) != h.header_crc)
+        return lcb_fail(c, "header: CRC mismatch" LCB_CORRUPT);
+    if (h.table_offset != sizeof(lc_lcb_header))
+        return lcb_fail(c, "header: table_offset is %llu, expected 64" LCB_CORRUPT, (unsigned long long)h.table_offset);
+    if (h.section_count > LC_LCB_MAX_SECTIONS)
+        return lcb_fail(c, "header: section_count %u exceeds the limit of %d" LCB_CORRUPT, h.section_count,
+                        LC_LCB_MAX_SECTIONS);
+    size_t table_len = (size_t)h.section_count * sizeof(lc_lcb_section);
+    if (table_len > c->size - sizeof h)
+        return lcb_fail(c, "section table: truncated: file is %zu bytes, the table of %u sections ends at %zu — "
+                           "re-run lucent-bake", c->size, h.section_count, sizeof h + table_len);
+    if (lc_crc32(0, c->base + sizeof h, table_len) != h.table_crc)
+        return lcb_fail(c, "section table: CRC mismatch" LCB_CORRUPT);
+    memcpy(f->table, c->base + sizeof h, table_len);
+    f->n_sections = h.section_count;
+    f->view.version_major = h.version_major;
+    f->view.version_minor = h.version_minor;
+    if (h.file_size > c->size) {
+        /* Name the first section that is cut off, so the message says what is missing. */
+        char b[5];
+        for (uint32_t i = 0; i < f->n_sections; i++) {
+            const lc_lcb_section *s = &f->table[i];
+            if (s->offset > c->size || s->size > c->size - s->offset)
+                return lcb_fail(c, "truncated: file is %zu bytes, header says %llu (section %s and later are "
+                                   "missing) — re-run lucent-bake", c->size, (unsigned long long)h.file_size,
+                                lcb_idstr(s->id, b));
+        }
+        return lcb_fail(c, "truncated: file is %zu bytes, header says %llu (end padding missing) — re-run "
+                           "lucent-bake", c->size, (unsigned long long)h.file_size);
+    }
+    if (h.file_size < c->size)
+        return lcb_fail(c, "header: file is %zu bytes, header says %llu (trailing data)" LCB_CORRUPT, c->size,
+                        (unsigned long long)h.file_size);
+    return 0;
+}
+
+static int lcb_check_sections(lcb_ctx *c, const lc_lcb *f) {
+    const uint64_t table_end = sizeof(lc_lcb_header) + (uint64_t)f->n_sections * sizeof(lc_lcb_section);
+    for (uint32_t i = 0; i < f->n_sections; i++) {
+        const lc_lcb_section *s = &f->table[i];
+        char b[5], b2[5];
+        const char *id = lcb_idstr(s->id, b);
+        if (s->offset % LC_LCB_ALIGN != 0)
+            return lcb_fail(c, "%s: offset %llu is not a multiple of %d" LCB_CORRUPT, id,
+                            (unsigned long long)s->offset, LC_LCB_ALIGN);
+        if (s->offset > c->size || s->size > c->size - s->offset)
+            return lcb_fail(c, "%s: bytes [%llu, %llu + %llu) lie outside the file (%zu bytes)" LCB_CORRUPT, id,
+                            (unsigned long long)s->offset, (unsigned long long)s->offset,
+                            (unsigned long long)s->size, c->size);
+        if (s->record_size == 0)
+            return lcb_fail(c, "%s: record size is 0" LCB_CORRUPT, id);
+        if (s->count > UINT64_MAX / s->record_size || s->count * s->record_size != s->size)
+            return lcb_fail(c, "%s: size %llu bytes is not %llu records x %u bytes" LCB_CORRUPT, id,
+                            (unsigned long long)s->size, (unsigned long long)s->count, s->record_size);
+        if (s->offset < table_end)
+            return lcb_fail(c, "%s: overlaps the header/section table" LCB_CORRUPT, id);
+        for (uint32_t j = 0; j < i; j++) {
+            const lc_lcb_section *o = &f->table[j];
+            /* Both ranges are inside the file, so the sums cannot overflow. */
+            if (s->size > 0 && o->size > 0 && s->offset < o->offset + o->size && o->offset < s->offset + s->size)
+                return lcb_fail(c, "%s: overlaps section %s" LCB_CORRUPT, id, lcb_idstr(o->id, b2));
+        }
+        for (uint32_t j = 0; j < i; j++)
+            if (memcmp(f->table[j].id, s->id, 4) == 0)
+                return lcb_fail(c, "%s: duplicate section" LCB_CORRUPT, id);
+        if (lc_crc32(0, c->base + s->offset, (size_t)s->size) != s->crc)
+            return lcb_fail(c, "%s: CRC mismatch" LCB_CORRUPT, id);
+    }
+    return 0;
+}
+
+/* --- 3: required sections, record sizes -------------------------------------------------- */
+
+static int lcb_find_sections(lcb_ctx *c, const lc_lcb *f) {
+    for (uint32_t i = 0; i < f->n_sections; i++)
+        for (int k = 0; k < S_COUNT; k++)
+            if (memcmp(f->table[i].id, lcb_known[k].id, 4) == 0) c->sec[k] = &f->table[i];
+    for (int k = 0; k < S_COUNT; k++) {
+        const lc_lcb_section *s = c->sec[k];
+        if (!s) {
+            if (lcb_known[k].required)
+                return lcb_fail(c, "%s: required section missing — the file is incomplete; re-run lucent-bake",
+                                lcb_known[k].id);
+            continue;
+        }
+        if (s->record_size != lcb_known[k].record)
+            return lcb_fail(c, "%s: record size %u, expected %u (%s) — written by an incompatible lucent-bake; "
+                               "re-run lucent-bake", lcb_known[k].id, s->record_size, lcb_known[k].record,
+                            lcb_known[k].what);
+        /* The view counts in 32 bits; LINK/LKSH have no count field there. */
+        if (k != S_LINK && k != S_LKSH && s->count > UINT32_MAX)
+            return lcb_fail(c, "%s: %llu records, more than this reader supports (2^32-1)", lcb_known[k].id,
+                            (unsigned long long)s->count);
+    }
+    int assets = !!c->sec[S_ASET] + !!c->sec[S_AVRT] + !!c->sec[S_AIDX];
+    if (assets != 0 && assets != 3) {
+        int k = !c->sec[S_ASET] ? S_ASET : !c->sec[S_AVRT] ? S_AVRT : S_AIDX;
+        return lcb_fail(c, "%s: missing (ASET, AVRT and AIDX come together)" LCB_INCONSISTENT, lcb_known[k].id);
+    }
+    if (c->sec[S_META]->count > LCB_META_MAX)
+        return lcb_fail(c, "META: %llu bytes, more than the 16 MiB limit" LCB_CORRUPT,
+                        (unsigned long long)c->sec[S_META]->count);
+    return 0;
+}
+
+/* --- 4: META ----------------------------------------------------------------------------- */
+
+/* Nesting depth of JSON text, ignoring brackets inside strings; checked before cJSON so a
+ * deeply nested META can neither exhaust the stack here nor in later cJSON walks. */
+static int lcb_json_depth_ok(const char *s, size_t n) {
+    int depth = 0, in_str = 0;
+    for (size_t i = 0; i < n; i++) {
+        char ch = s[i];
+        if (in_str) {
+            if (ch == '\\')
+                i++;
+            else if (ch == '"')
+                in_str = 0;
+        } else if (ch == '"') {
+            in_str = 1;
+        } else if (ch == '[' || ch == '{') {
+            if (++depth > LCB_JSON_DEPTH_MAX) return 0;
+        } else if (ch == ']' || ch == '}') {
+            depth--;
+        }
+    }
+    return 1;
+}
+
+/* JSON-pointer-like lookup of "/a/b" through objects. */
+static const cJSON *lcb_json_at(const cJSON *root, const char *path) {
+    const cJSON *cur = root;
+    const char *p = path;
+    while (*p == '/') {
+        p++;
+        size_t n = strcspn(p, "/");
+        char key[32];
+        if (n >= sizeof key || !cJSON_IsObject(cur)) return NULL;
+        memcpy(key, p, n);
+        key[n] = 0;
+        cur = cJSON_GetObjectItemCaseSensitive(cur, key);
+        if (!cur) return NULL;
+        p += n;
+    }
+    return cur;
+}
+
+static int lcb_json_uint(const cJSON *j, uint64_t lo, uint64_t hi, uint64_t *out) {
+    if (!cJSON_IsNumber(j)) return 0;
+    double v = j->valuedouble;
+    if (!isfinite(v) || v != floor(v) || v < (double)lo || v > (double)hi) return 0;
+    *out = (uint64_t)v;
+    return 1;
+}
+
+static int lcb_meta_uint(lcb_ctx *c, const cJSON *root, const char *path, uint64_t lo, uint64_t hi, uint64_t *out) {
+    if (!lcb_json_uint(lcb_json_at(root, path), lo, hi, out))
+        return lcb_fail(c, "META: %s must be an integer in %llu..%llu" LCB_INCONSISTENT, path,
+                        (unsigned long long)lo, (unsigned long long)hi);
+    return 0;
+}
+
+/* Finite and representable as a finite float (an out-of-range double->float cast is UB). */
+static int lcb_float_ok(double v) { return isfinite(v) && fabs(v) <= FLT_MAX; }
+
+static int lcb_meta_fields(lcb_ctx *c, const cJSON *root) {
+    lcb_meta *m = &c->m;
+    uint64_t v;
+    if (!cJSON_IsObject(root)) return lcb_fail(c, "META: must be a JSON object" LCB_INCONSISTENT);
+    const cJSON *fmt = lcb_json_at(root, "/format");
+    if (!cJSON_IsString(fmt) || strcmp(fmt->valuestring, "lucent-bake") != 0)
+        return lcb_fail(c, "META: /format must be \"lucent-bake\"" LCB_INCONSISTENT);
+    if (lcb_meta_uint(c, root, "/sh_bands", 1, 8, &v)) return -1;
+    m->sh_bands = (uint32_t)v;
+    if (lcb_meta_uint(c, root, "/lightmap/width", 1, 16384, &v)) return -1;
+    m->lm_w = (uint32_t)v;
+    if (lcb_meta_uint(c, root, "/lightmap/height", 1, 16384, &v)) return -1;
+    m->lm_h = (uint32_t)v;
+
+    const cJSON *origin = lcb_json_at(root, "/grid/origin");
+    if (!cJSON_IsArray(origin) || cJSON_GetArraySize(origin) != 3)
+        return lcb_fail(c, "META: /grid/origin must be an array of 3 finite numbers" LCB_INCONSISTENT);
+    for (int i = 0; i < 3; i++) {
+        const cJSON *e = cJSON_GetArrayItem(origin, i);
+        if (!cJSON_IsNumber(e) || !lcb_float_ok(e->valuedouble))
+            return lcb_fail(c, "META: /grid/origin must be an array of 3 finite numbers" LCB_INCONSISTENT);
+        m->origin[i] = (float)e->valuedouble;
+    }
+    const cJSON *cell = lcb_json_at(root, "/grid/cell");
+    if (!cJSON_IsNumber(cell) || !lcb_float_ok(cell->valuedouble) || !((float)cell->valuedouble > 0))
+        return lcb_fail(c, "META: /grid/cell must be a finite number > 0" LCB_INCONSISTENT);
+    m->cell = (float)cell->valuedouble;
+    const cJSON *dims = lcb_json_at(root, "/grid/dims");
+    if (!cJSON_IsArray(dims) || cJSON_GetArraySize(dims) != 3)
+        return lcb_fail(c, "META: /grid/dims must be an array of 3 integers in 1..1024" LCB_INCONSISTENT);
+    for (int i = 0; i < 3; i++) {
+        if (!lcb_json_uint(cJSON_GetArrayItem(dims, i), 1, 1024, &v))
+            return lcb_fail(c, "META: /grid/dims must be an array of 3 integers in 1..1024" LCB_INCONSISTENT);
+        m->dims[i] = (uint32_t)v;
+    }
+    if (lcb_meta_uint(c, root, "/surfels/count", 1, UINT32_MAX, &m->surfels)) return -1;
+    const cJSON *area = lcb_json_at(root, "/surfels/area");
+    if (!cJSON_IsNumber(area) || !isfinite(area->valuedouble) || area->valuedouble < 0)
+        return lcb_fail(c, "META: /surfels/area must be a finite number >= 0" LCB_INCONSISTENT);
+    if (lcb_meta_uint(c, root, "/hierarchy/nodes", 1, UINT32_MAX, &m->nodes)) return -1;
+    if (lcb_meta_uint(c, root, "/hierarchy/levels", 1, UINT32_MAX - 1, &m->levels)) return -1;
+    if (lcb_meta_uint(c, root, "/caches/count", 0, UINT32_MAX, &m->caches)) return -1;
+    if (lcb_meta_uint(c, root, "/caches/texel", 0, m->caches, &m->texel)) return -1;
+    if (lcb_meta_uint(c, root, "/links/per_cache", 1, 1024, &m->per_cache)) return -1;
+    if (lcb_meta_uint(c, root, "/links/sh_bands", 0, 8, &m->link_sh)) return -1;
+    return 0;
+}
+
+/* Counts in META against the section record counts. */
+static int lcb_meta_counts(lcb_ctx *c) {
+    const lcb_meta *m = &c->m;
+    uint64_t texels = (uint64_t)m->lm_w * m->lm_h;
+    if (lcb_count(c, S_LMAP) != texels)
+        return lcb_fail(c, "LMAP: %llu entries, but META /lightmap is %ux%u = %llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_LMAP), m->lm_w, m->lm_h, (unsigned long long)texels);
+    uint64_t cells = (uint64_t)m->dims[0] * m->dims[1] * m->dims[2];
+    if (cells > LCB_GRID_CELLS_MAX)
+        return lcb_fail(c, "META: /grid/dims %ux%ux%u exceed 2^26 samples" LCB_INCONSISTENT, m->dims[0], m->dims[1],
+                        m->dims[2]);
+    if (lcb_count(c, S_GRID) != cells)
+        return lcb_fail(c, "GRID: %llu entries, but META /grid/dims is %ux%ux%u = %llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_GRID), m->dims[0], m->dims[1], m->dims[2],
+                        (unsigned long long)cells);
+    if (lcb_count(c, S_SURF) != m->surfels)
+        return lcb_fail(c, "SURF: %llu surfels, but META /surfels/count is %llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_SURF), (unsigned long long)m->surfels);
+    if (m->nodes != 2 * m->surfels - 1)
+        return lcb_fail(c, "META: /hierarchy/nodes is %llu, expected 2 x /surfels/count - 1 = %llu" LCB_INCONSISTENT,
+                        (unsigned long long)m->nodes, (unsigned long long)(2 * m->surfels - 1));
+    if (lcb_count(c, S_NODE) != m->nodes)
+        return lcb_fail(c, "NODE: %llu nodes, but META /hierarchy/nodes is %llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_NODE), (unsigned long long)m->nodes);
+    if (lcb_count(c, S_LEVL) != m->levels + 1)
+        return lcb_fail(c, "LEVL: %llu entries, but META /hierarchy/levels + 1 is %llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_LEVL), (unsigned long long)(m->levels + 1));
+    if (lcb_count(c, S_CACH) != m->caches)
+        return lcb_fail(c, "CACH: %llu caches, but META /caches/count is %llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_CACH), (unsigned long long)m->caches);
+    /* caches <= 2^32-1 and per_cache <= 1024: the product fits 64 bits, and so does x 64. */
+    uint64_t links = m->caches * m->per_cache;
+    if (lcb_count(c, S_LINK) != links)
+        return lcb_fail(c, "LINK: %llu links, but META /caches/count x /links/per_cache is %llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_LINK), (unsigned long long)links);
+    if (m->link_sh == 0) {
+        if (c->sec[S_LKSH])
+            return lcb_fail(c, "LKSH: present, but META /links/sh_bands is 0" LCB_INCONSISTENT);
+    } else {
+        uint64_t halves = links * m->link_sh * m->link_sh;
+        if (!c->sec[S_LKSH])
+            return lcb_fail(c, "LKSH: required section missing (META /links/sh_bands is %llu)" LCB_INCONSISTENT,
+                            (unsigned long long)m->link_sh);
+        if (lcb_count(c, S_LKSH) != halves)
+            return lcb_fail(c, "LKSH: %llu values, but LINK count x /links/sh_bands^2 is %llu" LCB_INCONSISTENT,
+                            (unsigned long long)lcb_count(c, S_LKSH), (unsigned long long)halves);
+    }
+    return 0;
+}
+
+static int lcb_check_meta(lcb_ctx *c, lc_lcb *f) {
+    const lc_lcb_section *s = c->sec[S_META];
+    size_t len = (size_t)s->size;
+    const char *text = (const char *)lcb_data(c, S_META);
+    if (memchr(text, 0, len))
+        return lcb_fail(c, "META: contains a NUL byte (must be JSON text)" LCB_CORRUPT);
+    f->meta_text = malloc(len + 1);
+    if (!f->meta_text) return lcb_fail(c, "META: out of memory");
+    memcpy(f->meta_text, text, len);
+    f->meta_text[len] = 0;
+    if (!lcb_json_depth_ok(f->meta_text, len))
+        return lcb_fail(c, "META: JSON nested deeper than %d levels" LCB_CORRUPT, LCB_JSON_DEPTH_MAX);
+    cJSON *root = cJSON_ParseWithOpts(f->meta_text, NULL, 1);
+    if (!root) return lcb_fail(c, "META: not valid JSON" LCB_CORRUPT);
+    int rc = lcb_meta_fields(c, root);
+    cJSON_Delete(root);
+    if (rc) return -1;
+    return lcb_meta_counts(c);
+}
+
+/* --- 5: referential integrity ------------------------------------------------------------ */
+
+static int lcb_check_geometry(lcb_ctx *c) {
+    const lc_lcb_material *mat = lcb_data(c, S_MATL);
+    uint64_t n_mat = lcb_count(c, S_MATL), n_vert = lcb_count(c, S_VERT);
+    for (uint64_t i = 0; i < n_mat; i++) {
+        if (!memchr(mat[i].name, 0, sizeof mat[i].name))
+            return lcb_fail(c, "MATL: material %llu name is not NUL-terminated" LCB_CORRUPT, (unsigned long long)i);
+        if (!lcb_finite(mat[i].base_color, 3) || !lcb_finite(mat[i].emission, 3))
+            return lcb_fail(c, "MATL: material %llu has a non-finite colour" LCB_INCONSISTENT, (unsigned long long)i);
+    }
+    const lc_lcb_vertex *vert = lcb_data(c, S_VERT);
+    for (uint64_t i = 0; i < n_vert; i++)
+        if (!lcb_finite(vert[i].position, 3) || !lcb_finite(vert[i].normal, 3) || !lcb_finite(vert[i].uv1, 2))
+            return lcb_fail(c, "VERT: vertex %llu has a non-finite value" LCB_INCONSISTENT, (unsigned long long)i);
+    const lc_lcb_triangle *tri = lcb_data(c, S_TRIS);
+    for (uint64_t i = 0; i < lcb_count(c, S_TRIS); i++) {
+        if (tri[i].v[0] >= n_vert || tri[i].v[1] >= n_vert || tri[i].v[2] >= n_vert)
+            return lcb_fail(c, "TRIS: triangle %llu has a vertex index >= %llu vertices" LCB_INCONSISTENT,
+                            (unsigned long long)i, (unsigned long long)n_vert);
+        if (tri[i].material >= n_mat)
+            return lcb_fail(c, "TRIS: triangle %llu has material %u >= %llu materials" LCB_INCONSISTENT,
+                            (unsigned long long)i, tri[i].material, (unsigned long long)n_mat);
+    }
+    return 0;
+}
+
+static int lcb_check_surfels(lcb_ctx *c) {
+    const lc_lcb_surfel *s = lcb_data(c, S_SURF);
+    uint64_t n_mat = lcb_count(c, S_MATL), n_cache = lcb_count(c, S_CACH);
+    for (uint64_t i = 0; i < lcb_count(c, S_SURF); i++) {
+        if (!lcb_finite(s[i].position, 3) || !lcb_finite(s[i].normal, 3) || !lcb_finite(s[i].albedo, 3) ||
+            !lcb_finite(s[i].emission, 3) || !isfinite(s[i].area))
+            return lcb_fail(c, "SURF: surfel %llu has a non-finite value" LCB_INCONSISTENT, (unsigned long long)i);
+        if (!(s[i].area > 0))
+            return lcb_fail(c, "SURF: surfel %llu has area <= 0" LCB_INCONSISTENT, (unsigned long long)i);
+        if (s[i].material >= n_mat)
+            return lcb_fail(c, "SURF: surfel %llu has material %u >= %llu materials" LCB_INCONSISTENT,
+                            (unsigned long long)i, s[i].material, (unsigned long long)n_mat);
+        if (s[i].cache != LC_NONE && s[i].cache >= n_cache)
+            return lcb_fail(c, "SURF: surfel %llu has cache %u >= %llu caches" LCB_INCONSISTENT, (unsigned long long)i,
+                            s[i].cache, (unsigned long long)n_cache);
+    }
+    return 0;
+}
+
+static int lcb_check_levels(lcb_ctx *c) {
+    const uint32_t *L = lcb_data(c, S_LEVL);
+    uint64_t n = lcb_count(c, S_LEVL), n_nodes = lcb_count(c, S_NODE);
+    /* META guarantees n = levels + 1 >= 2. */
+    if (L[0] != 0) return lcb_fail(c, "LEVL: first offset is %u, must be 0" LCB_INCONSISTENT, L[0]);
+    if (L[1] != 1) return lcb_fail(c, "LEVL: level 0 must hold only the root (offset[1] = %u)" LCB_INCONSISTENT, L[1]);
+    for (uint64_t i = 1; i < n; i++)
+        if (L[i] <= L[i - 1])
+            return lcb_fail(c, "LEVL: offsets not strictly increasing at level %llu" LCB_INCONSISTENT,
+                            (unsigned long long)i);
+    if (L[n - 1] != n_nodes)
+        return lcb_fail(c, "LEVL: last offset is %u, must be the node count %llu" LCB_INCONSISTENT, L[n - 1],
+                        (unsigned long long)n_nodes);
+    return 0;
+}
+
+/* The hierarchy is a full binary tree in BFS order: node 0 is the root over all surfels,
+ * children of a level-k node lie in level k+1, the two children partition the parent's
+ * surfel range (left first), leaves hold exactly one surfel, and every node but the root
+ * has exactly one parent. LEVL must be validated first. */
+static int lcb_check_nodes(lcb_ctx *c) {
+    const lc_lcb_node *nd = lcb_data(c, S_NODE);
+    const uint32_t *L = lcb_data(c, S_LEVL);
+    uint64_t n = lcb_count(c, S_NODE), n_levels = lcb_count(c, S_LEVL) - 1, n_surf = lcb_count(c, S_SURF);
+    uint8_t *has_parent = calloc((size_t)n, 1);
+    int rc = -1;
+    if (!has_parent) return lcb_fail(c, "NODE: out of memory");
+    if (nd[0].first_surfel != 0 || nd[0].surfel_count != n_surf) {
+        lcb_fail(c, "NODE: root covers [%u, +%u), must cover all %llu surfels" LCB_INCONSISTENT, nd[0].first_surfel,
+                 nd[0].surfel_count, (unsigned long long)n_surf);
+        goto err;
+    }
+    uint64_t lev = 0;
+    for (uint64_t i = 0; i < n; i++) {
+        const lc_lcb_node *p = &nd[i];
+        unsigned long long ui = (unsigned long long)i;
+        while (i >= L[lev + 1]) lev++; /* L[n_levels] == n, so lev < n_levels here */
+        if (!lcb_finite(p->center, 3) || !isfinite(p->area) || !lcb_finite(p->normal, 3) || !isfinite(p->radius)) {
+            lcb_fail(c, "NODE: node %llu has a non-finite value" LCB_INCONSISTENT, ui);
+            goto err;
+        }
+        if (!(p->area > 0) || !(p->radius >= 0)) {
+            lcb_fail(c, "NODE: node %llu has area <= 0 or radius < 0" LCB_INCONSISTENT, ui);
+            goto err;
+        }
+        if (p->child[0] == LC_NONE && p->child[1] == LC_NONE) {
+            if (p->surfel_count != 1 || p->first_surfel >= n_surf) {
+                lcb_fail(c, "NODE: leaf %llu must hold one surfel below %llu (has [%u, +%u))" LCB_INCONSISTENT, ui,
+                         (unsigned long long)n_surf, p->first_surfel, p->surfel_count);
+                goto err;
+            }
+            continue;
+        }
+        for (int k = 0; k < 2; k++) {
+            uint32_t ch = p->child[k];
+            if (ch == LC_NONE || ch >= n) {
+                lcb_fail(c, "NODE: node %llu child %d is %u, out of range (%llu nodes)" LCB_INCONSISTENT, ui, k, ch,
+                         (unsigned long long)n);
+                goto err;
+            }
+            if (lev + 1 >= n_levels || ch < L[lev + 1] || ch >= L[lev + 2]) {
+                lcb_fail(c, "NODE: node %llu (level %llu) has child %u outside the next level — not in BFS "
+                            "order" LCB_INCONSISTENT, ui, (unsigned long long)lev, ch);
+                goto err;
+            }
+            if (has_parent[ch]) {
+                lcb_fail(c, "NODE: node %u has more than one parent" LCB_INCONSISTENT, ch);
+                goto err;
+            }
+            has_parent[ch] = 1;
+        }
+        const lc_lcb_node *a = &nd[p->child[0]], *b = &nd[p->child[1]];
+        if (a->first_surfel != p->first_surfel || (uint64_t)a->first_surfel + a->surfel_count != b->first_surfel ||
+            (uint64_t)a->surfel_count + b->surfel_count != p->surfel_count) {
+            lcb_fail(c, "NODE: children of node %llu do not partition its surfel range" LCB_INCONSISTENT, ui);
+            goto err;
+        }
+    }
+    for (uint64_t i = 1; i < n; i++)
+        if (!has_parent[i]) {
+            lcb_fail(c, "NODE: node %llu has no parent" LCB_INCONSISTENT, (unsigned long long)i);
+            goto err;
+        }
+    rc = 0;
+err:
+    free(has_parent);
+    return rc;
+}
+
+static int lcb_check_caches(lcb_ctx *c) {
+    const lc_lcb_cache *ca = lcb_data(c, S_CACH);
+    uint64_t n = lcb_count(c, S_CACH), texels = (uint64_t)c->m.lm_w * c->m.lm_h, cells = lcb_count(c, S_GRID);
+    for (uint64_t i = 0; i < n; i++) {
+        unsigned long long ui = (unsigned long long)i;
+        if (!lcb_finite(ca[i].position, 3) || !lcb_finite(ca[i].normal, 3) || !lcb_finite(ca[i].albedo, 3))
+            return lcb_fail(c, "CACH: cache %llu has a non-finite value" LCB_INCONSISTENT, ui);
+        uint32_t kind = ca[i].flags & (LC_CACHE_TEXEL | LC_CACHE_GRID);
+        if (i < c->m.texel) {
+            if (kind != LC_CACHE_TEXEL || ca[i].index >= texels)
+                return lcb_fail(c, "CACH: cache %llu must be a texel cache with index < %llu (META /caches/texel)"
+                                   LCB_INCONSISTENT, ui, (unsigned long long)texels);
+        } else if (kind != LC_CACHE_GRID || ca[i].index >= cells) {
+            return lcb_fail(c, "CACH: cache %llu must be a grid cache with index < %llu" LCB_INCONSISTENT, ui,
+                            (unsigned long long)cells);
+        }
+    }
+    const uint32_t *lm = lcb_data(c, S_LMAP);
+    for (uint64_t i = 0; i < lcb_count(c, S_LMAP); i++)
+        if (lm[i] != LC_NONE && lm[i] >= n)
+            return lcb_fail(c, "LMAP: texel %llu refers to cache %u >= %llu caches" LCB_INCONSISTENT,
+                            (unsigned long long)i, lm[i], (unsigned long long)n);
+    const uint32_t *g = lcb_data(c, S_GRID);
+    for (uint64_t i = 0; i < cells; i++)
+        if (g[i] >= n)
+            return lcb_fail(c, "GRID: sample %llu refers to cache %u >= %llu caches" LCB_INCONSISTENT,
+                            (unsigned long long)i, g[i], (unsigned long long)n);
+    return 0;
+}
+
+static int lcb_check_links(lcb_ctx *c) {
+    const lc_lcb_link *l = lcb_data(c, S_LINK);
+    uint64_t n_nodes = lcb_count(c, S_NODE);
+    for (uint64_t i = 0; i < lcb_count(c, S_LINK); i++)
+        if (l[i].node >= n_nodes || !isfinite(l[i].factor) || !(l[i].factor >= 0))
+            return lcb_fail(c, "LINK: link %llu has node %u (of %llu) or a factor that is not finite and >= 0"
+                               LCB_INCONSISTENT, (unsigned long long)i, l[i].node, (unsigned long long)n_nodes);
+    if (c->sec[S_LKSH]) {
+        const uint16_t *h = lcb_data(c, S_LKSH);
+        for (uint64_t i = 0; i < lcb_count(c, S_LKSH); i++)
+            if ((h[i] & 0x7C00u) == 0x7C00u) /* exponent all ones: inf or NaN */
+                return lcb_fail(c, "LKSH: value %llu is inf/NaN" LCB_INCONSISTENT, (unsigned long long)i);
+    }
+    return 0;
+}
+
+static int lcb_check_assets(lcb_ctx *c) {
+    if (!c->sec[S_ASET]) return 0;
+    const lc_lcb_asset *a = lcb_data(c, S_ASET);
+    const lc_lcb_asset_vertex *v = lcb_data(c, S_AVRT);
+    const uint32_t *idx = lcb_data(c, S_AIDX);
+    uint64_t n_v = lcb_count(c, S_AVRT), n_t = lcb_count(c, S_AIDX);
+    for (uint64_t i = 0; i < n_v; i++)
+        if (!lcb_finite(v[i].position, 3) || !lcb_finite(v[i].normal, 3) || !lcb_finite(v[i].albedo, 3))
+            return lcb_fail(c, "AVRT: vertex %llu has a non-finite value" LCB_INCONSISTENT, (unsigned long long)i);
+    for (uint64_t i = 0; i < lcb_count(c, S_ASET); i++) {
+        unsigned long long ui = (unsigned long long)i;
+        if (!memchr(a[i].name, 0, sizeof a[i].name))
+            return lcb_fail(c, "ASET: asset %llu name is not NUL-terminated" LCB_CORRUPT, ui);
+        if ((uint64_t)a[i].first_vertex + a[i].vertex_count > n_v)
+            return lcb_fail(c, "ASET: asset %llu vertices [%u, +%u) exceed AVRT (%llu)" LCB_INCONSISTENT, ui,
+                            a[i].first_vertex, a[i].vertex_count, (unsigned long long)n_v);
+        if ((uint64_t)a[i].first_triangle + a[i].triangle_count > n_t)
+            return lcb_fail(c, "ASET: asset %llu triangles [%u, +%u) exceed AIDX (%llu)" LCB_INCONSISTENT, ui,
+                            a[i].first_triangle, a[i].triangle_count, (unsigned long long)n_t);
+        if (!lcb_finite(a[i].bounds_min, 3) || !lcb_finite(a[i].bounds_max, 3) || !lcb_finite(a[i].albedo, 3))
+            return lcb_fail(c, "ASET: asset %llu has a non-finite value" LCB_INCONSISTENT, ui);
+        const uint32_t *t = idx + (size_t)a[i].first_triangle * 3;
+        for (uint64_t k = 0; k < (uint64_t)a[i].triangle_count * 3; k++)
+            if (t[k] >= a[i].vertex_count)
+                return lcb_fail(c, "AIDX: asset %llu triangle index %u >= its %u vertices" LCB_INCONSISTENT, ui, t[k],
+                                a[i].vertex_count);
+    }
+    return 0;
+}
+
+/* --- load ------------------------------------------------------------------------------ */
+
+static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
+    lcb_ctx c;
+    memset(&c, 0, sizeof c);
+    c.base = f->base;
+    c.size = f->size;
+    c.err = err;
+    c.errlen = errlen;
+    if (lcb_check_header(&c, f) || lcb_check_sections(&c, f) || lcb_find_sections(&c, f) || lcb_check_meta(&c, f) ||
+        lcb_check_geometry(&c) || lcb_check_surfels(&c) || lcb_check_levels(&c) || lcb_check_nodes(&c) ||
+        lcb_check_caches(&c) || lcb_check_links(&c) || lcb_check_assets(&c))
+        return -1;
+
+    lc_lcb_view *v = &f->view;
+    v->meta_json = f->meta_text;
+    v->meta_len = (size_t)c.sec[S_META]->size;
+    v->sh_bands = c.m.sh_bands;
+#define LCB_ARR(k) ((const void *)(c.sec[k] ? f->base + c.sec[k]->offset : NULL))
+    v->materials = LCB_ARR(S_MATL);
+    v->n_materials = (uint32_t)lcb_count(&c, S_MATL);
+    v->vertices = LCB_ARR(S_VERT);
+    v->n_vertices = (uint32_t)lcb_count(&c, S_VERT);
+    v->triangles = LCB_ARR(S_TRIS);
+    v->n_triangles = (uint32_t)lcb_count(&c, S_TRIS);
+    v->surfels = LCB_ARR(S_SURF);
+    v->n_surfels = (uint32_t)lcb_count(&c, S_SURF);
+    v->nodes = LCB_ARR(S_NODE);
+    v->n_nodes = (uint32_t)lcb_count(&c, S_NODE);
+    v->levels = LCB_ARR(S_LEVL);
+    v->n_levels = (uint32_t)(lcb_count(&c, S_LEVL) - 1);
+    v->caches = LCB_ARR(S_CACH);
+    v->n_caches = (uint32_t)lcb_count(&c, S_CACH);
+    v->n_texel_caches = (uint32_t)c.m.texel;
+    v->lightmap = LCB_ARR(S_LMAP);
+    v->lightmap_width = c.m.lm_w;
+    v->lightmap_height = c.m.lm_h;
+    v->grid = LCB_ARR(S_GRID);
+    memcpy(v->grid_dims, c.m.dims, sizeof v->grid_dims);
+    memcpy(v->grid_origin, c.m.origin, sizeof v->grid_origin);
+    v->grid_cell = c.m.cell;
+    v->links = LCB_ARR(S_LINK);
+    v->links_per_cache = (uint32_t)c.m.per_cache;
+    v->link_sh = LCB_ARR(S_LKSH);
+    v->link_sh_bands = (uint32_t)c.m.link_sh;
+    v->assets = LCB_ARR(S_ASET);
+    v->n_assets = (uint32_t)lcb_count(&c, S_ASET);
+    v->asset_vertices = LCB_ARR(S_AVRT);
+    v->n_asset_vertices = (uint32_t)lcb_count(&c, S_AVRT);
+    v->asset_indices = LCB_ARR(S_AIDX);
+    v->n_asset_triangles = (uint32_t)lcb_count(&c, S_AIDX);
+#undef LCB_ARR
+    return 0;
+}
+
+int lc_lcb_open(const char *path, lc_lcb **out, char *err, size_t errlen) {
+    lc_lcb *f = NULL;
+    int fd = -1;
+    if (!out || !path) {
+        lc_set_err(err, errlen, "lc_lcb_open: invalid arguments");
+        return -1;
+    }
+    *out = NULL;
+    fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+        lc_set_err(err, errlen, "cannot open '%s': %s — check the path or re-run lucent-bake", path, strerror(errno));
+        goto err;
+    }
+    struct stat st;
+    if (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+        lc_set_err(err, errlen, "'%s' is not a regular file — pass a .lcb written by lucent-bake", path);
+        goto err;
+    }
+    f = calloc(1, sizeof *f);
+    if (!f) {
+        lc_set_err(err, errlen, "out of memory");
+        goto err;
+    }
+    f->size = (size_t)st.st_size;
+    /* A file shorter than the header cannot be mapped usefully (size 0 cannot be mapped at
+     * all); the header check rejects it without touching base. */
+    if (f->size >= sizeof(lc_lcb_header)) {
+        void *m = mmap(NULL, f->size, PROT_READ, MAP_PRIVATE, fd, 0);
+        if (m == MAP_FAILED) {
+            lc_set_err(err, errlen, "cannot map '%s': %s", path, strerror(errno));
+            goto err;
+        }
+        f->map = m;
+        f->map_len = f->size;
+        f->base = m;
+    }
+    close(fd);
+    fd = -1;
+    if (lcb_load(f, err, errlen) != 0) goto err;
+    *out = f;
+    return 0;
+err:
+    if (fd >= 0) close(fd);
+    lc_lcb_close(f);
+    return -1;
+}
+
+int lc_lcb_open_memory(const void *data, size_t len, lc_lcb **out, char *err, size_t errlen) {
+    lc_lcb *f = NULL;
+    if (!out || (!data && len > 0)) {
+        lc_set_err(err, errlen, "lc_lcb_open_memory: invalid arguments");
+        return -1;
+    }
+    *out = NULL;
+    f = calloc(1, sizeof *f);
+    if (!f) {
+        lc_set_err(err, errlen, "out of memory");
+        goto err;
+    }
+    f->size = len;
+    f->base = data;
+    /* Records are read in place: need 8-byte alignment (uint64 in the table); copy otherwise. */
+    if (len > 0 && ((uintptr_t)data % 8) != 0) {
+        f->copy = malloc(len);
+        if (!f->copy) {
+            lc_set_err(err, errlen, "out of memory");
+            goto err;
+        }
+        memcpy(f->copy, data, len);
+        f->base = f->copy;
+    }
+    if (lcb_load(f, err, errlen) != 0) goto err;
+    *out = f;
+    return 0;
+err:
+    lc_lcb_close(f);
+    return -1;
+}
+
+const lc_lcb_view *lc_lcb_get(const lc_lcb *f) { return f ? &f->view : NULL; }
+
+uint32_t lc_lcb_section_count(const lc_lcb *f) { return f ? f->n_sections : 0; }
+
+const lc_lcb_section *lc_lcb_section_at(const lc_lcb *f, uint32_t i) {
+    return f && i < f->n_sections ? &f->table[i] : NULL;
+}
+
+void lc_lcb_close(lc_lcb *f) {
+    if (!f) return;
+    if (f->map) munmap(f->map, f->map_len);
+    free(f->copy);
+    free(f->meta_text);
+    free(f);
+}
