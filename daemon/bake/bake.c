@@ -551,6 +551,18 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
         lc_set_err(err, errlen, "link generation failed (out of memory?)");
         goto err;
     }
+    /* Links come used-first, padding after; record the count so runtimes can stop early. */
+    for (uint32_t c = 0; c < n_caches; c++) {
+        const lc_lcb_link *cl = links + (size_t)c * s->links;
+        uint32_t used = 0;
+        while (used < (uint32_t)s->links && cl[used].factor > 0) used++;
+        for (uint32_t j = used; j < (uint32_t)s->links; j++)
+            if (cl[j].factor > 0) {
+                lc_set_err(err, errlen, "internal error: cache %u has a used link after padding", c);
+                goto err;
+            }
+        caches[c].link_count = used;
+    }
     bake_stage(r, "links", &t0);
 
     /* 10. assets */

@@ -119,14 +119,15 @@ typedef struct lc_lcb_cache {
     float normal[3]; /* texel caches: surface normal; grid caches: zero (full sphere) */
     float albedo[3]; /* texel caches: surface albedo; grid: zero */
     uint32_t flags;
-    uint32_t index;  /* texel index (y*W + x) or grid sample index */
-    uint32_t reserved;
+    uint32_t index;      /* texel index (y*W + x) or grid sample index */
+    uint32_t link_count; /* links in use: the cache's slots [link_count, links_per_cache) are padding */
 } lc_lcb_cache;
 
 /* A link for runtime projection: cache radiance SH gains
  *   L_lm += flux(node) * factor * h_l(cos alpha) * y_lm(dir)
  * with h_l from lc_sh_cone_ratio(). factor = visible solid angle / (pi * node area).
- * Padding links (when fewer visible nodes than links_per_cache) have factor 0, node 0. */
+ * Padding links (when fewer visible nodes than links_per_cache) have factor 0, node 0, and
+ * come after the cache's link_count used links, so a runtime may stop at link_count. */
 typedef struct lc_lcb_link {
     uint32_t node;
     float factor;

@@ -590,6 +590,17 @@ static int lcb_check_links(lcb_ctx *c) {
         if (l[i].node >= n_nodes || !isfinite(l[i].factor) || !(l[i].factor >= 0))
             return lcb_fail(c, "LINK: link %llu has node %u (of %llu) or a factor that is not finite and >= 0"
                                LCB_INCONSISTENT, (unsigned long long)i, l[i].node, (unsigned long long)n_nodes);
+    /* Used links first, padding after: runtimes stop at link_count. */
+    const lc_lcb_cache *ca = lcb_data(c, S_CACH);
+    for (uint64_t i = 0; i < lcb_count(c, S_CACH); i++) {
+        if (ca[i].link_count > c->m.per_cache)
+            return lcb_fail(c, "CACH: cache %llu has link_count %u > /links/per_cache %llu" LCB_INCONSISTENT,
+                            (unsigned long long)i, ca[i].link_count, (unsigned long long)c->m.per_cache);
+        for (uint64_t j = ca[i].link_count; j < c->m.per_cache; j++)
+            if (l[i * c->m.per_cache + j].factor != 0)
+                return lcb_fail(c, "LINK: cache %llu slot %llu lies past its link_count %u but is not padding"
+                                   LCB_INCONSISTENT, (unsigned long long)i, (unsigned long long)j, ca[i].link_count);
+    }
     if (c->sec[S_LKSH]) {
         const uint16_t *h = lcb_data(c, S_LKSH);
         for (uint64_t i = 0; i < lcb_count(c, S_LKSH); i++)

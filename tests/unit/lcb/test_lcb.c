@@ -160,6 +160,7 @@ static void bake_init(bake *b) {
         float dir[3] = {0.6f, 0, 0.8f};
         b->link[c * 2] = (lc_lcb_link){(uint32_t)(c % N_NODE), 0.1f * (float)(c + 1), lc_link_pack(dir, 0.3f)};
         b->link[c * 2 + 1] = (lc_lcb_link){0, 0, 0}; /* padding link */
+        b->cache[c].link_count = 1;
     }
     for (int i = 0; i < N_LKSH; i++) b->lksh[i] = lc_half_from_float(0.01f * (float)i - 0.2f);
     lc_lcb_asset *a = &b->asset[0];
@@ -709,6 +710,8 @@ static void test_semantic(void) {
     CASE("link node", b.link[5].node = N_NODE, "LINK", NULL);
     CASE("link factor", b.link[5].factor = -0.5f, "LINK", NULL);
     CASE("link factor NaN", b.link[0].factor = NAN, "LINK", NULL);
+    CASE("link past link_count", b.link[3].factor = 0.5f, "LINK", NULL);
+    CASE("link_count too large", b.cache[1].link_count = 3, "CACH", NULL);
     CASE("LKSH inf", b.lksh[17] = 0x7C00, "LKSH", "inf");
     CASE("LKSH NaN", b.lksh[0] = 0xFE01, "LKSH", NULL);
     CASE("asset index", b.aidx[2] = N_AVRT, "AIDX", NULL);
