@@ -73,7 +73,10 @@ static const lc_opt bake_options[] = {
     {"output", LC_OPT_STRING, OFF(output), 1, LC_BAKE_PATH_MAX, NULL, NULL,
      "output bake file (default: input name with .lcb)", "PATH", NULL},
     {"glb", LC_OPT_STRING, OFF(glb), 0, LC_BAKE_PATH_MAX, NULL, NULL,
-     "also write the scene with lightmap UVs as binary glTF for viewers", "PATH", NULL},
+     "where to write the scene with lightmap UVs (TEXCOORD_1) as binary glTF for viewers (default: OUT.glb)",
+     "PATH", NULL},
+    {"write-glb", LC_OPT_BOOL, OFF(write_glb), 0, 1, "true", NULL, "write the .glb (--no-write-glb to skip)", NULL,
+     NULL},
     {"quality", LC_OPT_ENUM, OFF(quality), 0, 0, "moderate", "draft|moderate|high",
      "preset for every parameter below (flags given explicitly win)", NULL, NULL},
     {"scale", LC_OPT_FLOAT, OFF(scale), 1e-9, 1e6, "1", NULL, "multiply positions (scene units -> metres)", NULL,
@@ -184,14 +187,18 @@ static double bake_now(void) {
     return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
-static void bake_stage(lc_bake_report *r, const char *name, double *t0) {
+#define BAKE_N_STAGES 11
+
+/* Records a finished stage and, unless quiet, says so (one line per stage: the long ones
+ * also draw their own progress). */
+static void bake_stage(lc_bake_report *r, const char *name, double *t0, int quiet) {
     double t = bake_now();
     if (r->n_stages < LC_BAKE_MAX_STAGES) {
         r->stages[r->n_stages].name = name;
         r->stages[r->n_stages].seconds = t - *t0;
         r->n_stages++;
     }
-    lc_debug("bake", "%s: %.3f s", name, t - *t0);
+    if (!quiet) lc_info("bake", "[%d/%d] %s done in %.3f s", r->n_stages, BAKE_N_STAGES, name, t - *t0);
     *t0 = t;
 }
 
@@ -380,7 +387,8 @@ static cJSON *bake_settings_json(const lc_bake_settings *s) {
     for (const lc_opt *opt = bake_options; opt->name; opt++) {
         const char *field = (const char *)s + opt->offset;
         /* Output paths and run-time knobs do not describe the bake's content. */
-        if (!strcmp(opt->name, "output") || !strcmp(opt->name, "glb") || !strcmp(opt->name, "stats-json") ||
+        if (!strcmp(opt->name, "output") || !strcmp(opt->name, "glb") || !strcmp(opt->name, "write-glb") ||
+            !strcmp(opt->name, "stats-json") ||
             !strcmp(opt->name, "threads") || !strcmp(opt->name, "quiet"))
             continue;
         switch (opt->type) {
@@ -458,7 +466,7 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
     if (!s->quiet)
         lc_info("bake", "imported %s: %u triangles, %u materials, %u textures, %u lights", s->input,
                 scene.mesh.n_triangles, scene.n_materials, scene.n_textures, scene.n_lights);
-    bake_stage(r, "import", &t0);
+    bake_stage(r, "import", &t0, s->quiet);
 
     /* 2. lightmap UVs */
     lc_uv_params uvp = {.texels_per_metre = s->texel_density,
@@ -475,12 +483,12 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
     if (!s->quiet)
         lc_info("bake", "lightmap %ux%u, %u charts, %.1f texels/m, atlas usage %.1f%%", uvs.width, uvs.height,
                 uvs.n_charts, uvs.texels_per_metre, uvs.usage * 100);
-    bake_stage(r, "lightmap-uv", &t0);
+    bake_stage(r, "lightmap-uv", &t0, s->quiet);
 
     /* 3. ray tracing structure */
     rt = lc_rt_create(&scene.mesh, s->threads, err, errlen);
     if (!rt) goto err;
-    bake_stage(r, "bvh", &t0);
+    bake_stage(r, "bvh", &t0, s->quiet);
 
     /* 4. texel caches, dilation */
     if (lc_texels_rasterize(&scene, uvs.width, uvs.height, &lm, &caches, &n_caches, err, errlen) != 0) goto err;
@@ -490,7 +498,7 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
     }
     lc_texels_dilate(&lm, (uint32_t)s->dilate);
     n_texel_caches = n_caches;
-    bake_stage(r, "texels", &t0);
+    bake_stage(r, "texels", &t0, s->quiet);
 
     /* 5. grid caches */
     lc_grid grid;
@@ -498,7 +506,7 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
                        (uint32_t)s->grid_max_samples, &grid, err, errlen) != 0)
         goto err;
     if (lc_grid_place(&grid, &caches, &n_caches, &cell_cache, err, errlen) != 0) goto err;
-    bake_stage(r, "grid", &t0);
+    bake_stage(r, "grid", &t0, s->quiet);
 
     /* 6. move caches out of geometry */
     lc_relocate_params rp = {.rays = (uint32_t)s->reloc_rays,
@@ -509,14 +517,14 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
     lc_relocate_stats rs;
     memset(&rs, 0, sizeof rs);
     lc_relocate_caches(rt, caches, n_caches, &rp, &rs);
-    bake_stage(r, "relocate", &t0);
+    bake_stage(r, "relocate", &t0, s->quiet);
 
     /* 7. surfels */
     lc_surfel_params sp = {.target_count = (uint32_t)s->surfels,
                            .relax_iterations = (uint32_t)s->relax,
                            .seed = (uint64_t)s->seed};
     if (lc_surfels_generate(&scene, &sp, &surfels, &surfel_tri, &n_surfels, err, errlen) != 0) goto err;
-    bake_stage(r, "surfels", &t0);
+    bake_stage(r, "surfels", &t0, s->quiet);
 
     /* 8. hierarchy (reorders surfels) */
     if (lc_hierarchy_build(surfels, n_surfels, (lc_hierarchy_method)s->hierarchy, &hier, &perm, err, errlen) != 0)
@@ -525,7 +533,7 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
     if (!tri_sorted) goto oom;
     for (uint32_t i = 0; i < n_surfels; i++) tri_sorted[i] = surfel_tri[perm[i]];
     bake_surfel_caches(&scene, &lm, &grid, cell_cache, caches, surfels, tri_sorted, n_surfels);
-    bake_stage(r, "hierarchy", &t0);
+    bake_stage(r, "hierarchy", &t0, s->quiet);
 
     /* 9. links */
     uint64_t n_links = (uint64_t)n_caches * (uint64_t)s->links;
@@ -563,11 +571,11 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
             }
         caches[c].link_count = used;
     }
-    bake_stage(r, "links", &t0);
+    bake_stage(r, "links", &t0, s->quiet);
 
     /* 10. assets */
     if (bake_assets_import(s, &assets, err, errlen) != 0) goto err;
-    bake_stage(r, "assets", &t0);
+    bake_stage(r, "assets", &t0, s->quiet);
 
     /* 11. write */
     const lc_mesh *m = &scene.mesh;
@@ -697,7 +705,7 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
         rc = 3;
         goto err;
     }
-    bake_stage(r, "write", &t0);
+    bake_stage(r, "write", &t0, s->quiet);
 
     struct stat st;
     r->file_bytes = stat(s->output, &st) == 0 ? (unsigned long long)st.st_size : 0;

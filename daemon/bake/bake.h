@@ -22,6 +22,7 @@ typedef struct lc_bake_settings {
     char input[LC_BAKE_PATH_MAX];
     char output[LC_BAKE_PATH_MAX];
     char glb[LC_BAKE_PATH_MAX];
+    int write_glb;
     char stats_json[LC_BAKE_PATH_MAX];
     int quality;
     double scale;

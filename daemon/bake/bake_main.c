@@ -60,6 +60,17 @@ static int cmd_bake(int argc, char **argv) {
         if (dot && dot != base) *dot = 0;
         snprintf(s.output, sizeof s.output, "%.1000s.lcb", base);
     }
+    if (!s.glb[0] && s.write_glb) {
+        /* The viewers' copy of the scene sits next to the bake: OUT.lcb -> OUT.glb. */
+        snprintf(s.glb, sizeof s.glb, "%s", s.output);
+        char *dot = strrchr(s.glb, '.'), *slash = strrchr(s.glb, '/');
+        if (dot && (!slash || dot > slash)) *dot = 0;
+        if (strlen(s.glb) + 5 > sizeof s.glb) {
+            fprintf(stderr, "lucent-bake: output path too long to derive the .glb name; pass --glb\n");
+            return EXIT_USAGE;
+        }
+        strcat(s.glb, ".glb");
+    }
     lc_bake_report report;
     int rc = lc_bake_run(&s, &report, err, sizeof err);
     if (rc != 0) {

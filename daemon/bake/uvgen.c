@@ -26,6 +26,8 @@
 #define UVGEN_MAX_PADDING 64u
 /* Slack for float rounding of uv1 (in texels) when reserving footprints. */
 #define UVGEN_SLACK 2e-3
+/* Vertices closer than this fraction of the scene extent are one vertex for chart topology. */
+#define UVGEN_WELD_TOL 1e-6
 
 typedef struct {
     uint32_t start, count; /* range in the triangle order array */
@@ -100,14 +102,7 @@ static void uvgen_tri_cross(const lc_mesh *m, uint32_t t, double c[3], double *m
 
 /* ---- welding ------------------------------------------------------------------------- */
 
-static uint32_t uvgen_fbits(float f) {
-    if (f == 0.0f) f = 0.0f; /* -0 and +0 weld */
-    uint32_t u;
-    memcpy(&u, &f, 4);
-    return u;
-}
-
-static uint64_t uvgen_hash(uint32_t a, uint32_t b, uint32_t c) {
+static uint64_t uvgen_hash(uint64_t a, uint64_t b, uint64_t c) {
     uint64_t h = a * 0x9E3779B97F4A7C15ull;
     h ^= (h >> 29) ^ (b * 0xC2B2AE3D27D4EB4Full);
     h ^= (h >> 31) ^ (c * 0x165667B19E3779F9ull);
@@ -117,8 +112,22 @@ static uint64_t uvgen_hash(uint32_t a, uint32_t b, uint32_t c) {
     return h;
 }
 
-/* weld[v] = lowest vertex index with exactly the same position. */
+/* weld[v] = lowest earlier representative vertex within q (per axis) of v, else v itself.
+ * Assets often have cracks (duplicated vertices a rounding error apart) that would otherwise
+ * split charts; q is a tiny fraction of the scene extent. Representatives live in a hash of
+ * q-sized cells; the 27 cells around v are searched, so welding is independent of where cell
+ * boundaries fall. Only chart topology uses it: uv1 is computed from each vertex's own
+ * position. */
 static int uvgen_weld(const lc_mesh *m, uint32_t *weld) {
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t v = 0; v < m->n_vertices; v++)
+        for (int k = 0; k < 3; k++) {
+            lo[k] = fmin(lo[k], m->position[3 * (size_t)v + k]);
+            hi[k] = fmax(hi[k], m->position[3 * (size_t)v + k]);
+        }
+    double ext = fmax(hi[0] - lo[0], fmax(hi[1] - lo[1], hi[2] - lo[2]));
+    double q = UVGEN_WELD_TOL * ext;
+    if (!(q > 0)) q = 1; /* a single point: everything welds */
     size_t cap = 16;
     while (cap < 2 * (size_t)m->n_vertices) cap <<= 1;
     uint32_t *table = malloc(cap * sizeof *table);
@@ -126,22 +135,31 @@ static int uvgen_weld(const lc_mesh *m, uint32_t *weld) {
     memset(table, 0xFF, cap * sizeof *table);
     for (uint32_t v = 0; v < m->n_vertices; v++) {
         const float *p = m->position + 3 * (size_t)v;
-        uint32_t a = uvgen_fbits(p[0]), b = uvgen_fbits(p[1]), c = uvgen_fbits(p[2]);
-        size_t s = (size_t)uvgen_hash(a, b, c) & (cap - 1);
-        for (;;) {
-            uint32_t o = table[s];
-            if (o == LC_NONE) {
-                table[s] = v;
-                weld[v] = v;
-                break;
+        int64_t cell[3];
+        for (int k = 0; k < 3; k++) cell[k] = (int64_t)floor((p[k] - lo[k]) / q);
+        uint32_t best = LC_NONE;
+        for (int n = 0; n < 27; n++) {
+            int64_t c[3] = {cell[0] + n % 3 - 1, cell[1] + n / 3 % 3 - 1, cell[2] + n / 9 - 1};
+            size_t s = (size_t)uvgen_hash((uint64_t)c[0], (uint64_t)c[1], (uint64_t)c[2]) & (cap - 1);
+            for (; table[s] != LC_NONE; s = (s + 1) & (cap - 1)) {
+                uint32_t o = table[s];
+                const float *r = m->position + 3 * (size_t)o;
+                int same = 1, near = 1;
+                for (int k = 0; k < 3; k++) {
+                    same &= (int64_t)floor((r[k] - lo[k]) / q) == c[k];
+                    near &= fabs((double)r[k] - p[k]) <= q;
+                }
+                if (same && near && o < best) best = o;
             }
-            const float *q = m->position + 3 * (size_t)o;
-            if (uvgen_fbits(q[0]) == a && uvgen_fbits(q[1]) == b && uvgen_fbits(q[2]) == c) {
-                weld[v] = o;
-                break;
-            }
-            s = (s + 1) & (cap - 1);
         }
+        if (best != LC_NONE) {
+            weld[v] = best;
+            continue;
+        }
+        weld[v] = v;
+        size_t s = (size_t)uvgen_hash((uint64_t)cell[0], (uint64_t)cell[1], (uint64_t)cell[2]) & (cap - 1);
+        while (table[s] != LC_NONE) s = (s + 1) & (cap - 1);
+        table[s] = v;
     }
     free(table);
     return 0;
@@ -864,17 +882,47 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
                 memcpy(c.ref, tri_n + 3 * (size_t)s, sizeof c.ref);
             else
                 c.ref[2] = 1;
-            chart_of[s] = n_charts;
-            order[n_order++] = s;
-            for (uint32_t q = c.start; q < n_order; q++) {
-                uint32_t t = order[q];
-                for (uint32_t a = adj_start[t]; a < adj_start[t + 1]; a++) {
-                    uint32_t nb = adj[a];
-                    if (chart_of[nb] != LC_NONE) continue;
-                    if (!degen[nb] && (pass == 1 || uvgen_dot(tri_n + 3 * (size_t)nb, c.ref) < cos_a)) continue;
-                    chart_of[nb] = n_charts;
-                    order[n_order++] = nb;
+            /* First against the running area-weighted normal (charts follow gentle curvature
+             * up to twice the angle), kept only if every triangle is within the angle of the
+             * final normal; else regrown against the seed normal (the bound holds by
+             * construction). */
+            for (int mode = pass == 0 ? 0 : 1; mode < 2; mode++) {
+                n_order = c.start;
+                chart_of[s] = n_charts;
+                order[n_order++] = s;
+                double sum[3], avg[3];
+                uvgen_tri_cross(mesh, s, sum, NULL);
+                memcpy(avg, c.ref, sizeof avg);
+                for (uint32_t q = c.start; q < n_order; q++) {
+                    uint32_t t = order[q];
+                    for (uint32_t a = adj_start[t]; a < adj_start[t + 1]; a++) {
+                        uint32_t nb = adj[a];
+                        if (chart_of[nb] != LC_NONE) continue;
+                        if (!degen[nb]) {
+                            if (pass == 1 || uvgen_dot(tri_n + 3 * (size_t)nb, avg) < cos_a) continue;
+                            if (mode == 0) {
+                                double cr[3];
+                                uvgen_tri_cross(mesh, nb, cr, NULL);
+                                for (int k = 0; k < 3; k++) sum[k] += cr[k];
+                                memcpy(avg, sum, sizeof avg);
+                                if (!uvgen_normalize(avg)) memcpy(avg, c.ref, sizeof avg);
+                            }
+                        }
+                        chart_of[nb] = n_charts;
+                        order[n_order++] = nb;
+                    }
                 }
+                if (mode == 1) break;
+                int ok = 1;
+                for (uint32_t q = c.start; q < n_order && ok; q++) {
+                    uint32_t t = order[q];
+                    if (!degen[t] && uvgen_dot(tri_n + 3 * (size_t)t, avg) < cos_a) ok = 0;
+                }
+                if (ok) {
+                    memcpy(c.ref, avg, sizeof c.ref);
+                    break;
+                }
+                for (uint32_t q = c.start; q < n_order; q++) chart_of[order[q]] = LC_NONE;
             }
             c.count = n_order - c.start;
             if (n_charts == cap_charts) {
