@@ -1,12 +1,18 @@
 /* uvgen: lightmap UV generation (see uvgen.h).
  *
- * Pipeline: weld vertices by exact position -> edge adjacency -> region-grow charts (BFS,
- * normal within chart_angle of the seed normal) -> project every chart onto the plane of its
- * area-weighted normal, rotate to the minimum-area bounding rectangle, landscape -> exact 2D
- * overlap test (separating axes on a per-chart grid); an overlapping chart is bisected along
- * its longest 3D axis and re-split into connected pieces until nothing overlaps -> choose the
- * density (given, or binary search to fit atlas_size) -> shelf packing with padding ->
- * rewrite the mesh with one vertex per (original vertex, chart) and uv1 filled.
+ * Pipeline: weld vertices within 1e-6 of the scene extent -> edge adjacency -> region-grow
+ * charts (BFS, normal within chart_angle of the chart's running area-weighted normal, kept
+ * only if every triangle is within it of the final normal, else regrown against the seed
+ * normal) -> project every chart onto the plane of its area-weighted normal, rotate to the
+ * minimum-area bounding rectangle, landscape -> exact 2D overlap test (separating axes on a
+ * per-chart grid); an overlapping chart is bisected along its longest 3D axis and re-split
+ * into connected pieces until nothing overlaps -> merge charts into edge-adjacent ones,
+ * smallest first, when the union still projects without flips or overlap and saves atlas
+ * texels (most charts of real scenes are sub-texel bevels and mouldings whose padding costs
+ * more than they do) -> project and check the merged charts the same way -> choose the
+ * density (given, or binary search to fit atlas_size, growing the atlas when the charts
+ * cannot fit it at all) -> skyline or shelf packing with padding -> rewrite the mesh with one
+ * vertex per (original vertex, chart) and uv1 filled.
  *
  * Placement detail: a chart's largest triangle has its incentre put exactly on a texel
  * centre, so every chart owns at least one texel whatever its size. The chart's
@@ -28,11 +34,25 @@
 #define UVGEN_SLACK 2e-3
 /* Vertices closer than this fraction of the scene extent are one vertex for chart topology. */
 #define UVGEN_WELD_TOL 1e-6
+/* Merging: max normal deviation of any triangle from a merged chart's projection normal
+ * (steep ones are only allowed within the UVGEN_MERGE_SQUASH texel budget, so this only lets
+ * sub-texel bevels join), passes over all charts, neighbours tried per chart. */
+#define UVGEN_MERGE_MAX_DEG 88.0
+#define UVGEN_MERGE_PASSES 3
+#define UVGEN_MERGE_TRIES 4
+/* Past its work budget, merging only tries unions up to this many triangles. */
+#define UVGEN_MERGE_SMALL_UNION 4096u
+/* Texels (in units of one chart's padding overhead) a merge may squash beyond the chart angle. */
+#define UVGEN_MERGE_SQUASH 2.0
+/* Atlas growth when the charts cannot fit atlas_size: ~x1.25 steps up to this side. */
+#define UVGEN_GROW_MAX 8192u
 
 typedef struct {
     uint32_t start, count; /* range in the triangle order array */
     int dead;              /* split into sub-charts */
-    double ref[3];         /* every triangle is within the chart angle of this normal */
+    int fixed;             /* project onto ref (a merge chose it), not the average normal */
+    double ref[3];         /* every triangle is within the chart angle of this normal (merged
+                            * charts: within UVGEN_MERGE_MAX_DEG) */
     double U[3], V[3];     /* in-plane axes (a rotation of the projection plane basis) */
     double umin, vmin;     /* local origin in (U, V) metres */
     double w, h;           /* extent in metres, w >= h */
@@ -116,8 +136,9 @@ static uint64_t uvgen_hash(uint64_t a, uint64_t b, uint64_t c) {
  * Assets often have cracks (duplicated vertices a rounding error apart) that would otherwise
  * split charts; q is a tiny fraction of the scene extent. Representatives live in a hash of
  * q-sized cells; the 27 cells around v are searched, so welding is independent of where cell
- * boundaries fall. Only chart topology uses it: uv1 is computed from each vertex's own
- * position. */
+ * boundaries fall. Charts are projected (and uv1 computed) from the representative's
+ * position, so a cracked edge is one edge in the atlas too, not two a sub-texel sliver
+ * apart that would read as an overlap. */
 static int uvgen_weld(const lc_mesh *m, uint32_t *weld) {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (uint32_t v = 0; v < m->n_vertices; v++)
@@ -312,7 +333,7 @@ static void uvgen_project_corners(const uvgen_ctx *cx, uvgen_chart *c, const dou
         const uint32_t *ix = cx->m->index + 3 * (size_t)cx->order[i];
         for (int k = 0; k < 3; k++) {
             double p[3];
-            uvgen_load(cx->m, ix[k], p);
+            uvgen_load(cx->m, cx->weld[ix[k]], p);
             cx->cu[3 * (size_t)i + k] = uvgen_dot(p, U);
             cx->cv[3 * (size_t)i + k] = uvgen_dot(p, V);
         }
@@ -330,7 +351,7 @@ static int uvgen_project(const uvgen_ctx *cx, uvgen_chart *c) {
         if (cx->degen[cx->order[i]]) continue;
         for (int k = 0; k < 3; k++) N[k] += cr[k];
     }
-    int ok = uvgen_normalize(N);
+    int ok = !c->fixed && uvgen_normalize(N);
     /* The area-weighted normal projects with least distortion, but may be up to twice the
      * chart angle away from some triangle; fall back to the seed normal (within the chart
      * angle of every triangle, < 90 degrees) rather than risk a flipped triangle. */
@@ -634,6 +655,7 @@ static int uvgen_split(uvgen_ctx *cx, uvgen_chart c, const uint32_t *adj_start, 
             sub.start = c.start + first;
             sub.count = out - first;
             memcpy(sub.ref, c.ref, sizeof sub.ref);
+            sub.fixed = c.fixed;
             (*charts)[(*n_charts)++] = sub;
         }
     }
@@ -642,6 +664,338 @@ static int uvgen_split(uvgen_ctx *cx, uvgen_chart c, const uint32_t *adj_start, 
 err:
     free(k);
     free(tmp);
+    return rc;
+}
+
+/* Projects charts[*n_charts..] rounds: all pending charts are checked in parallel (each
+ * touches only its own range), then the overlapping ones are split serially and their pieces
+ * form the next round. Dead charts are dropped at the end. -1 on out of memory. */
+static int uvgen_resolve(uvgen_ctx *cx, uvgen_chart **charts, uint32_t *n_charts, uint32_t *cap_charts,
+                         const uint32_t *adj_start, const uint32_t *adj, uint32_t *mark, uint32_t *stamp) {
+    int8_t *verdict = NULL;
+    int rc = -1;
+    for (uint32_t round_begin = 0; round_begin < *n_charts;) {
+        uint32_t round_end = *n_charts;
+        int8_t *v = realloc(verdict, round_end - round_begin);
+        if (!v) goto err;
+        verdict = v;
+        uvgen_round job = {cx, *charts + round_begin, verdict};
+        lc_parallel_for(round_end - round_begin, 4, uvgen_check_charts, &job);
+        for (uint32_t i = round_begin; i < round_end; i++) {
+            int ov = verdict[i - round_begin];
+            if (ov < 0) goto err;
+            if (ov) {
+                (*charts)[i].dead = 1;
+                if (uvgen_split(cx, (*charts)[i], adj_start, adj, mark, stamp, charts, n_charts, cap_charts) != 0)
+                    goto err;
+            }
+        }
+        round_begin = round_end;
+    }
+    uint32_t k = 0;
+    for (uint32_t i = 0; i < *n_charts; i++)
+        if (!(*charts)[i].dead) (*charts)[k++] = (*charts)[i];
+    *n_charts = k;
+    rc = 0;
+err:
+    free(verdict);
+    return rc;
+}
+
+/* ---- merging ------------------------------------------------------------------------- */
+
+/* Footprint + padding texels a chart of extent w x h (metres) costs at density d. */
+static double uvgen_cost_texels(double w, double h, double d, uint32_t pad) {
+    return (w * d + 1 + pad) * (h * d + 1 + pad);
+}
+
+/* Density the atlas would get for these charts (each w[i] x h[i] metres), assuming rects
+ * fill ~80% of it: solves sum((w d + 1 + p)(h d + 1 + p)) = 0.8 W^2. Never below half the
+ * density of the whole area packed perfectly: with too many charts the estimate collapses
+ * (merging fixes that) and would let merges squash large surfaces. */
+static double uvgen_density_estimate(const double *w, const double *h, const uint8_t *alive, uint32_t n,
+                                     uint32_t W, uint32_t pad, double total_area) {
+    double floor_d = 0.5 * W / sqrt(total_area);
+    double a = 0, b = 0, c = -0.8 * W * (double)W, k = 1.0 + pad;
+    for (uint32_t i = 0; i < n; i++) {
+        if (!alive[i]) continue;
+        a += w[i] * h[i];
+        b += (w[i] + h[i]) * k;
+        c += k * k;
+    }
+    if (c >= 0 || !(a > 0)) return floor_d;
+    return fmax(floor_d, (-b + sqrt(b * b - 4 * a * c)) / (2 * a));
+}
+
+typedef struct {
+    double cost;
+    uint32_t chart;
+} uvgen_cand;
+
+static int uvgen_cand_cmp(const void *pa, const void *pb) {
+    const uvgen_cand *a = pa, *b = pb;
+    if (a->cost != b->cost) return a->cost < b->cost ? -1 : 1;
+    return (a->chart > b->chart) - (a->chart < b->chart);
+}
+
+typedef struct {
+    uint32_t *head, *tail, *next, *chart_of, *slot, *slot_stamp, *area_n; /* area_n: triangles */
+    double *area, *nsum, *pn, *w, *h, *tri_a; /* pn: projection normal of merged charts */
+    double *beyond;                           /* area beyond the chart angle of its normal */
+    uint64_t work, budget;                    /* triangles projected by trials, and the cap */
+    uint8_t *alive, *merged;
+} uvgen_merge_state;
+
+/* Tries to merge chart b into chart a (a keeps its id). The merged chart projects onto the
+ * area-weighted normal of the two, or failing that onto the bisector of their normals (a
+ * small box corner, a bevel), with every triangle within UVGEN_MERGE_MAX_DEG of it (no flips
+ * and no overlap, both checked exactly); it must cost no more atlas texels than the two apart
+ * at density d, and the area it newly puts beyond the chart angle may cover only a few
+ * texels (a tiny bevel may be squashed, a wall may not). Uses cx's order/cu/cv as scratch. 1 merged, 0 not,
+ * -1 out of memory. */
+static int uvgen_try_merge(uvgen_ctx *cx, uvgen_merge_state *st, uint32_t a, uint32_t b, double d, uint32_t pad,
+                           double cos_a) {
+    double cos_max = cos(UVGEN_MERGE_MAX_DEG * M_PI / 180.0);
+    double na[3], nb[3], N[2][3];
+    memcpy(na, st->nsum + 3 * (size_t)a, sizeof na);
+    memcpy(nb, st->nsum + 3 * (size_t)b, sizeof nb);
+    if (!uvgen_normalize(na) || !uvgen_normalize(nb)) return 0;
+    for (int k = 0; k < 3; k++) {
+        N[0][k] = st->nsum[3 * (size_t)a + k] + st->nsum[3 * (size_t)b + k];
+        N[1][k] = na[k] + nb[k];
+    }
+    int n_try = uvgen_normalize(N[0]) ? 1 : 0;
+    if (uvgen_normalize(N[1]) && (!n_try || uvgen_dot(N[0], N[1]) < 1 - 1e-6)) {
+        if (!n_try) memcpy(N[0], N[1], sizeof N[0]);
+        n_try++;
+    }
+    /* Each trial re-projects the union: a huge chart with countless tiny neighbours would be
+     * quadratic, so past a work budget only small unions are tried. */
+    if (st->work > st->budget && st->area_n[a] + st->area_n[b] > UVGEN_MERGE_SMALL_UNION) return 0;
+    uint32_t n = 0;
+    for (int side = 0; side < 2; side++)
+        for (uint32_t t = st->head[side ? b : a]; t != LC_NONE; t = st->next[t]) cx->order[n++] = t;
+    st->work += n;
+    for (int k = 0; k < n_try; k++) {
+        double beyond = 0;
+        int ok = 1;
+        for (uint32_t i = 0; i < n && ok; i++) {
+            uint32_t t = cx->order[i];
+            if (cx->degen[t]) continue;
+            double c = uvgen_dot(cx->tri_n + 3 * (size_t)t, N[k]);
+            if (c < cos_max) ok = 0;
+            if (c < cos_a) beyond += st->tri_a[t];
+        }
+        /* budget per merge: what this merge newly squashes (each merge saves about one
+         * chart's padding overhead) */
+        if (!ok || (beyond - st->beyond[a] - st->beyond[b]) * d * d > UVGEN_MERGE_SQUASH * (1 + pad) * (1 + pad))
+            continue;
+        uvgen_chart c = {0};
+        c.count = n;
+        c.fixed = 1;
+        memcpy(c.ref, N[k], sizeof c.ref);
+        if (uvgen_project(cx, &c) != 0) return -1;
+        if (uvgen_cost_texels(c.w, c.h, d, pad) >
+            uvgen_cost_texels(st->w[a], st->h[a], d, pad) + uvgen_cost_texels(st->w[b], st->h[b], d, pad))
+            continue;
+        int ov = uvgen_chart_overlaps(cx, &c);
+        if (ov < 0) return -1;
+        if (ov) continue;
+        for (uint32_t t = st->head[b]; t != LC_NONE; t = st->next[t]) st->chart_of[t] = a;
+        st->next[st->tail[a]] = st->head[b];
+        st->tail[a] = st->tail[b];
+        st->area[a] += st->area[b];
+        st->area_n[a] += st->area_n[b];
+        st->beyond[a] = beyond;
+        for (int q = 0; q < 3; q++) st->nsum[3 * (size_t)a + q] += st->nsum[3 * (size_t)b + q];
+        memcpy(st->pn + 3 * (size_t)a, N[k], 3 * sizeof(double));
+        st->merged[a] = 1;
+        st->w[a] = c.w;
+        st->h[a] = c.h;
+        st->alive[b] = 0;
+        return 1;
+    }
+    return 0;
+}
+
+/* Merges small charts into edge-adjacent ones, smallest first, each trying its neighbours by
+ * cost (normal deviation, then how little of its boundary they share). Rewrites cx->order
+ * and *charts (n_charts in and out) with the merged charts as contiguous ranges; they still
+ * need projecting. d: the density (0: estimate it for atlas W). */
+static int uvgen_merge(uvgen_ctx *cx, uvgen_chart **charts, uint32_t *n_charts, const uint32_t *adj_start,
+                       const uint32_t *adj, double d, uint32_t W, uint32_t pad, double cos_a) {
+    const lc_mesh *m = cx->m;
+    const uint32_t T = m->n_triangles, n = *n_charts;
+    uvgen_merge_state st = {0};
+    uvgen_keyed *sorted = NULL;
+    uvgen_cand *cand = NULL;
+    uvgen_chart *out = NULL;
+    int rc = -1;
+    st.head = malloc((size_t)n * sizeof *st.head);
+    st.tail = malloc((size_t)n * sizeof *st.tail);
+    st.pn = malloc(3 * (size_t)n * sizeof *st.pn);
+    st.area_n = malloc((size_t)n * sizeof *st.area_n);
+    st.budget = 32 * (uint64_t)T + (1u << 20);
+    st.beyond = calloc(n, sizeof *st.beyond);
+    st.merged = calloc(n, 1);
+    st.slot = malloc((size_t)n * sizeof *st.slot);
+    st.slot_stamp = calloc(n, sizeof *st.slot_stamp);
+    st.next = malloc((size_t)T * sizeof *st.next);
+    st.chart_of = malloc((size_t)T * sizeof *st.chart_of);
+    st.area = calloc(n, sizeof *st.area);
+    st.nsum = calloc(3 * (size_t)n, sizeof *st.nsum);
+    st.w = malloc((size_t)n * sizeof *st.w);
+    st.h = malloc((size_t)n * sizeof *st.h);
+    st.tri_a = malloc((size_t)T * sizeof *st.tri_a);
+    st.alive = malloc(n);
+    sorted = malloc((size_t)n * sizeof *sorted);
+    cand = malloc((size_t)n * sizeof *cand);
+    if (!st.head || !st.tail || !st.pn || !st.area_n || !st.beyond || !st.merged || !st.slot || !st.slot_stamp || !st.next || !st.chart_of || !st.area ||
+        !st.nsum || !st.w || !st.h || !st.tri_a || !st.alive || !sorted || !cand)
+        goto err;
+    for (uint32_t i = 0; i < n; i++) {
+        const uvgen_chart *c = &(*charts)[i];
+        st.alive[i] = 1;
+        st.w[i] = c->w;
+        st.area_n[i] = c->count;
+        st.h[i] = c->h;
+        st.head[i] = cx->order[c->start];
+        st.tail[i] = cx->order[c->start + c->count - 1];
+        for (uint32_t q = c->start; q < c->start + c->count; q++) {
+            uint32_t t = cx->order[q];
+            double cr[3];
+            uvgen_tri_cross(m, t, cr, NULL);
+            st.tri_a[t] = 0.5 * sqrt(uvgen_dot(cr, cr));
+            st.chart_of[t] = i;
+            st.next[t] = q + 1 < c->start + c->count ? cx->order[q + 1] : LC_NONE;
+            st.area[i] += st.tri_a[t];
+            if (!cx->degen[t])
+                for (int k = 0; k < 3; k++) st.nsum[3 * (size_t)i + k] += cr[k];
+        }
+    }
+    double total_area = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        total_area += st.area[i];
+        double N[3];
+        memcpy(N, st.nsum + 3 * (size_t)i, sizeof N);
+        if (!uvgen_normalize(N)) continue;
+        for (uint32_t t = st.head[i]; t != LC_NONE; t = st.next[t])
+            if (!cx->degen[t] && uvgen_dot(cx->tri_n + 3 * (size_t)t, N) < cos_a) st.beyond[i] += st.tri_a[t];
+    }
+    uint32_t stamp = 0, alive = n;
+    for (int pass = 0; pass < UVGEN_MERGE_PASSES; pass++) {
+        double dd = d > 0 ? d : uvgen_density_estimate(st.w, st.h, st.alive, n, W, pad, total_area);
+        uint32_t ns = 0, merged = 0;
+        for (uint32_t i = 0; i < n; i++)
+            if (st.alive[i]) sorted[ns++] = (uvgen_keyed){st.area[i], i};
+        qsort(sorted, ns, sizeof *sorted, uvgen_keyed_cmp);
+        for (uint32_t si = 0; si < ns; si++) {
+            uint32_t s = sorted[si].tri; /* a chart id here */
+            if (!st.alive[s]) continue;
+            /* neighbours with the length of boundary shared with each */
+            uint32_t nc = 0;
+            double shared_all = 0;
+            stamp++;
+            for (uint32_t t = st.head[s]; t != LC_NONE; t = st.next[t]) {
+                const uint32_t *it = m->index + 3 * (size_t)t;
+                uint32_t wt[3] = {cx->weld[it[0]], cx->weld[it[1]], cx->weld[it[2]]};
+                for (uint32_t e = adj_start[t]; e < adj_start[t + 1]; e++) {
+                    uint32_t nb = adj[e], o = st.chart_of[nb];
+                    if (o == s) continue;
+                    const uint32_t *in = m->index + 3 * (size_t)nb;
+                    uint32_t common[2], k = 0;
+                    for (int x = 0; x < 3 && k < 2; x++)
+                        for (int y = 0; y < 3; y++)
+                            if (wt[x] == cx->weld[in[y]]) {
+                                common[k++] = wt[x];
+                                break;
+                            }
+                    double len = 0;
+                    if (k == 2) {
+                        double p0[3], p1[3];
+                        uvgen_load(m, common[0], p0);
+                        uvgen_load(m, common[1], p1);
+                        len = sqrt((p0[0] - p1[0]) * (p0[0] - p1[0]) + (p0[1] - p1[1]) * (p0[1] - p1[1]) +
+                                   (p0[2] - p1[2]) * (p0[2] - p1[2]));
+                    }
+                    if (st.slot_stamp[o] != stamp) {
+                        st.slot_stamp[o] = stamp;
+                        st.slot[o] = nc;
+                        cand[nc++] = (uvgen_cand){0, o};
+                    }
+                    cand[st.slot[o]].cost += len;
+                    shared_all += len;
+                }
+            }
+            double ns_[3];
+            memcpy(ns_, st.nsum + 3 * (size_t)s, sizeof ns_);
+            int ok_s = uvgen_normalize(ns_);
+            for (uint32_t i = 0; i < nc; i++) {
+                double no[3], dev = 1;
+                memcpy(no, st.nsum + 3 * (size_t)cand[i].chart, sizeof no);
+                if (ok_s && uvgen_normalize(no)) dev = 1 - uvgen_dot(ns_, no);
+                double frac = shared_all > 0 ? cand[i].cost / shared_all : 0;
+                cand[i].cost = dev + 0.5 * (1 - frac);
+            }
+            qsort(cand, nc, sizeof *cand, uvgen_cand_cmp);
+            for (uint32_t i = 0, tries = 0; i < nc && tries < UVGEN_MERGE_TRIES && st.alive[s]; i++) {
+                uint32_t o = cand[i].chart;
+                if (!st.alive[o]) continue;
+                tries++;
+                /* the larger keeps its id (relabelling the smaller stays cheap) */
+                uint32_t keep = st.area[o] > st.area[s] || (st.area[o] == st.area[s] && o < s) ? o : s;
+                int r = uvgen_try_merge(cx, &st, keep, keep == o ? s : o, dd, pad, cos_a);
+                if (r < 0) goto err;
+                merged += (uint32_t)r;
+            }
+        }
+        alive -= merged;
+        lc_debug("uvgen", "merge pass %d at %.3g texels/m: %u of %u charts merged", pass, dd, merged, ns);
+        if (merged * 100 < ns) break; /* converged */
+    }
+    out = malloc((size_t)(alive ? alive : 1) * sizeof *out);
+    if (!out) goto err;
+    uint32_t k = 0, pos = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        if (!st.alive[i]) continue;
+        uvgen_chart c = {0};
+        c.start = pos;
+        for (uint32_t t = st.head[i]; t != LC_NONE; t = st.next[t]) cx->order[pos++] = t;
+        c.count = pos - c.start;
+        if (st.merged[i]) {
+            memcpy(c.ref, st.pn + 3 * (size_t)i, sizeof c.ref);
+            c.fixed = 1;
+        } else { /* unmerged: its own reference (the chart angle bound holds) */
+            memcpy(c.ref, (*charts)[i].ref, sizeof c.ref);
+            c.fixed = (*charts)[i].fixed;
+        }
+        out[k++] = c;
+    }
+    free(*charts);
+    *charts = out;
+    *n_charts = k;
+    out = NULL;
+    rc = 0;
+err:
+    free(st.head);
+    free(st.tail);
+    free(st.pn);
+    free(st.area_n);
+    free(st.beyond);
+    free(st.merged);
+    free(st.slot);
+    free(st.slot_stamp);
+    free(st.next);
+    free(st.chart_of);
+    free(st.area);
+    free(st.nsum);
+    free(st.w);
+    free(st.h);
+    free(st.tri_a);
+    free(st.alive);
+    free(sorted);
+    free(cand);
+    free(out);
     return rc;
 }
 
@@ -672,10 +1026,14 @@ static int uvgen_item_cmp(const void *pa, const void *pb) {
     return (a->id > b->id) - (a->id < b->id);
 }
 
-/* Shelf packing at density d into width W. Returns the height used (incl. border padding),
- * or UINT32_MAX when a chart is wider than the atlas or the height passes max_h. */
-static uint32_t uvgen_pack(uvgen_chart *ch, uint32_t n, uvgen_item *items, double d, uint32_t W, uint32_t max_h,
-                           uint32_t pad, int allow_rot) {
+typedef struct {
+    uint32_t x, y, w; /* skyline segment: [x, x + w) is free from height y up */
+} uvgen_seg;
+
+/* Footprints at density d, rotated when too wide, sorted tallest first into items. 0, or
+ * -1 when a chart is wider than W or taller than max_h with padding. */
+static int uvgen_pack_items(uvgen_chart *ch, uint32_t n, uvgen_item *items, double d, uint32_t W, uint32_t max_h,
+                            uint32_t pad, int allow_rot) {
     for (uint32_t i = 0; i < n; i++) {
         ch[i].rot = 0;
         uvgen_footprint(&ch[i], d);
@@ -683,10 +1041,16 @@ static uint32_t uvgen_pack(uvgen_chart *ch, uint32_t n, uvgen_item *items, doubl
             ch[i].rot = 1;
             uvgen_footprint(&ch[i], d);
         }
-        if ((uint64_t)ch[i].fw + 2 * pad > W || (uint64_t)ch[i].fh + 2 * pad > max_h) return UINT32_MAX;
+        if ((uint64_t)ch[i].fw + 2 * pad > W || (uint64_t)ch[i].fh + 2 * pad > max_h) return -1;
         items[i] = (uvgen_item){ch[i].fw, ch[i].fh, i};
     }
     qsort(items, n, sizeof *items, uvgen_item_cmp);
+    return 0;
+}
+
+/* Shelf placement of sorted items into width W; height used or UINT32_MAX past max_h. */
+static uint32_t uvgen_shelf(uvgen_chart *ch, uint32_t n, const uvgen_item *items, uint32_t W, uint32_t max_h,
+                            uint32_t pad) {
     uint64_t x = pad, y = pad, shelf = 0;
     for (uint32_t i = 0; i < n; i++) {
         uvgen_chart *c = &ch[items[i].id];
@@ -703,6 +1067,70 @@ static uint32_t uvgen_pack(uvgen_chart *ch, uint32_t n, uvgen_item *items, doubl
         if (rh > shelf) shelf = rh;
     }
     return (uint32_t)(y + shelf);
+}
+
+/* Skyline bottom-left placement of sorted items: each goes where its top ends lowest
+ * (leftmost on ties), so short charts fill the steps beside tall ones instead of the space
+ * above them on a shelf. sky: scratch for n + 2 segments. Height used or UINT32_MAX. */
+static uint32_t uvgen_skyline(uvgen_chart *ch, uint32_t n, const uvgen_item *items, uvgen_seg *sky, uint32_t W,
+                              uint32_t max_h, uint32_t pad) {
+    uint32_t ns = 1, top = pad;
+    sky[0] = (uvgen_seg){pad, pad, W - pad};
+    for (uint32_t i = 0; i < n; i++) {
+        uvgen_chart *c = &ch[items[i].id];
+        uint32_t rw = c->fw + pad, rh = c->fh + pad; /* both fit: checked by uvgen_pack_items */
+        uint32_t best = UINT32_MAX, best_y = UINT32_MAX;
+        for (uint32_t s = 0; s < ns && sky[s].x + rw <= W; s++) {
+            uint32_t y = 0, end = sky[s].x + rw;
+            for (uint32_t k = s; k < ns && sky[k].x < end; k++) y = sky[k].y > y ? sky[k].y : y;
+            if (y < best_y) {
+                best_y = y;
+                best = s;
+            }
+        }
+        if (best == UINT32_MAX || (uint64_t)best_y + rh > max_h) return UINT32_MAX;
+        uint32_t x = sky[best].x, end = x + rw;
+        c->x = x;
+        c->y = best_y;
+        if (best_y + rh > top) top = best_y + rh;
+        /* replace the covered segments by the new one; trim a partly covered last one */
+        uint32_t k = best;
+        while (k < ns && sky[k].x + sky[k].w <= end) k++;
+        uvgen_seg tail = {0, 0, 0};
+        int has_tail = k < ns && sky[k].x < end;
+        if (has_tail) {
+            tail = (uvgen_seg){end, sky[k].y, sky[k].x + sky[k].w - end};
+            k++;
+        }
+        uvgen_seg repl[2] = {{x, best_y + rh, rw}, tail};
+        uint32_t nr = has_tail ? 2 : 1;
+        memmove(sky + best + nr, sky + k, (ns - k) * sizeof *sky);
+        memcpy(sky + best, repl, nr * sizeof *sky);
+        ns = ns - (k - best) + nr;
+        /* merge equal-height neighbours around the new segment */
+        uint32_t lo = best > 0 ? best - 1 : 0, hi = best + nr < ns ? best + nr : ns - 1;
+        for (uint32_t j = hi; j > lo; j--)
+            if (sky[j - 1].y == sky[j].y) {
+                sky[j - 1].w += sky[j].w;
+                memmove(sky + j, sky + j + 1, (ns - j - 1) * sizeof *sky);
+                ns--;
+            }
+    }
+    return top;
+}
+
+/* Packs at density d into width W: skyline and shelves both, keeping the lower (neither
+ * wins everywhere: shelves suit a few similar charts). Rects are footprint + padding (the
+ * border supplies the first padding). Returns the height used (incl. border padding), or
+ * UINT32_MAX when a chart is wider than the atlas or the height passes max_h. Integer-only
+ * placement, so deterministic. */
+static uint32_t uvgen_pack(uvgen_chart *ch, uint32_t n, uvgen_item *items, uvgen_seg *sky, double d, uint32_t W,
+                           uint32_t max_h, uint32_t pad, int allow_rot) {
+    if (uvgen_pack_items(ch, n, items, d, W, max_h, pad, allow_rot) != 0) return UINT32_MAX;
+    uint32_t hs = uvgen_shelf(ch, n, items, W, max_h, pad);
+    uint32_t hk = uvgen_skyline(ch, n, items, sky, W, hs == UINT32_MAX ? max_h : hs, pad);
+    if (hk != UINT32_MAX) return hk;
+    return hs == UINT32_MAX ? UINT32_MAX : uvgen_shelf(ch, n, items, W, max_h, pad);
 }
 
 static uint32_t uvgen_round4(double v) {
@@ -831,9 +1259,9 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
     uint32_t *mark = NULL;
     double *tri_n = NULL, *cu = NULL, *cv = NULL;
     uint8_t *degen = NULL, *bits = NULL;
-    int8_t *verdict = NULL;
     uvgen_chart *charts = NULL, *fin = NULL;
     uvgen_item *items = NULL;
+    uvgen_seg *sky = NULL;
     uvgen_corner *corners = NULL;
     float *npos = NULL, *nnrm = NULL, *nuv0 = NULL, *nuv1 = NULL;
     uint32_t *nidx = NULL;
@@ -934,37 +1362,24 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
             charts[n_charts++] = c;
         }
 
-    /* 2. project; split overlapping charts until none overlap (sub-charts are appended). */
-    /* Rounds: all pending charts are checked in parallel (each touches only its own range),
-     * then the overlapping ones are split serially and their pieces form the next round. */
+    /* 2. project; split overlapping charts until none overlap (sub-charts are appended);
+     * merge small charts into neighbours; project and check the merged ones the same way. */
     uvgen_ctx cx = {mesh, weld, tri_n, degen, order, cu, cv, 0.02};
-    uint32_t stamp = 0, n_final = 0;
-    for (uint32_t round_begin = 0; round_begin < n_charts;) {
-        uint32_t round_end = n_charts;
-        int8_t *v = realloc(verdict, round_end - round_begin);
-        if (!v) goto oom;
-        verdict = v;
-        uvgen_round job = {&cx, charts + round_begin, verdict};
-        lc_parallel_for(round_end - round_begin, 4, uvgen_check_charts, &job);
-        for (uint32_t i = round_begin; i < round_end; i++) {
-            int ov = verdict[i - round_begin];
-            if (ov < 0) goto oom;
-            if (ov) {
-                charts[i].dead = 1;
-                if (uvgen_split(&cx, charts[i], adj_start, adj, mark, &stamp, &charts, &n_charts, &cap_charts) != 0)
-                    goto oom;
-            } else {
-                n_final++;
-            }
-        }
-        round_begin = round_end;
-    }
-    fin = malloc((size_t)n_final * sizeof *fin);
-    items = malloc((size_t)n_final * sizeof *items);
-    if (!fin || !items) goto oom;
-    n_final = 0;
-    for (uint32_t i = 0; i < n_charts; i++)
-        if (!charts[i].dead) fin[n_final++] = charts[i];
+    uint32_t stamp = 0;
+    if (uvgen_resolve(&cx, &charts, &n_charts, &cap_charts, adj_start, adj, mark, &stamp) != 0) goto oom;
+    uint32_t n_grown = n_charts;
+    if (uvgen_merge(&cx, &charts, &n_charts, adj_start, adj, params->texels_per_metre, params->atlas_size, pad,
+                    cos_a) != 0)
+        goto oom;
+    cap_charts = n_charts ? n_charts : 1;
+    if (uvgen_resolve(&cx, &charts, &n_charts, &cap_charts, adj_start, adj, mark, &stamp) != 0) goto oom;
+    lc_debug("uvgen", "%u charts grown, %u after merging", n_grown, n_charts);
+    uint32_t n_final = n_charts;
+    fin = charts;
+    charts = NULL;
+    items = malloc((size_t)(n_final ? n_final : 1) * sizeof *items);
+    sky = malloc(((size_t)n_final + 2) * sizeof *sky);
+    if (!items || !sky) goto oom;
     for (uint32_t i = 0; i < n_final; i++)
         for (uint32_t q = fin[i].start; q < fin[i].start + fin[i].count; q++) chart_of[order[q]] = i;
 
@@ -987,7 +1402,7 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
         for (uint32_t i = 0; i < n_final; i++) try_w = fmax(try_w, fin[i].w * d + 4 + 2 * pad);
         for (int it = 0; it < 4; it++) {
             uint32_t w = uvgen_round4(try_w);
-            uint32_t used = uvgen_pack(fin, n_final, items, d, w, UVGEN_MAX_ATLAS, pad, 0);
+            uint32_t used = uvgen_pack(fin, n_final, items, sky, d, w, UVGEN_MAX_ATLAS, pad, 0);
             uint32_t h = used == UINT32_MAX ? UINT32_MAX : uvgen_round4(used);
             if (used == UINT32_MAX) { /* too wide a chart or too tall: widen */
                 try_w = w * 1.5;
@@ -1008,26 +1423,47 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
         }
         W = best_w;
         H = best_h;
-        uvgen_pack(fin, n_final, items, d, W, H, pad, 0); /* final placement */
+        uvgen_pack(fin, n_final, items, sky, d, W, H, pad, 0); /* final placement */
     } else {
         W = H = params->atlas_size;
+        /* At 1e-4 of the ideal density every chart is a texel or two: if they do not fit
+         * then, no density does; grow the atlas (a bake with default settings must not fail
+         * on a scene with many small parts). Growing only until they barely fit would leave
+         * nothing but padding: a grown atlas keeps the requested atlas_size^2 texels free
+         * beside the charts' minimal footprints (rows above them), for their content. */
         double hi = W / sqrt(fmax(rect_area, total_area)), lo = hi * 1e-4;
-        if (uvgen_pack(fin, n_final, items, lo, W, H, pad, 1) == UINT32_MAX) {
-            lc_set_err(err, errlen,
-                       "uvgen: %u charts with padding %u cannot fit atlas_size %u; raise atlas_size (or chart_angle_deg)",
-                       n_final, pad, W);
-            goto err;
+        if (uvgen_pack(fin, n_final, items, sky, lo, W, H, pad, 1) == UINT32_MAX) {
+            for (;;) {
+                if (W >= UVGEN_GROW_MAX) {
+                    lc_set_err(err, errlen,
+                               "uvgen: %u charts with padding %u cannot fit atlas_size %u, even grown to %u; raise "
+                               "chart_angle_deg or lower padding",
+                               n_final, pad, params->atlas_size, W);
+                    goto err;
+                }
+                W = H = uvgen_round4(fmin(W * 1.25, UVGEN_GROW_MAX));
+                hi = W / sqrt(fmax(rect_area, total_area));
+                lo = hi * 1e-4;
+                uint64_t room = ((uint64_t)params->atlas_size * params->atlas_size + W - 1) / W;
+                uint32_t max_h = W < UVGEN_GROW_MAX ? (uint32_t)(H > room ? H - room : 0) : H;
+                if (uvgen_pack(fin, n_final, items, sky, lo, W, max_h, pad, 1) != UINT32_MAX) break;
+            }
         }
-        if (uvgen_pack(fin, n_final, items, hi, W, H, pad, 1) != UINT32_MAX) lo = hi;
+        if (W != params->atlas_size)
+            lc_warn("uvgen",
+                    "atlas grown from %u to %u to hold %u charts; raise --atlas-size or --chart-angle, or give the "
+                    "asset a second UV set, to avoid this",
+                    params->atlas_size, W, n_final);
+        if (uvgen_pack(fin, n_final, items, sky, hi, W, H, pad, 1) != UINT32_MAX) lo = hi;
         for (int it = 0; it < 60 && hi > lo * 1.0005; it++) {
             double mid = sqrt(lo * hi);
-            if (uvgen_pack(fin, n_final, items, mid, W, H, pad, 1) != UINT32_MAX)
+            if (uvgen_pack(fin, n_final, items, sky, mid, W, H, pad, 1) != UINT32_MAX)
                 lo = mid;
             else
                 hi = mid;
         }
         d = lo;
-        uvgen_pack(fin, n_final, items, d, W, H, pad, 1);
+        uvgen_pack(fin, n_final, items, sky, d, W, H, pad, 1);
     }
 
     /* 5. rewrite: one vertex per (original vertex, chart), in (vertex, chart) order */
@@ -1079,7 +1515,7 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
             if (nuv0) memcpy(nuv0 + 2 * cur, mesh->uv0 + 2 * (size_t)k->v, 2 * sizeof(float));
             const uvgen_chart *c = &fin[k->chart];
             double p[3];
-            uvgen_load(mesh, k->v, p);
+            uvgen_load(mesh, weld[k->v], p);
             double lu = uvgen_dot(p, c->U) - c->umin, lv = uvgen_dot(p, c->V) - c->vmin;
             if (c->rot) {
                 double t = lu;
@@ -1155,10 +1591,10 @@ err:
     free(cv);
     free(degen);
     free(bits);
-    free(verdict);
     free(charts);
     free(fin);
     free(items);
+    free(sky);
     free(corners);
     free(npos);
     free(nnrm);

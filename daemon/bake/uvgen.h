@@ -10,9 +10,12 @@
 
 typedef struct lc_uv_params {
     double texels_per_metre; /* > 0: density mode; the atlas grows to fit */
-    uint32_t atlas_size;     /* > 0 (and density 0): fit into atlas_size x atlas_size, density chosen */
+    uint32_t atlas_size;     /* > 0 (and density 0): fit into atlas_size x atlas_size, density chosen;
+                                when the charts cannot fit even at the minimum density the atlas grows
+                                (x1.25 steps, warned) up to 8192 */
     uint32_t padding;        /* empty texels between charts and at the border, >= 2 */
-    double chart_angle_deg;  /* max normal deviation from the chart's seed normal, (0, 90) */
+    double chart_angle_deg;  /* max normal deviation from the chart's projection normal, (0, 90);
+                                sub-texel bevels merged into a neighbour may exceed it (up to 88) */
 } lc_uv_params;
 
 typedef struct lc_uv_stats {
@@ -23,7 +26,7 @@ typedef struct lc_uv_stats {
 } lc_uv_stats;
 
 /* Generates lightmap UVs (replacing any existing uv1). Returns 0 or -1 with err set (e.g.
- * the charts cannot fit the requested atlas even at the minimum density). */
+ * the charts cannot fit even an 8192 atlas). */
 int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char *err, size_t errlen);
 
 /* For meshes that already have uv1 from the asset: chooses the atlas size for the density or

@@ -156,6 +156,64 @@ static lc_mesh make_terrain(int n) {
     return b.m;
 }
 
+/* 1 x 1 plate (normal +y) on an n x n grid; every third cell holds a pyramid of height
+ * `h` cells (4 faces at atan(2h) from the plate), sharing the cell's edges. */
+static lc_mesh make_studded_plate(int n, double h) {
+    builder b = {0};
+    double c = 1.0 / n;
+    for (int i = 0; i <= n; i++)
+        for (int j = 0; j <= n; j++) add_v(&b, i * c, 0, j * c, 0, 1, 0);
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            uint32_t a = i * (n + 1) + j, d = a + n + 1; /* a (i,j), a+1 (i,j+1), d (i+1,j), d+1 */
+            if (i % 3 == 1 && j % 3 == 1) {
+                uint32_t t = add_v(&b, (i + 0.5) * c, h * c, (j + 0.5) * c, 0, 1, 0);
+                add_t(&b, a, a + 1, t);
+                add_t(&b, a + 1, d + 1, t);
+                add_t(&b, d + 1, d, t);
+                add_t(&b, d, a, t);
+            } else {
+                add_t(&b, a, a + 1, d);
+                add_t(&b, a + 1, d + 1, d);
+            }
+        }
+    return b.m;
+}
+
+/* n x n quads of a flat 1 x 1 grid, each with its own four vertices jittered by `jitter`
+ * metres: an asset with cracks. */
+static lc_mesh make_cracked_grid(int n, double jitter) {
+    builder b = {0};
+    double c = 1.0 / n;
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            uint32_t v[4];
+            for (int k = 0; k < 4; k++) {
+                double x = (i + (k == 1 || k == 2)) * c, z = (j + (k >= 2)) * c;
+                v[k] = add_v(&b, x + jitter * (rnd() - 0.5), jitter * (rnd() - 0.5), z + jitter * (rnd() - 0.5), 0, 1, 0);
+            }
+            add_t(&b, v[0], v[3], v[2]);
+            add_t(&b, v[0], v[2], v[1]);
+        }
+    return b.m;
+}
+
+/* A strip bent by `deg` degrees around the z axis, in `seg` flat segments. */
+static lc_mesh make_arc(double deg, int seg) {
+    builder b = {0};
+    for (int i = 0; i <= seg; i++) {
+        double a = deg * M_PI / 180 * i / seg;
+        add_v(&b, sin(a), cos(a), 0, sin(a), cos(a), 0);
+        add_v(&b, sin(a), cos(a), 1, sin(a), cos(a), 0);
+    }
+    for (int i = 0; i < seg; i++) {
+        uint32_t a = 2 * i, c = a + 2;
+        add_t(&b, a, a + 1, c);
+        add_t(&b, c, a + 1, c + 1);
+    }
+    return b.m;
+}
+
 static lc_mesh copy_mesh(const lc_mesh *s) {
     lc_mesh m = *s;
     m.position = malloc(12 * (size_t)s->n_vertices);
@@ -320,6 +378,8 @@ static double now(void) {
     return ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
+static int expect_growth; /* run_case: the charts cannot fit atlas_size, it must grow */
+
 /* Runs uvgen twice on copies, checks determinism and the atlas; returns the stats. */
 static lc_uv_stats run_case(const char *name, const lc_mesh *src, lc_uv_params p, int check_pack) {
     lc_mesh a = copy_mesh(src), b = copy_mesh(src);
@@ -356,9 +416,12 @@ static lc_uv_stats run_case(const char *name, const lc_mesh *src, lc_uv_params p
     CHECK(bad_uv == 0, "%s: %u uv1 values outside [0, 1]", name, bad_uv);
     CHECK(sa.usage > 0 && sa.usage <= 1, "%s: usage %g in (0, 1]", name, sa.usage);
     CHECK(sa.width % 4 == 0 && sa.height % 4 == 0, "%s: atlas %ux%u multiple of 4", name, sa.width, sa.height);
-    if (p.atlas_size && p.texels_per_metre == 0)
+    if (p.atlas_size && p.texels_per_metre == 0 && !expect_growth)
         CHECK(sa.width == p.atlas_size && sa.height == p.atlas_size, "%s: atlas %ux%u honours atlas_size %u", name,
               sa.width, sa.height, p.atlas_size);
+    if (expect_growth)
+        CHECK(sa.width > p.atlas_size && sa.width == sa.height && sa.width <= 8192, "%s: atlas %ux%u grown from %u",
+              name, sa.width, sa.height, p.atlas_size);
     if (check_pack) {
         verify_result v = verify(&a, sa.width, sa.height, p.padding);
         CHECK(v.double_covered == 0, "%s: %u texel centres inside two triangles", name, v.double_covered);
@@ -405,12 +468,14 @@ static void test_errors(void) {
     cube.position[4] = NAN;
     CHECK(lc_uvgen(&cube, &ok, &s, err, sizeof err) == -1 && strstr(err, "finite"), "NaN: %s", err);
     cube.position[4] = keep;
-    lc_mesh sph = make_sphere(32, 32, 1);
+    /* more charts than even an 8192 atlas holds at padding 64 (each needs >= 65x65 texels) */
+    lc_mesh many = make_tiny(16000);
     p = ok;
-    p.atlas_size = 8;
-    CHECK(lc_uvgen(&sph, &p, &s, err, sizeof err) == -1 && strstr(err, "atlas_size"), "too small atlas: %s", err);
+    p.padding = 64;
+    CHECK(lc_uvgen(&many, &p, &s, err, sizeof err) == -1 && strstr(err, "atlas_size") && strstr(err, "8192"),
+          "too many charts for any atlas: %s", err);
+    lc_mesh_release(&many);
     CHECK(lc_uvgen_measure(&cube, &ok, &s, err, sizeof err) == -1 && strstr(err, "uv1"), "measure w/o uv1: %s", err);
-    lc_mesh_release(&sph);
     lc_mesh_release(&cube);
 }
 
@@ -473,6 +538,50 @@ int main(void) {
     CHECK(s.n_charts == 3000, "tiny: %u charts", s.n_charts);
     run_case("tiny/density", &tiny, (lc_uv_params){.texels_per_metre = 100, .padding = 2, .chart_angle_deg = 45}, 1);
     lc_mesh_release(&tiny);
+
+    /* growth: 3000 disconnected charts cannot fit 64x64 with padding 2 (>= 9 texels each) */
+    lc_mesh tiny64 = make_tiny(3000);
+    expect_growth = 1;
+    s = run_case("tiny/atlas64-grown", &tiny64, (lc_uv_params){.atlas_size = 64, .padding = 2, .chart_angle_deg = 45},
+                 1);
+    CHECK(s.n_charts == 3000 && s.width % 4 == 0 && s.width >= 164, "grown: %u charts in %ux%u", s.n_charts, s.width,
+          s.height);
+    s = run_case("tiny/atlas64-grown-pad4", &tiny64,
+                 (lc_uv_params){.atlas_size = 64, .padding = 4, .chart_angle_deg = 45}, 1);
+    lc_mesh sph8 = make_sphere(32, 32, 1);
+    run_case("sphere/atlas16-grown", &sph8, (lc_uv_params){.atlas_size = 16, .padding = 8, .chart_angle_deg = 30}, 1);
+    expect_growth = 0;
+    lc_mesh_release(&sph8);
+    lc_mesh_release(&tiny64);
+
+    /* merging: pyramids (faces at 63 degrees) far below a texel join the plate's chart; at a
+     * density where they span many texels they keep their own charts */
+    lc_mesh plate = make_studded_plate(30, 1.0);
+    s = run_case("studs/atlas64", &plate, (lc_uv_params){.atlas_size = 64, .padding = 2, .chart_angle_deg = 30}, 1);
+    CHECK(s.n_charts == 1, "sub-texel pyramids merged into the plate: %u charts", s.n_charts);
+    s = run_case("studs/density300", &plate, (lc_uv_params){.texels_per_metre = 300, .padding = 2, .chart_angle_deg = 30},
+                 1);
+    CHECK(s.n_charts > 300, "pyramids of many texels keep their faces: %u charts", s.n_charts);
+    lc_mesh_release(&plate);
+
+    /* welding: quads with cracks of ~1e-7 of the extent form one chart */
+    lc_mesh cracked = make_cracked_grid(6, 2e-7);
+    s = run_case("cracked", &cracked, atlas, 1);
+    CHECK(s.n_charts == 1, "cracked grid welded: %u charts", s.n_charts);
+    lc_mesh_release(&cracked);
+    /* ... but real gaps (1e-3 of the extent) are not welded */
+    cracked = make_cracked_grid(3, 0);
+    for (uint32_t v = 0; v < cracked.n_vertices; v++) cracked.position[3 * v] += (float)(1e-3 * (v / 4));
+    s = run_case("gaps", &cracked, atlas, 1);
+    CHECK(s.n_charts == 9, "9 separate quads: %u charts", s.n_charts);
+    lc_mesh_release(&cracked);
+
+    /* running average normal: an 80 degree bend is one chart at 45 degrees (against the seed
+     * normal it took two) */
+    lc_mesh arc = make_arc(80, 16);
+    s = run_case("arc80", &arc, (lc_uv_params){.atlas_size = 128, .padding = 2, .chart_angle_deg = 45}, 1);
+    CHECK(s.n_charts == 1, "80 degree arc at 45 degrees: %u charts", s.n_charts);
+    lc_mesh_release(&arc);
 
     lc_mesh two = make_two_quads();
     s = run_case("two-quads", &two, atlas, 1);
