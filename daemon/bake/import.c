@@ -4,6 +4,7 @@
  * from the glTF JSON directly, and texture names are resolved case-insensitively because
  * OBJ assets authored on Windows rarely match the case of the files on disk. */
 #include <assimp/cimport.h>
+#include <assimp/config.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 #include <cjson/cJSON.h>
@@ -828,8 +829,20 @@ int lc_scene_import(const char *path, const lc_import_params *params, lc_scene *
         return -1;
     }
 
-    ai = aiImportFile(path, aiProcess_Triangulate | aiProcess_GenSmoothNormals | aiProcess_JoinIdenticalVertices |
-                                aiProcess_SortByPType | aiProcess_ValidateDataStructure);
+    /* Generated normals smooth only across edges flatter than 60 degrees: Assimp's default
+     * (175) rounds the corners of boxes, tilting texel and surfel normals at hard edges. */
+    struct aiPropertyStore *props = aiCreatePropertyStore();
+    if (!props) {
+        lc_set_err(err, errlen, "%s: out of memory", path);
+        goto err;
+    }
+    aiSetImportPropertyFloat(props, AI_CONFIG_PP_GSN_MAX_SMOOTHING_ANGLE, 60.0f);
+    ai = aiImportFileExWithProperties(path,
+                                      aiProcess_Triangulate | aiProcess_GenSmoothNormals |
+                                          aiProcess_JoinIdenticalVertices | aiProcess_SortByPType |
+                                          aiProcess_ValidateDataStructure,
+                                      NULL, props);
+    aiReleasePropertyStore(props);
     if (!ai) {
         lc_set_err(err, errlen, "%s: Assimp could not import it: %s", path, aiGetErrorString());
         goto err;

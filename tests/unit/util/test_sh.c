@@ -77,6 +77,20 @@ int main(void) {
     CHECK_NEAR(lc_sh_cosine_factor(2), M_PI / 4, 1e-12);
     CHECK_NEAR(lc_sh_cosine_factor(4), -M_PI / 24, 1e-12);
 
+    /* The fast float path equals the generic evaluation. */
+    for (int i = 0; i < 1000; i++) {
+        float dd[3], ya[16], yb[16];
+        fib_dir(i, 1000, dd);
+        lc_sh_eval(4, dd, ya);
+        lc_sh_eval_fast(4, dd[0], dd[1], dd[2], yb);
+        for (int k = 0; k < 16; k++)
+            if (fabsf(ya[k] - yb[k]) > 1e-5f) {
+                CHECK(0, "fast SH coeff %d differs at dir %d: %g vs %g", k, i, yb[k], ya[k]);
+                i = 1000;
+                break;
+            }
+    }
+
     /* Irradiance of a uniform sky L=1 through SH: E = pi for any normal. */
     float n[3] = {0, 1, 0};
     lc_sh_eval(3, n, y);

@@ -1,0 +1,397 @@
+/* transport_cpu: the reference implementation of the transport pipeline (transport.h) in
+ * C11 with lc_parallel_for across caches. Runs on the engine's (compute) thread. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "engine/transport.h"
+#include "util/log.h"
+#include "util/parallel.h"
+#include "util/sh.h"
+
+#define TCPU_MAX_COEFFS LC_SH_MAX_COEFFS
+
+typedef struct tcpu {
+    const lc_lcb_view *v;
+    uint32_t cells;
+    uint32_t coeff_cap;  /* bands^2 the buffers are sized for */
+    float *flux;         /* n_nodes*3 */
+    float *radiosity;    /* n_surfels*3 */
+    float *e_ind;        /* n_surfels*3, kept across runs for progressive feedback */
+    float *cache_sh;     /* n_caches*coeff_cap*3 */
+    float *lightmap;     /* W*H*3 */
+    float *lightmap_sh;  /* W*H*coeff_cap*3, allocated on demand */
+    float *grid_sh;      /* cells*27 */
+    float *object_sh;    /* n_objects*27 */
+    uint32_t object_cap;
+    uint8_t *feedback_cache; /* per cache: some surfel reads it */
+    uint32_t *feedback_list; /* those caches */
+    uint32_t n_feedback;
+    float cone[256][8];
+} tcpu;
+
+void lc_transport_cone_table(float table[256][8]) {
+    for (int q = 0; q < 256; q++) {
+        double alpha = q / 255.0 * M_PI;
+        for (int l = 0; l < 8; l++) table[q][l] = (float)lc_sh_cone_ratio(l, cos(alpha));
+    }
+}
+
+static double tcpu_now_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+static void tcpu_release(void *impl) {
+    tcpu *t = impl;
+    if (!t) return;
+    free(t->flux);
+    free(t->radiosity);
+    free(t->e_ind);
+    free(t->cache_sh);
+    free(t->lightmap);
+    free(t->lightmap_sh);
+    free(t->grid_sh);
+    free(t->object_sh);
+    free(t->feedback_cache);
+    free(t->feedback_list);
+    free(t);
+}
+
+static void *tcpu_create(const lc_lcb_view *v, int threads, char *err, size_t errlen) {
+    (void)threads; /* lc_parallel_set_threads is process-wide; the engine sets it */
+    tcpu *t = calloc(1, sizeof *t);
+    if (!t) goto oom;
+    t->v = v;
+    t->cells = v->grid_dims[0] * v->grid_dims[1] * v->grid_dims[2];
+    t->coeff_cap = LC_SH_MAX_COEFFS;
+    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
+    t->flux = calloc((size_t)v->n_nodes * 3, sizeof(float));
+    t->radiosity = calloc((size_t)v->n_surfels * 3, sizeof(float));
+    t->e_ind = calloc((size_t)v->n_surfels * 3, sizeof(float));
+    t->cache_sh = calloc((size_t)v->n_caches * t->coeff_cap * 3, sizeof(float));
+    t->lightmap = calloc(texels * 3, sizeof(float));
+    t->grid_sh = calloc((size_t)t->cells * 27, sizeof(float));
+    t->feedback_cache = calloc(v->n_caches ? v->n_caches : 1, 1);
+    t->feedback_list = calloc(v->n_caches ? v->n_caches : 1, sizeof(uint32_t));
+    if (!t->flux || !t->radiosity || !t->e_ind || !t->cache_sh || !t->lightmap || !t->grid_sh ||
+        !t->feedback_cache || !t->feedback_list)
+        goto oom;
+    for (uint32_t s = 0; s < v->n_surfels; s++)
+        if (v->surfels[s].cache != LC_NONE) t->feedback_cache[v->surfels[s].cache] = 1;
+    for (uint32_t c = 0; c < v->n_caches; c++)
+        if (t->feedback_cache[c]) t->feedback_list[t->n_feedback++] = c;
+    lc_transport_cone_table(t->cone);
+    return t;
+oom:
+    tcpu_release(t);
+    lc_set_err(err, errlen, "cpu transport: out of memory for %u caches x %u SH coefficients", v->n_caches,
+               (unsigned)LC_SH_MAX_COEFFS);
+    return NULL;
+}
+
+/* --- pull ------------------------------------------------------------------------------------ */
+
+/* Leaves hold B * area; internal nodes the sum of their children. BFS order puts children
+ * after parents, so one reverse sweep pulls everything up. */
+static void tcpu_pull(tcpu *t) {
+    const lc_lcb_view *v = t->v;
+    for (uint32_t i = v->n_nodes; i-- > 0;) {
+        const lc_lcb_node *nd = &v->nodes[i];
+        float *f = t->flux + 3 * (size_t)i;
+        if (nd->child[0] == LC_NONE) {
+            const lc_lcb_surfel *s = &v->surfels[nd->first_surfel];
+            const float *b = t->radiosity + 3 * (size_t)nd->first_surfel;
+            for (int k = 0; k < 3; k++) f[k] = b[k] * s->area;
+        } else {
+            const float *a = t->flux + 3 * (size_t)nd->child[0], *b = t->flux + 3 * (size_t)nd->child[1];
+            for (int k = 0; k < 3; k++) f[k] = a[k] + b[k];
+        }
+    }
+}
+
+/* --- gather ---------------------------------------------------------------------------------- */
+
+typedef struct {
+    tcpu *t;
+    const uint32_t *list; /* cache indices, or NULL = all caches */
+    int bands, chroma_bands;
+    int chroma;           /* flux is YCoCg: Co/Cg use chroma_bands only */
+} tcpu_gather_job;
+
+static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
+    float u = (float)(packed & 0xFFFu) * (2.0f / 4095.0f) - 1.0f;
+    float w = (float)((packed >> 12) & 0xFFFu) * (2.0f / 4095.0f) - 1.0f;
+    float z = 1.0f - fabsf(u) - fabsf(w);
+    if (z < 0) {
+        float uu = (1 - fabsf(w)) * (u >= 0 ? 1.0f : -1.0f);
+        float ww = (1 - fabsf(u)) * (w >= 0 ? 1.0f : -1.0f);
+        u = uu;
+        w = ww;
+    }
+    float inv = 1.0f / sqrtf(u * u + w * w + z * z);
+    d[0] = u * inv;
+    d[1] = w * inv;
+    d[2] = z * inv;
+}
+
+static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
+    (void)thread;
+    const tcpu_gather_job *job = ctx;
+    tcpu *t = job->t;
+    const lc_lcb_view *v = t->v;
+    const int nc = job->bands * job->bands;
+    const int ncc = job->chroma ? job->chroma_bands * job->chroma_bands : nc;
+    const uint32_t nl = v->links_per_cache;
+    static const int band_of[TCPU_MAX_COEFFS] = {
+        0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5,
+        5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7};
+    for (size_t i = begin; i < end; i++) {
+        uint32_t c = job->list ? job->list[i] : (uint32_t)i;
+        float acc0[TCPU_MAX_COEFFS], acc1[TCPU_MAX_COEFFS], acc2[TCPU_MAX_COEFFS];
+        memset(acc0, 0, sizeof(float) * nc);
+        memset(acc1, 0, sizeof(float) * nc);
+        memset(acc2, 0, sizeof(float) * nc);
+        const lc_lcb_link *lk = v->links + (size_t)c * nl;
+        uint32_t used = v->caches[c].link_count;
+        for (uint32_t k = 0; k < used; k++) {
+            const float *phi = t->flux + 3 * (size_t)lk[k].node;
+            float d[3], y[TCPU_MAX_COEFFS];
+            tcpu_oct_decode(lk[k].dir_cone, d);
+            lc_sh_eval_fast(job->bands, d[0], d[1], d[2], y);
+            const float *h = t->cone[lk[k].dir_cone >> 24];
+            float f = lk[k].factor;
+            float p0 = phi[0] * f, p1 = phi[1] * f, p2 = phi[2] * f;
+            for (int j = 0; j < nc; j++) {
+                float w = h[band_of[j]] * y[j];
+                acc0[j] += w * p0;
+                if (j < ncc) {
+                    acc1[j] += w * p1;
+                    acc2[j] += w * p2;
+                }
+            }
+        }
+        float *out = t->cache_sh + (size_t)c * t->coeff_cap * 3;
+        for (int j = 0; j < nc; j++) {
+            float a = acc0[j], b = acc1[j], g = acc2[j];
+            if (job->chroma) { /* Y, Co, Cg -> RGB (Malvar-Sullivan YCoCg-R, linear) */
+                float tt = a - g;
+                out[3 * j + 1] = a + g;
+                out[3 * j + 2] = tt - b;
+                out[3 * j + 0] = tt + b;
+            } else {
+                out[3 * j + 0] = a;
+                out[3 * j + 1] = b;
+                out[3 * j + 2] = g;
+            }
+        }
+    }
+}
+
+/* --- irradiance ------------------------------------------------------------------------------ */
+
+/* Irradiance at a cache for normal n (see transport.h for the two formulas). */
+static inline void tcpu_irradiance(const float *sh, int bands, int texel, const float n[3], float e[3]) {
+    float y[16];
+    lc_sh_eval_fast(bands < 3 ? bands : 3, n[0], n[1], n[2], y);
+    if (texel) {
+        if (bands < 2) {
+            for (int k = 0; k < 3; k++) e[k] = fmaxf(0.0f, (float)(2.0 * M_PI) * sh[k] * y[0]);
+            return;
+        }
+        const float w = (float)(4.0 * M_PI / 3.0);
+        for (int k = 0; k < 3; k++)
+            e[k] = fmaxf(0.0f, w * (sh[3 + k] * y[1] + sh[6 + k] * y[2] + sh[9 + k] * y[3]));
+        return;
+    }
+    static const float a[3] = {(float)M_PI, (float)(2.0 * M_PI / 3.0), (float)(M_PI / 4.0)};
+    int nc = bands >= 3 ? 9 : bands * bands;
+    for (int k = 0; k < 3; k++) {
+        float s = 0;
+        for (int j = 0; j < nc; j++) s += a[j == 0 ? 0 : j < 4 ? 1 : 2] * sh[3 * j + k] * y[j];
+        e[k] = fmaxf(0.0f, s);
+    }
+}
+
+typedef struct {
+    tcpu *t;
+    int bands;
+} tcpu_feedback_job;
+
+static void tcpu_feedback_range(void *ctx, size_t begin, size_t end, int thread) {
+    (void)thread;
+    const tcpu_feedback_job *job = ctx;
+    tcpu *t = job->t;
+    const lc_lcb_view *v = t->v;
+    for (size_t s = begin; s < end; s++) {
+        const lc_lcb_surfel *sf = &v->surfels[s];
+        float *e = t->e_ind + 3 * s;
+        if (sf->cache == LC_NONE) {
+            e[0] = e[1] = e[2] = 0;
+            continue;
+        }
+        const float *sh = t->cache_sh + (size_t)sf->cache * t->coeff_cap * 3;
+        tcpu_irradiance(sh, job->bands, (v->caches[sf->cache].flags & LC_CACHE_TEXEL) != 0, sf->normal, e);
+    }
+}
+
+/* Trilinear sample of the grid's irradiance SH at p (clamped to the lattice). */
+static void tcpu_grid_sample(const tcpu *t, const float p[3], float out[27]) {
+    const lc_lcb_view *v = t->v;
+    float f[3];
+    int i0[3];
+    for (int k = 0; k < 3; k++) {
+        float g = (p[k] - v->grid_origin[k]) / v->grid_cell;
+        float maxg = (float)(v->grid_dims[k] - 1);
+        if (!(g > 0)) g = 0;
+        if (g > maxg) g = maxg;
+        i0[k] = (int)floorf(g);
+        if (i0[k] > (int)v->grid_dims[k] - 2) i0[k] = (int)v->grid_dims[k] - 2;
+        if (i0[k] < 0) i0[k] = 0;
+        f[k] = v->grid_dims[k] > 1 ? g - (float)i0[k] : 0;
+    }
+    memset(out, 0, 27 * sizeof(float));
+    for (int corner = 0; corner < 8; corner++) {
+        int idx[3];
+        float w = 1;
+        for (int k = 0; k < 3; k++) {
+            int bit = (corner >> k) & 1;
+            idx[k] = i0[k] + bit;
+            if (idx[k] >= (int)v->grid_dims[k]) idx[k] = (int)v->grid_dims[k] - 1;
+            w *= bit ? f[k] : 1 - f[k];
+        }
+        if (w == 0) continue;
+        size_t cell = (size_t)idx[0] + v->grid_dims[0] * ((size_t)idx[1] + v->grid_dims[1] * (size_t)idx[2]);
+        const float *src = t->grid_sh + cell * 27;
+        for (int j = 0; j < 27; j++) out[j] += w * src[j];
+    }
+}
+
+/* --- run ------------------------------------------------------------------------------------- */
+
+static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr, char *err, size_t errlen) {
+    tcpu *t = impl;
+    const lc_lcb_view *v = t->v;
+    const lc_engine_settings *st = &in->settings;
+    int bands = (int)st->bands;
+    int chroma = st->chroma_compression && st->chroma_bands < st->bands;
+    if (bands < 1 || bands > LC_SH_MAX_BANDS) {
+        lc_set_err(err, errlen, "/settings/bands: %d is outside 1..%d", bands, LC_SH_MAX_BANDS);
+        return -1;
+    }
+    const size_t cap = t->coeff_cap;
+    double t1;
+    if (in->reset_feedback) memset(t->e_ind, 0, (size_t)v->n_surfels * 3 * sizeof(float));
+    double ms_pull = 0, ms_gather = 0, ms_bounce = 0;
+
+    for (uint32_t pass = 0; pass <= st->bounces; pass++) {
+        int last = pass == st->bounces;
+        t1 = tcpu_now_ms();
+        for (uint32_t s = 0; s < v->n_surfels; s++) {
+            const float *alb = v->surfels[s].albedo;
+            for (int k = 0; k < 3; k++)
+                t->radiosity[3 * s + k] = in->b0[3 * s + k] + alb[k] * t->e_ind[3 * s + k];
+        }
+        double t2 = tcpu_now_ms();
+        ms_bounce += t2 - t1;
+        tcpu_pull(t);
+        if (chroma) /* the pull is linear, so convert once at the nodes: RGB -> Y, Co, Cg */
+            for (uint32_t i = 0; i < v->n_nodes; i++) {
+                float *f = t->flux + 3 * (size_t)i;
+                float co = (f[0] - f[2]) * 0.5f, tt = f[2] + co, cg = (f[1] - tt) * 0.5f;
+                f[0] = tt + cg;
+                f[1] = co;
+                f[2] = cg;
+            }
+        double t3 = tcpu_now_ms();
+        ms_pull += t3 - t2;
+        /* Intermediate passes only need the caches some surfel reads. */
+        tcpu_gather_job job = {t, last ? NULL : t->feedback_list, bands, (int)st->chroma_bands, chroma};
+        lc_parallel_for(last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
+        double t4 = tcpu_now_ms();
+        ms_gather += t4 - t3;
+        /* Feedback for the next pass (and, progressive, for the next relight). */
+        tcpu_feedback_job fj = {t, bands};
+        lc_parallel_for(v->n_surfels, 1024, tcpu_feedback_range, &fj);
+        ms_bounce += tcpu_now_ms() - t4;
+    }
+    fr->stage_ms[LC_STAGE_BOUNCE] = ms_bounce;
+    fr->stage_ms[LC_STAGE_PULL] = ms_pull;
+    fr->stage_ms[LC_STAGE_GATHER] = ms_gather;
+    fr->stage_ms[LC_STAGE_CHROMA] = 0;
+
+    /* Lightmap: each texel shows its cache's irradiance for the cache normal. */
+    t1 = tcpu_now_ms();
+    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
+    if (st->sh_lightmap && !t->lightmap_sh) {
+        t->lightmap_sh = calloc(texels * cap * 3, sizeof(float));
+        if (!t->lightmap_sh) {
+            lc_set_err(err, errlen, "cpu transport: out of memory for the SH lightmap");
+            return -1;
+        }
+    }
+    for (size_t i = 0; i < texels; i++) {
+        uint32_t c = v->lightmap[i];
+        float *e = t->lightmap + 3 * i;
+        if (c == LC_NONE) {
+            e[0] = e[1] = e[2] = 0;
+            if (st->sh_lightmap) memset(t->lightmap_sh + i * cap * 3, 0, cap * 3 * sizeof(float));
+            continue;
+        }
+        const float *sh = t->cache_sh + (size_t)c * cap * 3;
+        tcpu_irradiance(sh, bands, 1, v->caches[c].normal, e);
+        if (st->sh_lightmap) memcpy(t->lightmap_sh + i * cap * 3, sh, cap * 3 * sizeof(float));
+    }
+    double t2 = tcpu_now_ms();
+    fr->stage_ms[LC_STAGE_LIGHTMAP] = t2 - t1;
+
+    /* Grid: cosine-convolved L2 irradiance SH per sample. */
+    static const float a[9] = {(float)M_PI, (float)(2 * M_PI / 3), (float)(2 * M_PI / 3), (float)(2 * M_PI / 3),
+                               (float)(M_PI / 4), (float)(M_PI / 4), (float)(M_PI / 4), (float)(M_PI / 4),
+                               (float)(M_PI / 4)};
+    int nc9 = bands >= 3 ? 9 : bands * bands;
+    for (uint32_t i = 0; i < t->cells; i++) {
+        uint32_t c = v->grid[i];
+        float *g = t->grid_sh + (size_t)i * 27;
+        memset(g, 0, 27 * sizeof(float));
+        const float *sh = t->cache_sh + (size_t)c * cap * 3;
+        for (int j = 0; j < nc9; j++)
+            for (int k = 0; k < 3; k++) g[3 * j + k] = a[j] * sh[3 * j + k];
+    }
+    double t3 = tcpu_now_ms();
+    fr->stage_ms[LC_STAGE_GRID] = t3 - t2;
+
+    if (in->n_objects > t->object_cap) {
+        float *o = realloc(t->object_sh, (size_t)in->n_objects * 27 * sizeof(float));
+        if (!o) {
+            lc_set_err(err, errlen, "cpu transport: out of memory for %u objects", in->n_objects);
+            return -1;
+        }
+        t->object_sh = o;
+        t->object_cap = in->n_objects;
+    }
+    for (uint32_t i = 0; i < in->n_objects; i++)
+        tcpu_grid_sample(t, in->object_pos + 3 * (size_t)i, t->object_sh + 27 * (size_t)i);
+    fr->stage_ms[LC_STAGE_OBJECTS] = tcpu_now_ms() - t3;
+
+    fr->lightmap_width = v->lightmap_width;
+    fr->lightmap_height = v->lightmap_height;
+    fr->lightmap = t->lightmap;
+    fr->sh_bands = (uint32_t)bands;
+    fr->lightmap_sh = st->sh_lightmap ? t->lightmap_sh : NULL;
+    fr->n_caches = v->n_caches;
+    fr->cache_sh = t->cache_sh;
+    memcpy(fr->grid_dims, v->grid_dims, sizeof fr->grid_dims);
+    memcpy(fr->grid_origin, v->grid_origin, sizeof fr->grid_origin);
+    fr->grid_cell = v->grid_cell;
+    fr->grid_sh = t->grid_sh;
+    fr->n_objects = in->n_objects;
+    fr->object_sh = t->object_sh;
+    fr->surfel_radiosity = t->radiosity;
+    fr->node_flux = chroma ? NULL : t->flux; /* YCoCg when compressing */
+    return 0;
+}
+
+const lc_transport_ops lc_transport_cpu = {"cpu", tcpu_create, tcpu_release, tcpu_run};

@@ -1,0 +1,645 @@
+/* engine: the relight front. Validates state, decides what changed, computes each surfel's
+ * direct radiosity (lights with Embree shadow rays against the static scene and the placed
+ * dynamic objects, emission, sky through a per-surfel visibility transfer), then hands the
+ * transport to the backend. Runs on the caller's (compute) thread; parallel inside. */
+#include "engine/engine.h"
+
+#include <embree3/rtcore.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "engine/transport.h"
+#include "util/log.h"
+#include "util/parallel.h"
+#include "util/rng.h"
+#include "util/sh.h"
+
+#define ENGINE_AREA_SAMPLES 16 /* shadow rays per area light per surfel */
+#define ENGINE_SKY_RAYS 64     /* visibility rays per surfel for the sky transfer */
+
+struct lc_engine {
+    const lc_lcb *bake;
+    const lc_lcb_view *v;
+    const lc_transport_ops *ops;
+    void *impl;
+    float scene_eps; /* ray offset scaled to the scene */
+    /* Embree: static geometry in its own scene, each asset in its own scene, and a top
+     * scene of instances rebuilt when the objects change. */
+    RTCDevice device;
+    RTCScene static_scene;
+    RTCScene *asset_scenes;
+    RTCScene top;
+    /* Derived per-surfel data. */
+    float *e_direct;   /* n_surfels*3: irradiance from lights (visibility included) */
+    float *sky_t;      /* n_surfels*9: cosine-weighted visibility projected on L2 SH */
+    float *b0;         /* n_surfels*3 */
+    float *object_pos; /* n_objects*3 */
+    int sky_valid;
+    /* The last applied state (deep copies) for change detection. */
+    lc_engine_light *lights;
+    uint32_t n_lights;
+    lc_engine_object *objects;
+    uint32_t n_objects;
+    float *emission; /* n_materials*3 */
+    lc_engine_environment env;
+    lc_engine_settings settings;
+    int have_state;
+    lc_engine_frame frame;
+};
+
+static double engine_now_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+static void engine_embree_error(void *user, enum RTCError code, const char *str) {
+    (void)user;
+    lc_error("engine", "embree error %d: %s", (int)code, str ? str : "");
+}
+
+lc_engine_settings lc_engine_default_settings(const lc_lcb *bake) {
+    const lc_lcb_view *v = lc_lcb_get(bake);
+    lc_engine_settings s = {.bounces = 2,
+                            .bands = v->sh_bands ? v->sh_bands : 3,
+                            .progressive = 1,
+                            .chroma_compression = 0,
+                            .chroma_bands = v->sh_bands ? v->sh_bands : 3,
+                            .sh_lightmap = 0};
+    return s;
+}
+
+/* --- Embree scenes ------------------------------------------------------------------------- */
+
+static RTCScene engine_mesh_scene(RTCDevice dev, const void *vertices, size_t vstride, uint32_t nv,
+                                  const void *indices, size_t istride, uint32_t nt) {
+    RTCScene sc = rtcNewScene(dev);
+    rtcSetSceneFlags(sc, RTC_SCENE_FLAG_ROBUST);
+    if (nt > 0) {
+        RTCGeometry g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_TRIANGLE);
+        /* Shared buffers straight from the mapping: each vertex record has >= 16 readable
+         * bytes from its position (normal follows), which Embree's SIMD loads need. */
+        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vertices, 0, vstride, nv);
+        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices, 0, istride, nt);
+        rtcCommitGeometry(g);
+        rtcAttachGeometry(sc, g);
+        rtcReleaseGeometry(g);
+    }
+    rtcCommitScene(sc);
+    return sc;
+}
+
+/* Column-major 3x4 from translation, unit quaternion (x,y,z,w) and scale. */
+static void engine_trs(const lc_engine_object *o, float m[12]) {
+    float x = o->rotation[0], y = o->rotation[1], z = o->rotation[2], w = o->rotation[3];
+    float len = sqrtf(x * x + y * y + z * z + w * w);
+    x /= len, y /= len, z /= len, w /= len;
+    float r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
+                     {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
+                     {2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)}};
+    for (int col = 0; col < 3; col++)
+        for (int row = 0; row < 3; row++) m[col * 3 + row] = r[row][col] * o->scale[col];
+    m[9] = o->translation[0];
+    m[10] = o->translation[1];
+    m[11] = o->translation[2];
+}
+
+static void engine_build_top(lc_engine *e, const lc_engine_object *objects, uint32_t n) {
+    if (e->top) rtcReleaseScene(e->top);
+    e->top = rtcNewScene(e->device);
+    RTCGeometry inst = rtcNewGeometry(e->device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(inst, e->static_scene);
+    float id[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};
+    rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, id);
+    rtcCommitGeometry(inst);
+    rtcAttachGeometry(e->top, inst);
+    rtcReleaseGeometry(inst);
+    for (uint32_t i = 0; i < n; i++) {
+        if (!objects[i].visible) continue;
+        RTCGeometry g = rtcNewGeometry(e->device, RTC_GEOMETRY_TYPE_INSTANCE);
+        rtcSetGeometryInstancedScene(g, e->asset_scenes[objects[i].asset]);
+        float m[12];
+        engine_trs(&objects[i], m);
+        rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, m);
+        rtcCommitGeometry(g);
+        rtcAttachGeometry(e->top, g);
+        rtcReleaseGeometry(g);
+    }
+    rtcCommitScene(e->top);
+}
+
+static int engine_occluded(RTCScene sc, const float org[3], const float dir[3], float tfar) {
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    struct RTCRay ray = {.org_x = org[0], .org_y = org[1], .org_z = org[2], .tnear = 0,
+                         .dir_x = dir[0], .dir_y = dir[1], .dir_z = dir[2], .time = 0,
+                         .tfar = tfar, .mask = ~0u, .id = 0, .flags = 0};
+    rtcOccluded1(sc, &ctx, &ray);
+    return ray.tfar < 0;
+}
+
+/* --- create / release ------------------------------------------------------------------------ */
+
+void lc_engine_release(lc_engine *e) {
+    if (!e) return;
+    if (e->impl) e->ops->release(e->impl);
+    if (e->top) rtcReleaseScene(e->top);
+    if (e->asset_scenes) {
+        for (uint32_t i = 0; i < e->v->n_assets; i++)
+            if (e->asset_scenes[i]) rtcReleaseScene(e->asset_scenes[i]);
+        free(e->asset_scenes);
+    }
+    if (e->static_scene) rtcReleaseScene(e->static_scene);
+    if (e->device) rtcReleaseDevice(e->device);
+    free(e->e_direct);
+    free(e->sky_t);
+    free(e->b0);
+    free(e->object_pos);
+    free(e->lights);
+    free(e->objects);
+    free(e->emission);
+    free(e);
+}
+
+const char *lc_engine_backend_name(const lc_engine *e) { return e->ops->name; }
+
+lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int threads, char *err, size_t errlen) {
+    lc_engine *e = calloc(1, sizeof *e);
+    if (!e) {
+        lc_set_err(err, errlen, "out of memory");
+        return NULL;
+    }
+    e->bake = bake;
+    e->v = lc_lcb_get(bake);
+    const lc_lcb_view *v = e->v;
+    lc_parallel_set_threads(threads);
+    float extent = 0;
+    for (uint32_t i = 0; i < v->n_vertices; i++)
+        for (int k = 0; k < 3; k++) extent = fmaxf(extent, fabsf(v->vertices[i].position[k]));
+    e->scene_eps = 1e-4f + 2e-6f * extent;
+
+    char config[32] = "";
+    if (threads > 0) snprintf(config, sizeof config, "threads=%d", threads);
+    e->device = rtcNewDevice(config[0] ? config : NULL);
+    if (!e->device) {
+        lc_set_err(err, errlen, "embree: rtcNewDevice failed");
+        goto err;
+    }
+    rtcSetDeviceErrorFunction(e->device, engine_embree_error, NULL);
+    e->static_scene = engine_mesh_scene(e->device, v->vertices, sizeof(lc_lcb_vertex), v->n_vertices, v->triangles,
+                                        sizeof(lc_lcb_triangle), v->n_triangles);
+    e->asset_scenes = calloc(v->n_assets ? v->n_assets : 1, sizeof *e->asset_scenes);
+    if (!e->asset_scenes) goto oom;
+    for (uint32_t i = 0; i < v->n_assets; i++) {
+        const lc_lcb_asset *a = &v->assets[i];
+        e->asset_scenes[i] =
+            engine_mesh_scene(e->device, v->asset_vertices + a->first_vertex, sizeof(lc_lcb_asset_vertex),
+                              a->vertex_count, v->asset_indices + 3 * (size_t)a->first_triangle,
+                              3 * sizeof(uint32_t), a->triangle_count);
+    }
+    engine_build_top(e, NULL, 0);
+    if (rtcGetDeviceError(e->device) != RTC_ERROR_NONE) {
+        lc_set_err(err, errlen, "embree: building the scene failed (see log)");
+        goto err;
+    }
+    e->e_direct = calloc((size_t)v->n_surfels * 3, sizeof(float));
+    e->b0 = calloc((size_t)v->n_surfels * 3, sizeof(float));
+    e->emission = calloc((size_t)(v->n_materials ? v->n_materials : 1) * 3, sizeof(float));
+    if (!e->e_direct || !e->b0 || !e->emission) goto oom;
+
+    /* Backend: AUTO tries EGL on a hardware device only (on llvmpipe plain C is ~6x faster). */
+    char berr[512] = "";
+    if (kind == LC_BACKEND_EGL || kind == LC_BACKEND_AUTO) {
+        e->ops = &lc_transport_egl;
+        e->impl = e->ops->create(v, kind == LC_BACKEND_AUTO ? -1 : threads, berr, sizeof berr);
+        if (!e->impl) {
+            if (kind == LC_BACKEND_EGL) {
+                lc_set_err(err, errlen, "egl backend: %s", berr);
+                goto err;
+            }
+            lc_info("engine", "backend auto: using cpu (%s)", berr);
+        }
+    }
+    if (!e->impl) {
+        e->ops = &lc_transport_cpu;
+        e->impl = e->ops->create(v, threads, err, errlen);
+        if (!e->impl) goto err;
+    }
+    lc_info("engine", "relight backend: %s (%u surfels, %u caches, %u links/cache)", e->ops->name, v->n_surfels,
+            v->n_caches, v->links_per_cache);
+    return e;
+oom:
+    lc_set_err(err, errlen, "out of memory creating the relight engine");
+err:
+    lc_engine_release(e);
+    return NULL;
+}
+
+/* --- validation ------------------------------------------------------------------------------ */
+
+static int engine_finite(const float *x, int n, double limit) {
+    for (int i = 0; i < n; i++)
+        if (!isfinite(x[i]) || fabs(x[i]) > limit) return 0;
+    return 1;
+}
+
+static float engine_len(const float d[3]) { return sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]); }
+
+int lc_engine_validate_state(const lc_engine *e, const lc_engine_state *st, char *err, size_t errlen) {
+    const lc_lcb_view *v = e->v;
+    if (st->n_lights > LC_ENGINE_MAX_LIGHTS || (st->n_lights && !st->lights)) {
+        lc_set_err(err, errlen, "/lights: at most %d lights", LC_ENGINE_MAX_LIGHTS);
+        return -1;
+    }
+    for (uint32_t i = 0; i < st->n_lights; i++) {
+        const lc_engine_light *l = &st->lights[i];
+#define LIGHT_FAIL(field, ...)                                            \
+    do {                                                                  \
+        char why[160];                                                    \
+        snprintf(why, sizeof why, __VA_ARGS__);                           \
+        lc_set_err(err, errlen, "/lights/%u/%s: %s", i, field, why);     \
+        return -1;                                                        \
+    } while (0)
+        if ((unsigned)l->type > LC_ENGINE_LIGHT_AREA) LIGHT_FAIL("type", "unknown light type %d", (int)l->type);
+        if (!engine_finite(l->color, 3, 1e6) || l->color[0] < 0 || l->color[1] < 0 || l->color[2] < 0)
+            LIGHT_FAIL("color", "must be 3 finite numbers >= 0");
+        if (!isfinite(l->intensity) || l->intensity < 0 || l->intensity > 1e9)
+            LIGHT_FAIL("intensity", "must be finite in [0, 1e9]");
+        if (!isfinite(l->range) || l->range < 0 || l->range > 1e6) LIGHT_FAIL("range", "must be finite in [0, 1e6]");
+        if (!engine_finite(l->position, 3, 1e6)) LIGHT_FAIL("position", "must be 3 finite numbers within 1e6");
+        if (l->type != LC_ENGINE_LIGHT_POINT &&
+            (!engine_finite(l->direction, 3, 1e6) || engine_len(l->direction) < 1e-6f))
+            LIGHT_FAIL("direction", "must be a finite non-zero vector");
+        if (l->type == LC_ENGINE_LIGHT_SPOT &&
+            (!(l->inner_cone >= 0) || !(l->inner_cone <= l->outer_cone) || !(l->outer_cone <= (float)M_PI_2)))
+            LIGHT_FAIL("outerConeAngle", "need 0 <= innerConeAngle <= outerConeAngle <= pi/2");
+        if (l->type == LC_ENGINE_LIGHT_AREA) {
+            if ((unsigned)l->shape > LC_AREA_DISC) LIGHT_FAIL("shape", "must be quad or disc");
+            int nsize = l->shape == LC_AREA_QUAD ? 2 : 1;
+            for (int k = 0; k < nsize; k++)
+                if (!isfinite(l->size[k]) || !(l->size[k] > 0) || l->size[k] > 1e4)
+                    LIGHT_FAIL("size", "must be finite in (0, 1e4] metres");
+            if (l->shape == LC_AREA_QUAD && (!engine_finite(l->tangent, 3, 1e6) || engine_len(l->tangent) < 1e-6f))
+                LIGHT_FAIL("tangent", "must be a finite non-zero vector");
+        }
+#undef LIGHT_FAIL
+    }
+    if (st->n_objects > LC_ENGINE_MAX_OBJECTS || (st->n_objects && !st->objects)) {
+        lc_set_err(err, errlen, "/objects: at most %d objects", LC_ENGINE_MAX_OBJECTS);
+        return -1;
+    }
+    for (uint32_t i = 0; i < st->n_objects; i++) {
+        const lc_engine_object *o = &st->objects[i];
+        if (o->asset >= v->n_assets) {
+            lc_set_err(err, errlen, "/objects/%u/asset: index %u, the bake has %u assets", i, o->asset, v->n_assets);
+            return -1;
+        }
+        if (!engine_finite(o->translation, 3, 1e6)) {
+            lc_set_err(err, errlen, "/objects/%u/translation: must be 3 finite numbers within 1e6", i);
+            return -1;
+        }
+        float q = sqrtf(o->rotation[0] * o->rotation[0] + o->rotation[1] * o->rotation[1] +
+                        o->rotation[2] * o->rotation[2] + o->rotation[3] * o->rotation[3]);
+        if (!engine_finite(o->rotation, 4, 1e6) || !(q > 1e-6f)) {
+            lc_set_err(err, errlen, "/objects/%u/rotation: must be a finite non-zero quaternion", i);
+            return -1;
+        }
+        for (int k = 0; k < 3; k++)
+            if (!isfinite(o->scale[k]) || fabsf(o->scale[k]) < 1e-6f || fabsf(o->scale[k]) > 1e4f) {
+                lc_set_err(err, errlen, "/objects/%u/scale: each component must be finite, |s| in [1e-6, 1e4]", i);
+                return -1;
+            }
+    }
+    if (st->material_emission)
+        for (uint32_t m = 0; m < v->n_materials; m++) {
+            const float *em = st->material_emission + 3 * (size_t)m;
+            if (!engine_finite(em, 3, 1e7) || em[0] < 0 || em[1] < 0 || em[2] < 0) {
+                lc_set_err(err, errlen, "/materials/%u/emission: must be 3 finite numbers in [0, 1e7]", m);
+                return -1;
+            }
+        }
+    const lc_engine_environment *env = &st->environment;
+    if ((unsigned)env->kind > LC_ENV_SH || !engine_finite(env->color, 3, 1e7) || !engine_finite(&env->sh[0][0], 27, 1e7) ||
+        !isfinite(env->intensity) || env->intensity < 0 || env->intensity > 1e7) {
+        lc_set_err(err, errlen, "/environment: kind, color, sh and intensity must be finite (intensity in [0, 1e7])");
+        return -1;
+    }
+    const lc_engine_settings *s = &st->settings;
+    if (s->bounces > 16) {
+        lc_set_err(err, errlen, "/settings/bounces: %u is outside 0..16", s->bounces);
+        return -1;
+    }
+    if (s->bands < 1 || s->bands > LC_SH_MAX_BANDS) {
+        lc_set_err(err, errlen, "/settings/bands: %u is outside 1..%d", s->bands, LC_SH_MAX_BANDS);
+        return -1;
+    }
+    if (s->chroma_compression && (s->chroma_bands < 1 || s->chroma_bands > s->bands)) {
+        lc_set_err(err, errlen, "/settings/chroma_bands: %u is outside 1..bands (%u)", s->chroma_bands, s->bands);
+        return -1;
+    }
+    return 0;
+}
+
+/* --- direct light ---------------------------------------------------------------------------- */
+
+typedef struct {
+    lc_engine *e;
+    const lc_engine_light *lights;
+    uint32_t n_lights;
+} engine_direct_job;
+
+/* glTF KHR_lights_punctual range window: smooth falloff to zero at `range`. */
+static inline float engine_range_window(float d2, float range) {
+    if (range <= 0) return 1.0f;
+    float r = d2 / (range * range);
+    float w = 1.0f - r * r;
+    w = w < 0 ? 0 : w > 1 ? 1 : w;
+    return w * w;
+}
+
+static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread) {
+    (void)thread;
+    const engine_direct_job *job = ctx;
+    lc_engine *e = job->e;
+    const lc_lcb_view *v = e->v;
+    for (size_t s = begin; s < end; s++) {
+        const lc_lcb_surfel *sf = &v->surfels[s];
+        const float *n = sf->normal;
+        float org[3] = {sf->position[0] + n[0] * e->scene_eps, sf->position[1] + n[1] * e->scene_eps,
+                        sf->position[2] + n[2] * e->scene_eps};
+        float acc[3] = {0, 0, 0};
+        for (uint32_t li = 0; li < job->n_lights; li++) {
+            const lc_engine_light *l = &job->lights[li];
+            float scale = l->intensity;
+            if (l->type == LC_ENGINE_LIGHT_DIRECTIONAL) {
+                float dl = engine_len(l->direction);
+                float w[3] = {-l->direction[0] / dl, -l->direction[1] / dl, -l->direction[2] / dl};
+                float cosn = n[0] * w[0] + n[1] * w[1] + n[2] * w[2];
+                if (cosn <= 0 || engine_occluded(e->top, org, w, INFINITY)) continue;
+                for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn;
+            } else if (l->type == LC_ENGINE_LIGHT_AREA) {
+                /* Stratified samples over the emitter, one shadow ray each. */
+                float dl = engine_len(l->direction);
+                float ln[3] = {l->direction[0] / dl, l->direction[1] / dl, l->direction[2] / dl};
+                float tx[3], ty[3], area;
+                if (l->shape == LC_AREA_QUAD) {
+                    float tl = engine_len(l->tangent);
+                    float t0[3] = {l->tangent[0] / tl, l->tangent[1] / tl, l->tangent[2] / tl};
+                    float dp = t0[0] * ln[0] + t0[1] * ln[1] + t0[2] * ln[2];
+                    for (int k = 0; k < 3; k++) tx[k] = t0[k] - dp * ln[k];
+                    float txl = engine_len(tx);
+                    for (int k = 0; k < 3; k++) tx[k] /= txl;
+                    ty[0] = ln[1] * tx[2] - ln[2] * tx[1];
+                    ty[1] = ln[2] * tx[0] - ln[0] * tx[2];
+                    ty[2] = ln[0] * tx[1] - ln[1] * tx[0];
+                    area = l->size[0] * l->size[1];
+                } else {
+                    float a[3] = {fabsf(ln[0]) < 0.9f ? 1.0f : 0.0f, fabsf(ln[0]) < 0.9f ? 0.0f : 1.0f, 0};
+                    float dp = a[0] * ln[0] + a[1] * ln[1];
+                    for (int k = 0; k < 3; k++) tx[k] = a[k] - dp * ln[k];
+                    float txl = engine_len(tx);
+                    for (int k = 0; k < 3; k++) tx[k] /= txl;
+                    ty[0] = ln[1] * tx[2] - ln[2] * tx[1];
+                    ty[1] = ln[2] * tx[0] - ln[0] * tx[2];
+                    ty[2] = ln[0] * tx[1] - ln[1] * tx[0];
+                    area = (float)M_PI * l->size[0] * l->size[0];
+                }
+                lc_rng rng = lc_rng_seed(0xA5EA, ((uint64_t)li << 32) | s);
+                float sum = 0;
+                for (int j = 0; j < ENGINE_AREA_SAMPLES; j++) {
+                    float u = ((float)(j % 4) + lc_rng_float(&rng)) * 0.25f;
+                    float w = ((float)(j / 4) + lc_rng_float(&rng)) * 0.25f;
+                    float a, b;
+                    if (l->shape == LC_AREA_QUAD) {
+                        a = (u - 0.5f) * l->size[0];
+                        b = (w - 0.5f) * l->size[1];
+                    } else { /* concentric-ish: sqrt radius keeps the density uniform */
+                        float r = l->size[0] * sqrtf(u), phi = 2.0f * (float)M_PI * w;
+                        a = r * cosf(phi);
+                        b = r * sinf(phi);
+                    }
+                    float p[3], d[3];
+                    for (int k = 0; k < 3; k++) p[k] = l->position[k] + a * tx[k] + b * ty[k];
+                    for (int k = 0; k < 3; k++) d[k] = p[k] - org[k];
+                    float d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+                    if (!(d2 > 1e-12f)) continue;
+                    float dist = sqrtf(d2);
+                    for (int k = 0; k < 3; k++) d[k] /= dist;
+                    float cos_s = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
+                    float cos_l = -(ln[0] * d[0] + ln[1] * d[1] + ln[2] * d[2]);
+                    if (cos_s <= 0 || cos_l <= 0) continue;
+                    if (engine_occluded(e->top, org, d, dist * (1.0f - 1e-4f) - e->scene_eps)) continue;
+                    sum += cos_s * cos_l / d2 * engine_range_window(d2, l->range);
+                }
+                float g = scale * sum * area / ENGINE_AREA_SAMPLES;
+                for (int k = 0; k < 3; k++) acc[k] += g * l->color[k];
+            } else { /* point, spot */
+                float d[3] = {l->position[0] - org[0], l->position[1] - org[1], l->position[2] - org[2]};
+                float d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+                if (!(d2 > 1e-12f)) continue;
+                float dist = sqrtf(d2);
+                for (int k = 0; k < 3; k++) d[k] /= dist;
+                float cosn = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
+                if (cosn <= 0) continue;
+                float att = engine_range_window(d2, l->range) / d2;
+                if (l->type == LC_ENGINE_LIGHT_SPOT) {
+                    float dl = engine_len(l->direction);
+                    float cd = -(d[0] * l->direction[0] + d[1] * l->direction[1] + d[2] * l->direction[2]) / dl;
+                    float co = cosf(l->outer_cone), ci = cosf(l->inner_cone);
+                    float sc = 1.0f / fmaxf(0.001f, ci - co);
+                    float t = (cd - co) * sc;
+                    t = t < 0 ? 0 : t > 1 ? 1 : t;
+                    att *= t * t;
+                }
+                if (att <= 0) continue;
+                if (engine_occluded(e->top, org, d, dist * (1.0f - 1e-4f) - e->scene_eps)) continue;
+                for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn * att;
+            }
+        }
+        for (int k = 0; k < 3; k++) e->e_direct[3 * s + k] = acc[k];
+    }
+}
+
+/* Cosine-weighted visibility of the sky projected on L2 SH, per surfel (PRT transfer). */
+static void engine_sky_range(void *ctx, size_t begin, size_t end, int thread) {
+    (void)thread;
+    lc_engine *e = ctx;
+    const lc_lcb_view *v = e->v;
+    for (size_t s = begin; s < end; s++) {
+        const lc_lcb_surfel *sf = &v->surfels[s];
+        float nx = sf->normal[0], ny = sf->normal[1], nz = sf->normal[2];
+        /* Orthonormal basis around n (Duff et al.). */
+        float sign = copysignf(1.0f, nz), a = -1.0f / (sign + nz), b = nx * ny * a;
+        float t[3] = {1.0f + sign * nx * nx * a, sign * b, -sign * nx}, bt[3] = {b, sign + ny * ny * a, -ny};
+        float org[3] = {sf->position[0] + nx * e->scene_eps, sf->position[1] + ny * e->scene_eps,
+                        sf->position[2] + nz * e->scene_eps};
+        float acc[9] = {0};
+        lc_rng rng = lc_rng_seed(0x5C1, s);
+        float rot = lc_rng_float(&rng);
+        for (int j = 0; j < ENGINE_SKY_RAYS; j++) {
+            /* Cosine-weighted Fibonacci hemisphere, rotated per surfel. */
+            float u = ((float)j + 0.5f) / ENGINE_SKY_RAYS;
+            float phi = 2.0f * (float)M_PI * ((float)j * 0.618034f + rot);
+            float r = sqrtf(u), z = sqrtf(1.0f - u);
+            float lx = r * cosf(phi), ly = r * sinf(phi);
+            float d[3] = {lx * t[0] + ly * bt[0] + z * nx, lx * t[1] + ly * bt[1] + z * ny,
+                          lx * t[2] + ly * bt[2] + z * nz};
+            if (engine_occluded(e->top, org, d, INFINITY)) continue;
+            float y[9];
+            lc_sh_eval_fast(3, d[0], d[1], d[2], y);
+            for (int k = 0; k < 9; k++) acc[k] += y[k];
+        }
+        for (int k = 0; k < 9; k++) e->sky_t[9 * s + k] = acc[k] * (float)M_PI / ENGINE_SKY_RAYS;
+    }
+}
+
+/* --- relight ----------------------------------------------------------------------------------- */
+
+static int engine_copy_state(lc_engine *e, const lc_engine_state *st) {
+    lc_engine_light *l = NULL;
+    lc_engine_object *o = NULL;
+    if (st->n_lights) {
+        l = malloc(st->n_lights * sizeof *l);
+        if (!l) return -1;
+        memcpy(l, st->lights, st->n_lights * sizeof *l);
+    }
+    if (st->n_objects) {
+        o = malloc(st->n_objects * sizeof *o);
+        if (!o) {
+            free(l);
+            return -1;
+        }
+        memcpy(o, st->objects, st->n_objects * sizeof *o);
+    }
+    free(e->lights);
+    free(e->objects);
+    e->lights = l;
+    e->n_lights = st->n_lights;
+    e->objects = o;
+    e->n_objects = st->n_objects;
+    return 0;
+}
+
+int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_frame **frame, char *err,
+                      size_t errlen) {
+    const lc_lcb_view *v = e->v;
+    if (lc_engine_validate_state(e, st, err, errlen) != 0) return -1;
+    double t0 = engine_now_ms();
+
+    /* What changed since the last relight. */
+    size_t nm = (size_t)v->n_materials * 3;
+    float *emission = malloc((nm ? nm : 1) * sizeof(float));
+    if (!emission) {
+        lc_set_err(err, errlen, "out of memory");
+        return -1;
+    }
+    for (uint32_t m = 0; m < v->n_materials; m++)
+        for (int k = 0; k < 3; k++)
+            emission[3 * m + k] = st->material_emission ? st->material_emission[3 * m + k] : v->materials[m].emission[k];
+    int first = !e->have_state;
+    int lights_changed = first || st->n_lights != e->n_lights ||
+                         (st->n_lights && memcmp(st->lights, e->lights, st->n_lights * sizeof *st->lights) != 0);
+    int objects_changed = first || st->n_objects != e->n_objects ||
+                          (st->n_objects && memcmp(st->objects, e->objects, st->n_objects * sizeof *st->objects) != 0);
+    int emission_changed = first || memcmp(emission, e->emission, nm * sizeof(float)) != 0;
+    int env_changed = first || memcmp(&st->environment, &e->env, sizeof st->environment) != 0;
+    int settings_changed = first || memcmp(&st->settings, &e->settings, sizeof st->settings) != 0;
+    if (!(lights_changed || objects_changed || emission_changed || env_changed || settings_changed) &&
+        !st->settings.progressive) {
+        free(emission);
+        e->frame.revision = st->revision;
+        for (int i = 0; i < LC_STAGE_COUNT; i++) e->frame.stage_ms[i] = 0;
+        e->frame.total_ms = engine_now_ms() - t0;
+        *frame = &e->frame;
+        return 0;
+    }
+    if (objects_changed) {
+        engine_build_top(e, st->objects, st->n_objects);
+        float *pos = realloc(e->object_pos, (st->n_objects ? st->n_objects : 1) * 3 * sizeof(float));
+        if (!pos) {
+            free(emission);
+            lc_set_err(err, errlen, "out of memory");
+            return -1;
+        }
+        e->object_pos = pos;
+        for (uint32_t i = 0; i < st->n_objects; i++) {
+            /* Sample the grid at the asset's bounds centre, transformed. */
+            const lc_lcb_asset *a = &v->assets[st->objects[i].asset];
+            float c[3], m[12];
+            for (int k = 0; k < 3; k++) c[k] = 0.5f * (a->bounds_min[k] + a->bounds_max[k]);
+            engine_trs(&st->objects[i], m);
+            for (int k = 0; k < 3; k++) pos[3 * i + k] = m[k] * c[0] + m[3 + k] * c[1] + m[6 + k] * c[2] + m[9 + k];
+        }
+        e->sky_valid = 0;
+    }
+
+    double t1 = engine_now_ms();
+    if (lights_changed || objects_changed) {
+        engine_direct_job job = {e, st->lights, st->n_lights};
+        lc_parallel_for(v->n_surfels, 256, engine_direct_range, &job);
+    }
+    int sky_on = st->environment.kind != LC_ENV_NONE && st->environment.intensity > 0;
+    if (sky_on && !e->sky_valid) {
+        if (!e->sky_t) e->sky_t = calloc((size_t)v->n_surfels * 9, sizeof(float));
+        if (!e->sky_t) {
+            free(emission);
+            lc_set_err(err, errlen, "out of memory for the sky transfer");
+            return -1;
+        }
+        lc_parallel_for(v->n_surfels, 256, engine_sky_range, e);
+        e->sky_valid = 1;
+    }
+    /* Sky radiance SH (L2). */
+    float sky[9][3] = {{0}};
+    if (sky_on) {
+        if (st->environment.kind == LC_ENV_CONSTANT)
+            for (int k = 0; k < 3; k++) sky[0][k] = st->environment.color[k] * (float)sqrt(4.0 * M_PI);
+        else
+            memcpy(sky, st->environment.sh, sizeof sky);
+        for (int j = 0; j < 9; j++)
+            for (int k = 0; k < 3; k++) sky[j][k] *= st->environment.intensity;
+    }
+    /* B0 = pi * emission + albedo * (direct + sky). */
+    for (uint32_t s = 0; s < v->n_surfels; s++) {
+        const lc_lcb_surfel *sf = &v->surfels[s];
+        for (int k = 0; k < 3; k++) {
+            float es = 0;
+            if (sky_on)
+                for (int j = 0; j < 9; j++) es += sky[j][k] * e->sky_t[9 * (size_t)s + j];
+            float em = st->material_emission ? emission[3 * sf->material + k] : sf->emission[k];
+            e->b0[3 * s + k] = (float)M_PI * em + sf->albedo[k] * (e->e_direct[3 * s + k] + fmaxf(0.0f, es));
+        }
+    }
+    double t2 = engine_now_ms();
+
+    lc_transport_input in = {.b0 = e->b0,
+                             .settings = st->settings,
+                             .reset_feedback = !st->settings.progressive || first,
+                             .object_pos = e->object_pos,
+                             .n_objects = st->n_objects};
+    lc_engine_frame fr;
+    memset(&fr, 0, sizeof fr);
+    if (e->ops->run(e->impl, &in, &fr, err, errlen) != 0) {
+        free(emission);
+        return -1;
+    }
+    if (engine_copy_state(e, st) != 0) {
+        free(emission);
+        lc_set_err(err, errlen, "out of memory");
+        return -1;
+    }
+    free(e->emission);
+    e->emission = emission;
+    e->env = st->environment;
+    e->settings = st->settings;
+    e->have_state = 1;
+    fr.stage_ms[LC_STAGE_DIRECT] = t2 - t1;
+    fr.revision = st->revision;
+    fr.total_ms = engine_now_ms() - t0;
+    e->frame = fr;
+    *frame = &e->frame;
+    return 0;
+}

@@ -1,0 +1,135 @@
+/* engine: the relight engine. Given a bake (.lcb, mapped by the caller) and the current
+ * state (lights, emissive materials, environment, dynamic-object instances, settings), it
+ * recomputes surfel radiosity, cache SH, lightmap irradiance, the SH grid and per-object SH.
+ *
+ * Backends behind one interface: "cpu" (C11, threads) and "egl" (GL 4.3 compute on a
+ * headless EGL display). Nothing here knows about sockets; outputs are plain arrays.
+ *
+ * Threads: an lc_engine is used from one thread at a time (the daemon's compute thread).
+ * Ownership: the engine borrows the lc_lcb (it must outlive the engine); frames returned by
+ * lc_engine_relight() point into engine memory valid until the next relight or release. */
+#ifndef LC_ENGINE_H
+#define LC_ENGINE_H
+#include <stddef.h>
+#include <stdint.h>
+
+#include "lcb/lcb.h"
+
+#define LC_ENGINE_ID_MAX 64
+#define LC_ENGINE_MAX_LIGHTS 1024
+#define LC_ENGINE_MAX_OBJECTS 4096
+
+typedef enum { LC_BACKEND_AUTO = 0, LC_BACKEND_CPU, LC_BACKEND_EGL } lc_backend_kind;
+
+typedef enum {
+    LC_ENGINE_LIGHT_POINT = 0, /* intensity: candela */
+    LC_ENGINE_LIGHT_SPOT,      /* candela, cone angles as glTF (half angles, radians) */
+    LC_ENGINE_LIGHT_DIRECTIONAL, /* lux */
+    LC_ENGINE_LIGHT_AREA,      /* nits (emitted radiance), one-sided toward `direction` */
+} lc_engine_light_type;
+
+typedef enum { LC_AREA_QUAD = 0, LC_AREA_DISC = 1 } lc_engine_area_shape;
+
+typedef struct lc_engine_light {
+    char id[LC_ENGINE_ID_MAX];
+    lc_engine_light_type type;
+    float color[3];      /* linear RGB */
+    float intensity;
+    float range;         /* 0 = infinite (glTF range window otherwise) */
+    float position[3];
+    float direction[3];  /* unit: the way the light travels (spot axis, sun direction, area normal) */
+    float inner_cone, outer_cone;
+    lc_engine_area_shape shape;
+    float size[2];       /* quad: width along `tangent`, height along direction x tangent; disc: radius in [0] */
+    float tangent[3];    /* quad orientation, unit, perpendicular to direction */
+} lc_engine_light;
+
+typedef struct lc_engine_object {
+    char id[LC_ENGINE_ID_MAX];
+    uint32_t asset;          /* index into the bake's assets */
+    float translation[3];
+    float rotation[4];       /* unit quaternion x, y, z, w */
+    float scale[3];
+    int visible;
+} lc_engine_object;
+
+typedef enum { LC_ENV_NONE = 0, LC_ENV_CONSTANT, LC_ENV_SH } lc_engine_env_kind;
+
+typedef struct lc_engine_environment {
+    lc_engine_env_kind kind;
+    float color[3];     /* constant sky radiance (nits) */
+    float sh[9][3];     /* L2 radiance SH (RGB per coefficient), lucent SH convention */
+    float intensity;    /* multiplies either */
+} lc_engine_environment;
+
+typedef struct lc_engine_settings {
+    uint32_t bounces;        /* indirect feedback passes per relight, 0..16 (see lc_engine_relight) */
+    uint32_t bands;          /* SH bands of the cache / SH-lightmap output, 1..8 (the grid is always L2) */
+    int progressive;         /* carry the indirect light of the previous relight (converges across relights) */
+    int chroma_compression;  /* store caches as YCoCg with fewer bands for Co/Cg */
+    uint32_t chroma_bands;   /* bands for Co/Cg when compressing, 1..bands */
+    int sh_lightmap;         /* also output the per-texel radiance SH lightmap */
+} lc_engine_settings;
+
+typedef struct lc_engine_state {
+    const lc_engine_light *lights;
+    uint32_t n_lights;
+    const lc_engine_object *objects;
+    uint32_t n_objects;
+    const float *material_emission; /* n_materials x 3 nits, or NULL = the baked emission */
+    lc_engine_environment environment;
+    lc_engine_settings settings;
+    uint64_t revision;               /* echoed in the frame */
+} lc_engine_state;
+
+/* Stage timings of the last relight (milliseconds; 0 when a stage was skipped). */
+typedef enum {
+    LC_STAGE_DIRECT = 0, LC_STAGE_BOUNCE, LC_STAGE_PULL, LC_STAGE_GATHER, LC_STAGE_LIGHTMAP,
+    LC_STAGE_GRID, LC_STAGE_OBJECTS, LC_STAGE_CHROMA, LC_STAGE_COUNT
+} lc_engine_stage;
+
+typedef struct lc_engine_frame {
+    uint64_t revision;
+    uint32_t lightmap_width, lightmap_height;
+    const float *lightmap;    /* W*H*3: irradiance E (W/m^2, RGB) for the texel normal; empty texels 0 */
+    uint32_t sh_bands;        /* bands of cache_sh / lightmap_sh */
+    const float *lightmap_sh; /* W*H*bands^2*3 radiance SH (RGB interleaved per coefficient), or NULL */
+    uint32_t n_caches;
+    const float *cache_sh;    /* n_caches*bands^2*3 incident radiance SH at each cache */
+    uint32_t grid_dims[3];
+    float grid_origin[3], grid_cell;
+    const float *grid_sh;     /* cells*9*3: L2 irradiance SH (cosine-convolved: E(n) = sum c_i y_i(n)) */
+    uint32_t n_objects;
+    const float *object_sh;   /* n_objects*9*3: L2 irradiance SH at each object's position */
+    const float *surfel_radiosity; /* n_surfels*3: final B (W/m^2) per surfel, for tests/debug */
+    const float *node_flux;        /* n_nodes*3: pulled flux (W) of the last pass, for tests/debug */
+    double stage_ms[LC_STAGE_COUNT];
+    double total_ms;
+} lc_engine_frame;
+
+typedef struct lc_engine lc_engine;
+
+/* Creates an engine over a validated bake. AUTO picks EGL on a hardware GPU and the CPU
+ * backend when EGL only offers a software rasterizer, and logs the choice; if EGL creation
+ * fails (no device, shader compile error), AUTO falls back to CPU and says so, while an
+ * explicit EGL request fails. threads 0 = all cores. Returns NULL with err set. */
+lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int threads, char *err, size_t errlen);
+void lc_engine_release(lc_engine *e);
+const char *lc_engine_backend_name(const lc_engine *e);
+
+/* Validates state (finite numbers, ranges, asset indices; err names the field as a JSON
+ * pointer-like path, e.g. "/lights/3/intensity") without relighting. */
+int lc_engine_validate_state(const lc_engine *e, const lc_engine_state *state, char *err, size_t errlen);
+
+/* Relights for `state`. Work whose inputs did not change is skipped (e.g. moving an
+ * object redoes direct light but not the sky's per-surfel rays unless the environment is
+ * visible through the moved object... in practice: lights/objects/emission -> direct; env
+ * or objects -> sky visibility; settings.bands -> gather). Returns 0 and a frame, or -1
+ * with err set (invalid state; the engine keeps its previous state). */
+int lc_engine_relight(lc_engine *e, const lc_engine_state *state, const lc_engine_frame **frame, char *err,
+                      size_t errlen);
+
+/* Default settings: bounces 2, bands = the bake's, progressive on, no chroma compression. */
+lc_engine_settings lc_engine_default_settings(const lc_lcb *bake);
+
+#endif

@@ -1,0 +1,50 @@
+/* transport: the light-transport half of a relight, behind one interface with a CPU and an
+ * EGL/GL implementation. Given each surfel's direct radiosity B0 (emission + reflected
+ * direct light + sky), it runs the PIC pipeline:
+ *
+ *   repeat bounces + 1 times:
+ *     B[s]    = B0[s] + albedo[s] * E_ind[s]                      (feedback; E_ind starts at 0,
+ *                                                                   or the last relight's if progressive)
+ *     flux    = B * area at the leaves, pulled up the tree         (pull)
+ *     L_c,lm  = sum over the cache's used links of
+ *               flux[node] * factor * h_l(cos alpha) * y_lm(dir)   (gather; radiance SH)
+ *     E_ind[s]= irradiance at surfel s's cache for the cache normal (feedback)
+ *   lightmap texel = irradiance of its cache; grid = L2 irradiance SH; objects = trilinear grid
+ *
+ * Irradiance from a cache's radiance SH for normal n:
+ *   texel caches (links only in front of the surface): E = (4pi/3) sum_m L_1m y_1m(n),
+ *     exact for light confined to the front hemisphere (band 1 carries all of it);
+ *   grid caches (full sphere): E = sum_{l<=2} A_l sum_m L_lm y_lm(n), A = (pi, 2pi/3, pi/4).
+ * With bands == 1 a texel cache falls back to E = 2 pi L_00 y_00 (uniform front hemisphere). */
+#ifndef LC_TRANSPORT_H
+#define LC_TRANSPORT_H
+#include <stddef.h>
+
+#include "engine/engine.h"
+
+typedef struct lc_transport_input {
+    const float *b0;             /* n_surfels*3 */
+    lc_engine_settings settings;
+    int reset_feedback;          /* forget the previous relight's indirect light */
+    const float *object_pos;     /* n_objects*3 world positions to sample the grid at */
+    uint32_t n_objects;
+} lc_transport_input;
+
+typedef struct lc_transport_ops {
+    const char *name;
+    /* Returns an implementation handle or NULL with err set. The view must outlive it. */
+    void *(*create)(const lc_lcb_view *v, int threads, char *err, size_t errlen);
+    void (*release)(void *impl);
+    /* Fills the frame's output arrays (owned by impl, valid until the next run) and the
+     * stage timings BOUNCE..CHROMA. */
+    int (*run)(void *impl, const lc_transport_input *in, lc_engine_frame *frame, char *err, size_t errlen);
+} lc_transport_ops;
+
+extern const lc_transport_ops lc_transport_cpu;
+extern const lc_transport_ops lc_transport_egl;
+
+/* Shared helpers (defined in cpu/transport_cpu.c, also used by tests and the GL backend's
+ * uploads): the h_l(cos alpha) table for the 256 quantised cone angles, 8 bands each. */
+void lc_transport_cone_table(float table[256][8]);
+
+#endif

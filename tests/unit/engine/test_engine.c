@@ -1,0 +1,239 @@
+/* Relight engine (CPU backend) against closed forms: a closed emitting box converges to
+ * pi*Le/(1-rho); a small emitting patch gives the analytic form factor on a floor; a light
+ * hidden by an occluder contributes nothing; the pull conserves energy; a point light and a
+ * constant sky light the surfels as I cos/d^2 and pi*L; bad state is refused by field. */
+#include <math.h>
+
+#include "check.h"
+#include "engine_fixture.h"
+
+static double median_of(double *x, int n) {
+    for (int i = 1; i < n; i++) /* insertion sort: n is small */
+        for (int j = i; j > 0 && x[j - 1] > x[j]; j--) {
+            double t = x[j];
+            x[j] = x[j - 1];
+            x[j - 1] = t;
+        }
+    return n ? x[n / 2] : 0;
+}
+
+static void test_closed_box(void) {
+    static char obj[1 << 16];
+    obj[0] = 0;
+    fixture_inward_box(obj, sizeof obj, 1.0f, 4, "wall", 1);
+    const char *mtl = "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n";
+    const char *flags[] = {"--surfels", "4096", "--links", "160", "--atlas-size", "64", "--node-samples", "32",
+                           "--final-samples", "64", "--grid-max-dim", "5", "--bands", "3", NULL};
+    fixture f;
+    if (fixture_bake(&f, obj, mtl, flags) != 0) {
+        CHECK(0, "closed box bake failed");
+        return;
+    }
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f.bake);
+    st.settings.bounces = 10;
+    st.settings.progressive = 0;
+    const lc_engine_frame *fr;
+    char err[256];
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    const double expect = M_PI * 1.0 / (1.0 - 0.5);
+    /* Lightmap: every owned texel's irradiance. */
+    double sum = 0, worst = 0;
+    int n = 0;
+    for (uint32_t c = 0; c < f.v->n_texel_caches; c++) {
+        const float *e = fr->lightmap + 3 * (size_t)f.v->caches[c].index;
+        double rel = e[1] / expect - 1;
+        sum += e[1];
+        worst = fmax(worst, fabs(rel));
+        n++;
+    }
+    double mean = sum / n;
+    CHECK(fabs(mean / expect - 1) < 0.02, "closed box: mean texel irradiance %.4f, expected %.4f (2%%)", mean, expect);
+    CHECK(worst < 0.08, "closed box: worst texel off by %.1f%%", worst * 100);
+    /* Surfel radiosity. */
+    double bsum = 0;
+    for (uint32_t s = 0; s < f.v->n_surfels; s++) bsum += fr->surfel_radiosity[3 * s];
+    CHECK(fabs(bsum / f.v->n_surfels / expect - 1) < 0.02, "closed box: mean surfel radiosity %.4f vs %.4f",
+          bsum / f.v->n_surfels, expect);
+    /* Grid: irradiance for +y at interior samples (E(n) = sum c_i y_i(n)). */
+    int ng = 0;
+    double gsum = 0;
+    for (uint32_t i = 0; i < fr->grid_dims[0] * fr->grid_dims[1] * fr->grid_dims[2]; i++) {
+        uint32_t c = f.v->grid[i];
+        const float *p = f.v->caches[c].position;
+        if (f.v->caches[c].flags & LC_CACHE_INSIDE) continue;
+        if (p[0] < 0.1f || p[0] > 0.9f || p[1] < 0.1f || p[1] > 0.9f || p[2] < 0.1f || p[2] > 0.9f) continue;
+        const float *g = fr->grid_sh + 27 * (size_t)i;
+        double y1 = 0.488602511903 * 1.0, y6 = 0.315391565253 * 2.0;
+        double e = g[0 * 3 + 1] * 0.282094791774 + g[2 * 3 + 1] * y1 + g[6 * 3 + 1] * y6;
+        gsum += e;
+        ng++;
+    }
+    CHECK(ng > 0, "closed box: no interior grid samples");
+    if (ng) CHECK(fabs(gsum / ng / expect - 1) < 0.03, "closed box: grid irradiance %.4f vs %.4f", gsum / ng, expect);
+    /* Energy through the pull: root flux = sum of leaf flux. */
+    double leaves = 0;
+    for (uint32_t s = 0; s < f.v->n_surfels; s++) leaves += fr->surfel_radiosity[3 * s] * f.v->surfels[s].area;
+    CHECK(fabs(fr->node_flux[0] / leaves - 1) < 1e-4, "pull: root flux %.6f vs leaves %.6f", fr->node_flux[0], leaves);
+    /* Progressive mode converges across relights with one pass each. */
+    st.settings.bounces = 0;
+    st.settings.progressive = 1;
+    for (int i = 0; i < 12; i++) lc_engine_relight(f.engine, &st, &fr, err, sizeof err);
+    sum = 0;
+    for (uint32_t c = 0; c < f.v->n_texel_caches; c++) sum += fr->lightmap[3 * (size_t)f.v->caches[c].index + 1];
+    CHECK(fabs(sum / n / expect - 1) < 0.02, "progressive: mean %.4f vs %.4f", sum / n, expect);
+    fixture_release(&f);
+}
+
+/* Irradiance at p (normal +y) from a downward-facing square patch of radiance L, side a,
+ * centred at (cx, h, cz), by fine numeric integration. */
+static double patch_irradiance(const float p[3], double L, double a, double cx, double h, double cz) {
+    const int N = 600;
+    double sum = 0, da = (a / N) * (a / N);
+    for (int j = 0; j < N; j++)
+        for (int i = 0; i < N; i++) {
+            double x = cx - a / 2 + (i + 0.5) * a / N - p[0], z = cz - a / 2 + (j + 0.5) * a / N - p[2];
+            double y = h - p[1];
+            double d2 = x * x + y * y + z * z;
+            sum += (y / sqrt(d2)) * (y / sqrt(d2)) / d2 * da;
+        }
+    return L * sum;
+}
+
+static void test_patch_form_factor(void) {
+    const char *obj =
+        "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n"
+        "usemtl lamp\nv -0.15 1 -0.15\nv 0.15 1 -0.15\nv 0.15 1 0.15\nv -0.15 1 0.15\nf 5 6 7 8\n";
+    const char *mtl = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 10 10 10\n";
+    const char *flags[] = {"--surfels", "8192", "--links", "128", "--atlas-size", "64", "--node-samples", "16",
+                           "--final-samples", "64", "--grid-max-dim", "4", NULL};
+    fixture f;
+    if (fixture_bake(&f, obj, mtl, flags) != 0) {
+        CHECK(0, "patch bake failed");
+        return;
+    }
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f.bake);
+    st.settings.bounces = 0;
+    st.settings.progressive = 0;
+    const lc_engine_frame *fr;
+    char err[256];
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    /* Floor texel caches within 1 m of the centre, away from the edges. */
+    double ratios[4096];
+    int n = 0;
+    for (uint32_t c = 0; c < f.v->n_texel_caches && n < 4096; c++) {
+        const lc_lcb_cache *ca = &f.v->caches[c];
+        if (ca->normal[1] < 0.99f || fabsf(ca->position[0]) > 1 || fabsf(ca->position[2]) > 1) continue;
+        double ref = patch_irradiance(ca->position, 10.0, 0.3, 0, 1, 0);
+        ratios[n++] = fr->lightmap[3 * (size_t)ca->index] / ref;
+    }
+    CHECK(n > 20, "patch: only %d floor texels", n);
+    double med = median_of(ratios, n);
+    CHECK(fabs(med - 1) < 0.03, "patch: median E/E_exact %.4f (3%%)", med);
+    CHECK(ratios[n / 20] > 0.9 && ratios[n - 1 - n / 20] < 1.1, "patch: 5-95%% ratio range [%.3f, %.3f]",
+          ratios[n / 20], ratios[n - 1 - n / 20]);
+    fixture_release(&f);
+}
+
+static void test_lights_and_occlusion(void) {
+    /* Floor plus a closed, outward-facing box (0.4 m) standing on it at the origin. */
+    static char obj[1 << 14];
+    int len = snprintf(obj, sizeof obj, "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\nusemtl box\n");
+    const float b = 0.2f, h = 0.4f;
+    float cv[8][3] = {{-b, 0.01f, -b}, {b, 0.01f, -b}, {b, h, -b}, {-b, h, -b},
+                      {-b, 0.01f, b},  {b, 0.01f, b},  {b, h, b},  {-b, h, b}};
+    for (int i = 0; i < 8; i++) len += snprintf(obj + len, sizeof obj - len, "v %g %g %g\n", cv[i][0], cv[i][1], cv[i][2]);
+    /* outward CCW faces (vertices 5..12) */
+    len += snprintf(obj + len, sizeof obj - len,
+                    "f 5 8 7 6\nf 9 10 11 12\nf 5 6 10 9\nf 8 12 11 7\nf 5 9 12 8\nf 6 7 11 10\n");
+    const char *mtl = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl box\nKd 0.5 0.5 0.5\n";
+    const char *flags[] = {"--quality", "draft", "--surfels", "4096", NULL};
+    fixture f;
+    if (fixture_bake(&f, obj, mtl, flags) != 0) {
+        CHECK(0, "occluder bake failed");
+        return;
+    }
+    lc_engine_light light = {.type = LC_ENGINE_LIGHT_POINT, .color = {1, 1, 1}, .intensity = 5, .position = {0, 0.2f, 0}};
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f.bake);
+    st.settings.bounces = 0;
+    st.settings.progressive = 0;
+    st.lights = &light;
+    st.n_lights = 1;
+    const lc_engine_frame *fr;
+    char err[256];
+    /* Inside the closed box: nothing reaches any surfel outside it or the floor. */
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    double lit = 0;
+    for (uint32_t s = 0; s < f.v->n_surfels; s++) {
+        const lc_lcb_surfel *sf = &f.v->surfels[s];
+        int inside_box_wall = fabsf(sf->position[0]) <= b + 1e-3f && fabsf(sf->position[2]) <= b + 1e-3f &&
+                              sf->position[1] <= h + 1e-3f;
+        if (!inside_box_wall) lit += fr->surfel_radiosity[3 * s];
+    }
+    CHECK(lit == 0, "hidden light: surfels outside the box got radiosity %g", lit);
+    size_t texels = (size_t)fr->lightmap_width * fr->lightmap_height;
+    double lm = 0;
+    for (size_t i = 0; i < texels; i++) lm += fr->lightmap[3 * i];
+    CHECK(lm == 0, "hidden light: lightmap sum %g", lm);
+
+    /* Above the box: floor surfels get I cos / d^2 (times albedo), unshadowed ones exactly. */
+    light.position[1] = 1.5f;
+    light.position[0] = 1.0f;
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    int checked = 0, bad = 0;
+    for (uint32_t s = 0; s < f.v->n_surfels; s++) {
+        const lc_lcb_surfel *sf = &f.v->surfels[s];
+        if (sf->normal[1] < 0.99f || sf->position[1] > 0.001f || sf->position[0] < 0.5f) continue;
+        double dx = light.position[0] - sf->position[0], dy = light.position[1] - sf->position[1],
+               dz = light.position[2] - sf->position[2];
+        double d2 = dx * dx + dy * dy + dz * dz;
+        double ref = 0.5 * 5.0 * (dy / sqrt(d2)) / d2;
+        checked++;
+        if (fabs(fr->surfel_radiosity[3 * s] / ref - 1) > 2e-3) bad++;
+    }
+    CHECK(checked > 50 && bad == 0, "point light: %d of %d surfels differ from I cos/d^2", bad, checked);
+
+    /* Constant sky over the open floor: unoccluded floor surfels get albedo * pi * L. */
+    st.n_lights = 0;
+    st.environment.kind = LC_ENV_CONSTANT;
+    st.environment.color[0] = st.environment.color[1] = st.environment.color[2] = 2.0f;
+    st.environment.intensity = 1;
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    checked = bad = 0;
+    for (uint32_t s = 0; s < f.v->n_surfels; s++) {
+        const lc_lcb_surfel *sf = &f.v->surfels[s];
+        if (sf->normal[1] < 0.99f || sf->position[1] > 0.001f) continue;
+        if (fabsf(sf->position[0]) < 1.8f && fabsf(sf->position[2]) < 1.8f) continue; /* far from the box */
+        checked++;
+        if (fabs(fr->surfel_radiosity[3 * s] / (0.5 * M_PI * 2.0) - 1) > 0.03) bad++;
+    }
+    CHECK(checked > 20 && bad == 0, "sky: %d of %d open floor surfels differ from rho*pi*L", bad, checked);
+
+    /* Bad state is refused with the field named, and the engine keeps working. */
+    light.intensity = NAN;
+    st.n_lights = 1;
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == -1 && strstr(err, "/lights/0/intensity"),
+          "NaN intensity: %s", err);
+    light.intensity = 1;
+    lc_engine_object obj1 = {.asset = 7, .rotation = {0, 0, 0, 1}, .scale = {1, 1, 1}, .visible = 1};
+    st.objects = &obj1;
+    st.n_objects = 1;
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == -1 && strstr(err, "/objects/0/asset"),
+          "bad asset: %s", err);
+    st.n_objects = 0;
+    st.settings.bands = 9;
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == -1 && strstr(err, "/settings/bands"),
+          "bad bands: %s", err);
+    st.settings.bands = 3;
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight after errors: %s", err);
+    fixture_release(&f);
+}
+
+int main(void) {
+    test_closed_box();
+    test_patch_form_factor();
+    test_lights_and_occlusion();
+    CHECK_DONE();
+}
