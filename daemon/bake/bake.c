@@ -100,6 +100,8 @@ static const lc_opt bake_options[] = {
      "visibility rays per node while refining the cut", NULL, NULL},
     {"final-samples", LC_OPT_INT, OFF(final_samples), 1, 1024, "32", NULL,
      "visibility rays per linked node for its final factor", NULL, NULL},
+    {"probe-rays", LC_OPT_INT, OFF(probe_rays), 0, 65536, "1024", NULL,
+     "near-field probe rays per cache for link solid angles (0 = surfel sampling only)", NULL, NULL},
     {"bands", LC_OPT_INT, OFF(bands), 1, 8, "3", NULL, "SH bands of the output caches", NULL, NULL},
     {"link-sh", LC_OPT_BOOL, OFF(link_sh), 0, 1, "false", NULL,
      "also store each link's transport projected into --bands SH (LKSH)", NULL, NULL},
@@ -133,15 +135,15 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
      * 16/32 visibility samples per node: with 8/16 the per-cache visible solid angle on
      * Sponza was off by 20-24% on average (vs 8% at 16/32) for 1.35x the link time. */
     typedef struct {
-        int atlas, surfels, links, bands, node_samples, final_samples, grid_max_dim, grid_max_samples, relax,
-            reloc_rays;
+        int atlas, surfels, links, bands, node_samples, final_samples, probe_rays, grid_max_dim, grid_max_samples,
+            relax, reloc_rays;
     } bake_preset;
     /* Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
      * so a cube-shaped room does not get 24^3 grid caches (more than its texel caches). */
     static const bake_preset presets[] = {
-        {64, 8192, 64, 2, 4, 8, 16, 1024, 2, 16},
-        {128, 32768, 128, 3, 16, 32, 24, 4096, 4, 32},
-        {128, 131072, 254, 4, 16, 32, 24, 8192, 4, 32},
+        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16},
+        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32},
+        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32},
     };
     const bake_preset *p = &presets[q];
     s->quality = (int)q;
@@ -151,6 +153,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     s->bands = p->bands;
     s->node_samples = p->node_samples;
     s->final_samples = p->final_samples;
+    s->probe_rays = p->probe_rays;
     s->grid_max_dim = p->grid_max_dim;
     s->grid_max_samples = p->grid_max_samples;
     s->relax = p->relax;
@@ -552,7 +555,8 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
                          .node_samples = (uint32_t)s->node_samples,
                          .final_samples = (uint32_t)s->final_samples,
                          .sh_bands = s->link_sh ? (uint32_t)s->bands : 0,
-                         .seed = (uint64_t)s->seed};
+                         .seed = (uint64_t)s->seed,
+                         .probe_rays = (uint32_t)s->probe_rays};
     lc_link_stats ls;
     memset(&ls, 0, sizeof ls);
     if (lc_links_build(rt, surfels, n_surfels, &hier, caches, n_caches, &lp, links, link_sh, &ls) != 0) {

@@ -38,6 +38,7 @@ typedef struct lc_bake_settings {
     int links;
     int node_samples;
     int final_samples;
+    int probe_rays;
     int bands;
     int link_sh;
     double grid_cell;

@@ -1,6 +1,13 @@
 /* links: for each cache, the links_per_cache most important hierarchy nodes by visible
  * solid angle, chosen by refining a cut top-down (the node with the largest estimated
- * visible solid angle is split first). Visibility by Embree shadow rays to sampled surfels.
+ * visible solid angle is split first). A node's visible solid angle is estimated two ways:
+ *  - near field: probe rays cast from the cache over its hemisphere/sphere; each ray that
+ *    hits a front face is attributed to the nearest surfel there, so a node's solid angle
+ *    is (rays landing in its subtree) x (solid angle per ray) — exact in aggregate, right
+ *    next to walls and corners where per-surfel area formulas fail;
+ *  - far field (nodes small in angle, see LC_LINKS_NEAR_HITS): the sum of sampled
+ *    surfels' disc solid angles, each checked with an Embree ray — precise for small
+ *    distant nodes (emitters) that few probe rays would find.
  * Each link stores node, factor = visible solid angle / (pi * node area), the mean
  * direction and a cone whose band-1 ratio matches the spread of the visible samples. */
 #ifndef LC_LINKS_H
@@ -17,7 +24,14 @@ typedef struct lc_link_params {
     uint32_t final_samples;   /* surfels sampled per linked node for the final factor */
     uint32_t sh_bands;        /* > 0: also project each link's transport into SH (LKSH) */
     uint64_t seed;
+    uint32_t probe_rays;      /* near-field probe rays per cache; 0 = far-field estimate only */
 } lc_link_params;
+
+/* A node is near (probe-ray estimate) when the cache is within 2 bounding radii of its
+ * centre, or its bounding sphere spans the solid angle of LC_LINKS_NEAR_HITS probe rays;
+ * smaller nodes (distant emitters) take the surfel-area estimate, which few probe rays
+ * would find only noisily. */
+#define LC_LINKS_NEAR_HITS 8.0f
 
 typedef struct lc_link_stats {
     double mean_links_used;   /* links with factor > 0, mean over caches */

@@ -105,8 +105,10 @@ static void test_patch_form_factor(void) {
         "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n"
         "usemtl lamp\nv -0.15 1 -0.15\nv 0.15 1 -0.15\nv 0.15 1 0.15\nv -0.15 1 0.15\nf 5 6 7 8\n";
     const char *mtl = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 10 10 10\n";
+    /* The patch is "near" for most floor texels (its bounding sphere spans > 8 probe rays),
+     * so its solid angle comes from probe-ray counts: per-texel noise falls as 1/sqrt(rays). */
     const char *flags[] = {"--surfels", "8192", "--links", "128", "--atlas-size", "64", "--node-samples", "16",
-                           "--final-samples", "64", "--grid-max-dim", "4", NULL};
+                           "--final-samples", "64", "--grid-max-dim", "4", "--probe-rays", "4096", NULL};
     fixture f;
     if (fixture_bake(&f, obj, mtl, flags) != 0) {
         CHECK(0, "patch bake failed");
@@ -131,7 +133,7 @@ static void test_patch_form_factor(void) {
     CHECK(n > 20, "patch: only %d floor texels", n);
     double med = median_of(ratios, n);
     CHECK(fabs(med - 1) < 0.03, "patch: median E/E_exact %.4f (3%%)", med);
-    CHECK(ratios[n / 20] > 0.9 && ratios[n - 1 - n / 20] < 1.1, "patch: 5-95%% ratio range [%.3f, %.3f]",
+    CHECK(ratios[n / 20] > 0.88 && ratios[n - 1 - n / 20] < 1.12, "patch: 5-95%% ratio range [%.3f, %.3f]",
           ratios[n / 20], ratios[n - 1 - n / 20]);
     fixture_release(&f);
 }

@@ -337,7 +337,7 @@ static void test_closed_box(void) {
     caches[nc++] = grid_cache(lc_v3(0.5f, 0.5f, 0.5f));
     caches[nc++] = grid_cache(lc_v3(0.3f, 0.6f, 0.7f));
     caches[nc++] = grid_cache(lc_v3(0.8f, 0.2f, 0.25f));
-    lc_link_params prm = {256, 8, 16, 0, 42};
+    lc_link_params prm = {256, 8, 16, 0, 42, 0};
     lc_lcb_link *links = calloc((size_t)nc * prm.links_per_cache, sizeof *links);
     lc_link_stats st;
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, nc, &prm, links, NULL, &st) == 0, "build");
@@ -369,7 +369,7 @@ static void test_closed_box(void) {
     CHECK(st.rays > 0 && st.mean_links_used > 1, "stats filled");
 
     /* Fewer links: coarse nodes are sampled, not enumerated; the sum stays close. */
-    lc_link_params coarse = {32, 8, 16, 0, 42};
+    lc_link_params coarse = {32, 8, 16, 0, 42, 0};
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, nc, &coarse, links, NULL, &st) == 0, "build");
     for (uint32_t c = 0; c < nc; c++) {
         double om = cache_omega(&h, links, coarse.links_per_cache, c);
@@ -407,7 +407,7 @@ static void test_patch(void) {
         caches[2 * i] = grid_cache(lc_v3(0, 0, dists[i]));
         caches[2 * i + 1] = texel_cache(lc_v3(0, 0, dists[i]), lc_v3(0, 0, -1));
     }
-    lc_link_params prm = {32, 8, 16, 3, 9};
+    lc_link_params prm = {32, 8, 16, 3, 9, 0};
     uint32_t L = prm.links_per_cache, nsh = prm.sh_bands * prm.sh_bands;
     lc_lcb_link *links = calloc((size_t)6 * L, sizeof *links);
     uint16_t *sh = calloc((size_t)6 * L * nsh, sizeof *sh);
@@ -464,7 +464,7 @@ static void test_occlusion(void) {
         lc_rt *rt = make_rt(&w);
         if (!rt) return;
         lc_lcb_cache caches[2] = {grid_cache(lc_v3(0, 0, d)), texel_cache(lc_v3(0, 0, d), lc_v3(0, 0, -1))};
-        lc_link_params prm = {32, 8, 16, 0, 5};
+        lc_link_params prm = {32, 8, 16, 0, 5, 0};
         lc_lcb_link *links = calloc((size_t)2 * prm.links_per_cache, sizeof *links);
         CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, 2, &prm, links, NULL, NULL) == 0, "build");
         double full = rect_solid_angle(a, a, d);
@@ -511,7 +511,7 @@ static void test_determinism(void) {
             caches[i] = grid_cache(p);
         }
     }
-    lc_link_params prm = {24, 4, 8, 2, 77};
+    lc_link_params prm = {24, 4, 8, 2, 77, 0};
     size_t nl = (size_t)NC * prm.links_per_cache, ns = nl * 4;
     lc_lcb_link *a = calloc(nl, sizeof *a), *b = calloc(nl, sizeof *b);
     uint16_t *sa = calloc(ns, sizeof *sa), *sb = calloc(ns, sizeof *sb);
@@ -548,10 +548,10 @@ static void test_bad_params(void) {
     lc_lcb_cache c = grid_cache(lc_v3(0, 0, 1));
     lc_lcb_link links[8];
     uint16_t sh[8 * 81];
-    lc_link_params zero_links = {0, 8, 16, 0, 1};
+    lc_link_params zero_links = {0, 8, 16, 0, 1, 0};
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, &c, 1, &zero_links, links, NULL, NULL) == -1,
           "links_per_cache 0 rejected");
-    lc_link_params bands9 = {8, 8, 16, 9, 1};
+    lc_link_params bands9 = {8, 8, 16, 9, 1, 0};
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, &c, 1, &bands9, links, sh, NULL) == -1,
           "9 SH bands rejected");
     lc_rt_release(rt);
@@ -591,7 +591,7 @@ static void test_closed_box_real(void) {
         grid_cache(lc_v3(0.5f, 0.5f, 0.5f)),
         grid_cache(lc_v3(0.3f, 0.7f, 0.6f)),
     };
-    lc_link_params prm = {512, 8, 16, 0, 42};
+    lc_link_params prm = {512, 8, 16, 0, 42, 0};
     lc_lcb_link *links = calloc((size_t)4 * prm.links_per_cache, sizeof *links);
     for (int method = 0; method < 2; method++) {
         lc_hierarchy h;

@@ -1,0 +1,397 @@
+/* EGL/GL compute transport against the CPU reference: the same bake relit by one engine per
+ * backend must give the same frame (every output) within 1e-3, on the Cornell box (draft) and
+ * on 20 seeded random light/settings states of a small box scene with a dynamic object; AUTO
+ * must pick the CPU backend on a software rasterizer; a broken shader must fail to compile
+ * with its info log in the error. Skips (77) only when no EGL display exists at all.
+ *
+ * Agreement metric, per output array (b = CPU, a = EGL):
+ *   max_i |a_i - b_i| / max(|b_i|, 1e-3 * max_i |b_i|)  <=  1e-3
+ * i.e. relative where values are not tiny next to the array's largest, absolute (1e-6 of the
+ * array's range) where they are. SH arrays compare the first bands^2 coefficients of each
+ * LC_SH_MAX_COEFFS-strided record (the rest are unspecified). */
+#include <math.h>
+#include <stdint.h>
+
+#include "check.h"
+#include "engine_fixture.h"
+#include "gpu/egl_context.h"
+#include "gpu/gl_util.h"
+#include "util/log.h"
+#include "util/rng.h"
+#include "util/sh.h"
+
+#define TOL 1e-3
+
+/* Worst metric over an array of `records` records of `stride` floats, of which the first
+ * `used` are compared. Returns the metric; *where gets the worst index. */
+static double compare(const float *a, const float *b, size_t records, size_t stride, size_t used, size_t *where) {
+    double maxb = 0, worst = 0;
+    *where = 0;
+    for (size_t r = 0; r < records; r++)
+        for (size_t j = 0; j < used; j++) maxb = fmax(maxb, fabs((double)b[r * stride + j]));
+    double floor_ = 1e-3 * maxb;
+    if (floor_ == 0) floor_ = 1e-30;
+    for (size_t r = 0; r < records; r++)
+        for (size_t j = 0; j < used; j++) {
+            size_t i = r * stride + j;
+            double d = fabs((double)a[i] - (double)b[i]);
+            double m = d / fmax(fabs((double)b[i]), floor_);
+            if (!(m <= worst)) { /* NaN counts as worst */
+                worst = isnan(m) ? INFINITY : m;
+                *where = i;
+            }
+        }
+    return worst;
+}
+
+/* Compares every output of two frames; returns the worst metric and names the array. */
+static double compare_frames(const lc_engine_frame *g, const lc_engine_frame *c, const lc_lcb_view *v,
+                             const char *label) {
+    size_t w;
+    double worst = 0, m;
+    const char *worst_name = "-";
+    size_t nc = (size_t)c->sh_bands * c->sh_bands;
+    size_t texels = (size_t)c->lightmap_width * c->lightmap_height;
+    size_t cells = (size_t)c->grid_dims[0] * c->grid_dims[1] * c->grid_dims[2];
+#define CMP(name, A, B, rec, stride, used)                                                                   \
+    do {                                                                                                     \
+        m = compare(A, B, rec, stride, used, &w);                                                            \
+        if (m > TOL) fprintf(stderr, "  %s: %s off by %.3g at %zu (egl %.9g, cpu %.9g)\n", label, name, m, w, \
+                             (double)(A)[w], (double)(B)[w]);                                                \
+        if (m > worst) {                                                                                     \
+            worst = m;                                                                                       \
+            worst_name = name;                                                                               \
+        }                                                                                                    \
+    } while (0)
+    CHECK(g->sh_bands == c->sh_bands && g->n_caches == c->n_caches && g->lightmap_width == c->lightmap_width &&
+              g->n_objects == c->n_objects && memcmp(g->grid_dims, c->grid_dims, sizeof g->grid_dims) == 0,
+          "%s: frame shapes differ", label);
+    CHECK((g->lightmap_sh == NULL) == (c->lightmap_sh == NULL), "%s: lightmap_sh presence differs", label);
+    CHECK((g->node_flux == NULL) == (c->node_flux == NULL), "%s: node_flux presence differs", label);
+    CMP("surfel_radiosity", g->surfel_radiosity, c->surfel_radiosity, v->n_surfels, 3, 3);
+    if (g->node_flux && c->node_flux) CMP("node_flux", g->node_flux, c->node_flux, v->n_nodes, 3, 3);
+    CMP("cache_sh", g->cache_sh, c->cache_sh, c->n_caches, LC_SH_MAX_COEFFS * 3, nc * 3);
+    CMP("lightmap", g->lightmap, c->lightmap, texels, 3, 3);
+    if (g->lightmap_sh && c->lightmap_sh)
+        CMP("lightmap_sh", g->lightmap_sh, c->lightmap_sh, texels, LC_SH_MAX_COEFFS * 3, nc * 3);
+    CMP("grid_sh", g->grid_sh, c->grid_sh, cells, 27, 27);
+    if (c->n_objects) CMP("object_sh", g->object_sh, c->object_sh, c->n_objects, 27, 27);
+#undef CMP
+    CHECK(worst <= TOL, "%s: EGL vs CPU worst %.3g in %s (tol %g)", label, worst, worst_name, TOL);
+    return worst;
+}
+
+static void print_stages(const char *label, const lc_engine_frame *fr) {
+    static const char *names[LC_STAGE_COUNT] = {"direct", "bounce", "pull", "gather",
+                                                "lightmap", "grid", "objects", "chroma"};
+    fprintf(stderr, "  %-14s", label);
+    for (int i = 0; i < LC_STAGE_COUNT; i++) fprintf(stderr, " %s %.2f", names[i], fr->stage_ms[i]);
+    fprintf(stderr, " | total %.2f ms\n", fr->total_ms);
+}
+
+/* Relights both engines with st and compares; optionally prints timings. */
+static double relight_both(lc_engine *gpu, lc_engine *cpu, const lc_lcb_view *v, const lc_engine_state *st,
+                           const char *label, int timings) {
+    const lc_engine_frame *fg, *fc;
+    char err[512];
+    int rg = lc_engine_relight(gpu, st, &fg, err, sizeof err);
+    CHECK(rg == 0, "%s: egl relight: %s", label, err);
+    int rc = lc_engine_relight(cpu, st, &fc, err, sizeof err);
+    CHECK(rc == 0, "%s: cpu relight: %s", label, err);
+    if (rg || rc) return INFINITY;
+    if (timings) {
+        print_stages("cpu", fc);
+        print_stages("egl", fg);
+    }
+    return compare_frames(fg, fc, v, label);
+}
+
+/* Reads a whole file (NUL-terminated, caller frees) or NULL. */
+static char *slurp(const char *path) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *s = malloc((size_t)n + 1);
+    if (s && fread(s, 1, (size_t)n, f) != (size_t)n) {
+        free(s);
+        s = NULL;
+    }
+    if (s) s[n] = 0;
+    fclose(f);
+    return s;
+}
+
+/* Bakes scenes/cornell-box with the given quality and compares EGL with CPU (bounces 2,
+ * bands 3), printing per-stage times of a few relights. */
+static void test_cornell(const char *quality, int runs) {
+    char path[512];
+    char *obj = slurp(check_source_path("scenes/cornell-box/cornell-box.obj", path, sizeof path));
+    char *mtl = slurp(check_source_path("scenes/cornell-box/cornell-box.mtl", path, sizeof path));
+    CHECK(obj && mtl, "cornell box sources missing");
+    if (!obj || !mtl) {
+        free(obj);
+        free(mtl);
+        return;
+    }
+    /* The fixture writes its own mtllib line: blank out the scene's. */
+    for (char *p = strstr(obj, "mtllib"); p && *p && *p != '\n'; p++) *p = ' ';
+    const char *flags[] = {"--quality", quality, NULL};
+    fixture f;
+    int rc = fixture_bake(&f, obj, mtl, flags);
+    free(obj);
+    free(mtl);
+    if (rc != 0) {
+        CHECK(0, "cornell %s bake failed", quality);
+        return;
+    }
+    char err[512];
+    lc_engine *gpu = lc_engine_create(f.bake, LC_BACKEND_EGL, 0, err, sizeof err);
+    CHECK(gpu != NULL, "egl engine: %s", err);
+    if (gpu) {
+        fprintf(stderr, "cornell %s: %u surfels, %u nodes, %u caches x %u links, lightmap %ux%u\n", quality,
+                f.v->n_surfels, f.v->n_nodes, f.v->n_caches, f.v->links_per_cache, f.v->lightmap_width,
+                f.v->lightmap_height);
+        lc_engine_state st = {0};
+        st.settings = lc_engine_default_settings(f.bake);
+        st.settings.bounces = 2;
+        st.settings.bands = 3;
+        st.settings.progressive = 1; /* relights are never skipped, so they can be timed */
+        double worst = 0;
+        char label[64];
+        for (int i = 0; i < runs; i++) {
+            st.revision = (uint64_t)i;
+            snprintf(label, sizeof label, "cornell %s relight %d", quality, i);
+            worst = fmax(worst, relight_both(gpu, f.engine, f.v, &st, label, 1));
+        }
+        /* The light must actually light the box, or agreement means little. */
+        const lc_engine_frame *fr;
+        if (lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0) {
+            double sum = 0;
+            for (size_t i = 0; i < (size_t)fr->lightmap_width * fr->lightmap_height * 3; i++) sum += fr->lightmap[i];
+            CHECK(sum > 0, "cornell %s: the lightmap is black", quality);
+        }
+        fprintf(stderr, "cornell %s: worst EGL/CPU difference %.3g\n", quality, worst);
+        lc_engine_release(gpu);
+    }
+    fixture_release(&f);
+}
+
+static float frand(lc_rng *r, float lo, float hi) { return lo + (hi - lo) * lc_rng_float(r); }
+
+static void random_unit(lc_rng *r, float d[3]) {
+    float n;
+    do {
+        for (int k = 0; k < 3; k++) d[k] = frand(r, -1, 1);
+        n = sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    } while (n < 0.1f || n > 1);
+    for (int k = 0; k < 3; k++) d[k] /= n;
+}
+
+/* 20 seeded random states on a box with an inner block and a dynamic-object asset. */
+static void test_fuzz(void) {
+    static char obj[1 << 17];
+    obj[0] = 0;
+    fixture_inward_box(obj, sizeof obj, 1.0f, 3, "wall", 1);
+    size_t len = strlen(obj);
+    /* A red block on the floor (outward faces) for occlusion and colour bleeding. */
+    int base = 6 * 16 + 1;
+    const float lo[3] = {0.3f, 0.0f, 0.3f}, hi[3] = {0.6f, 0.4f, 0.55f};
+    len += (size_t)snprintf(obj + len, sizeof obj - len, "usemtl block\n");
+    for (int i = 0; i < 8; i++)
+        len += (size_t)snprintf(obj + len, sizeof obj - len, "v %g %g %g\n", (i & 1) ? hi[0] : lo[0],
+                                (i & 2) ? hi[1] : lo[1] + 0.001f, (i & 4) ? hi[2] : lo[2]);
+    /* corners: bit0 x, bit1 y, bit2 z; CCW seen from outside */
+    static const int quads[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}};
+    for (int q = 0; q < 6; q++)
+        len += (size_t)snprintf(obj + len, sizeof obj - len, "f %d %d %d %d\n", base + quads[q][0],
+                                base + quads[q][1], base + quads[q][2], base + quads[q][3]);
+    const char *mtl = "newmtl wall\nKd 0.7 0.7 0.7\nnewmtl block\nKd 0.8 0.2 0.1\nKe 0.2 0.05 0\n";
+    /* The dynamic-object asset: a small cube. */
+    char asset_path[] = "/tmp/lc_egl_asset_XXXXXX.obj";
+    int fd = mkstemps(asset_path, 4);
+    CHECK(fd >= 0, "asset temp file");
+    if (fd < 0) return;
+    FILE *af = fdopen(fd, "w");
+    fputs("v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0.1 0.1 0\nv 0 0 0.1\nv 0.1 0 0.1\nv 0 0.1 0.1\nv 0.1 0.1 0.1\n"
+          "f 1 5 7 3\nf 2 4 8 6\nf 1 2 6 5\nf 3 7 8 4\nf 1 3 4 2\nf 5 6 8 7\n",
+          af);
+    fclose(af);
+    char asset_arg[128];
+    snprintf(asset_arg, sizeof asset_arg, "cube=%s", asset_path);
+    const char *flags[] = {"--quality", "draft", "--surfels", "2048", "--links", "64", "--grid-max-dim", "5",
+                           "--asset", asset_arg, NULL};
+    fixture f;
+    int rc = fixture_bake(&f, obj, mtl, flags);
+    unlink(asset_path);
+    if (rc != 0) {
+        CHECK(0, "fuzz scene bake failed");
+        return;
+    }
+    char err[512];
+    lc_engine *gpu = lc_engine_create(f.bake, LC_BACKEND_EGL, 0, err, sizeof err);
+    CHECK(gpu != NULL, "egl engine: %s", err);
+    if (!gpu) {
+        fixture_release(&f);
+        return;
+    }
+    fprintf(stderr, "fuzz scene: %u surfels, %u caches, %u assets, grid %ux%ux%u\n", f.v->n_surfels, f.v->n_caches,
+            f.v->n_assets, f.v->grid_dims[0], f.v->grid_dims[1], f.v->grid_dims[2]);
+    lc_rng rng = lc_rng_seed(20240611u, 7);
+    double worst = 0;
+    for (int it = 0; it < 20; it++) {
+        lc_engine_light lights[4];
+        memset(lights, 0, sizeof lights);
+        int nl = 1 + (int)(lc_rng_float(&rng) * 4) % 4;
+        for (int i = 0; i < nl; i++) {
+            lc_engine_light *l = &lights[i];
+            snprintf(l->id, sizeof l->id, "l%d", i);
+            l->type = (lc_engine_light_type)((int)(lc_rng_float(&rng) * 4) % 4);
+            for (int k = 0; k < 3; k++) {
+                l->color[k] = frand(&rng, 0.1f, 1.0f);
+                l->position[k] = frand(&rng, 0.15f, 0.85f);
+            }
+            l->position[1] = frand(&rng, 0.5f, 0.85f); /* above the block */
+            l->intensity = frand(&rng, 0.5f, 20.0f);
+            random_unit(&rng, l->direction);
+            l->outer_cone = frand(&rng, 0.3f, 1.2f);
+            l->inner_cone = l->outer_cone * frand(&rng, 0.0f, 0.9f);
+            l->shape = lc_rng_float(&rng) < 0.5f ? LC_AREA_QUAD : LC_AREA_DISC;
+            l->size[0] = frand(&rng, 0.05f, 0.2f);
+            l->size[1] = frand(&rng, 0.05f, 0.2f);
+            /* tangent: any unit vector perpendicular to the direction */
+            float a[3] = {1, 0, 0};
+            if (fabsf(l->direction[0]) > 0.8f) a[0] = 0, a[1] = 1;
+            float tn[3] = {l->direction[1] * a[2] - l->direction[2] * a[1],
+                           l->direction[2] * a[0] - l->direction[0] * a[2],
+                           l->direction[0] * a[1] - l->direction[1] * a[0]};
+            float n = sqrtf(tn[0] * tn[0] + tn[1] * tn[1] + tn[2] * tn[2]);
+            for (int k = 0; k < 3; k++) l->tangent[k] = tn[k] / n;
+        }
+        lc_engine_object objs[3];
+        memset(objs, 0, sizeof objs);
+        int no = (int)(lc_rng_float(&rng) * 3) % 3;
+        for (int i = 0; i < no; i++) {
+            snprintf(objs[i].id, sizeof objs[i].id, "o%d", i);
+            objs[i].asset = 0;
+            for (int k = 0; k < 3; k++) {
+                objs[i].translation[k] = frand(&rng, -0.1f, 1.0f); /* some outside the grid: clamped */
+                objs[i].scale[k] = 1;
+            }
+            objs[i].rotation[3] = 1;
+            objs[i].visible = 1;
+        }
+        lc_engine_state st = {0};
+        st.lights = lights;
+        st.n_lights = (uint32_t)nl;
+        st.objects = objs;
+        st.n_objects = f.v->n_assets ? (uint32_t)no : 0;
+        st.settings.bounces = (uint32_t)((int)(lc_rng_float(&rng) * 5) % 5);
+        st.settings.bands = 1 + (uint32_t)((int)(lc_rng_float(&rng) * 5) % 5);
+        st.settings.chroma_compression = lc_rng_float(&rng) < 0.5f;
+        st.settings.chroma_bands = 1 + (uint32_t)((int)(lc_rng_float(&rng) * st.settings.bands) % st.settings.bands);
+        st.settings.progressive = lc_rng_float(&rng) < 0.5f;
+        st.settings.sh_lightmap = lc_rng_float(&rng) < 0.5f;
+        if (lc_rng_float(&rng) < 0.3f) {
+            st.environment.kind = LC_ENV_CONSTANT;
+            st.environment.intensity = 1;
+            for (int k = 0; k < 3; k++) st.environment.color[k] = frand(&rng, 0.0f, 0.5f);
+        }
+        st.revision = (uint64_t)it;
+        char label[160];
+        snprintf(label, sizeof label,
+                 "fuzz %d (%d lights, %d objects, bounces %u, bands %u, chroma %d/%u, progressive %d, sh_lightmap %d)",
+                 it, nl, (int)st.n_objects, st.settings.bounces, st.settings.bands, st.settings.chroma_compression,
+                 st.settings.chroma_bands, st.settings.progressive, st.settings.sh_lightmap);
+        CHECK(lc_engine_validate_state(f.engine, &st, err, sizeof err) == 0, "%s: invalid state: %s", label, err);
+        double m = relight_both(gpu, f.engine, f.v, &st, label, 0);
+        fprintf(stderr, "%s: worst %.3g\n", label, m);
+        worst = fmax(worst, m);
+    }
+    /* Bands above 5 (generic SH recurrence in the shader) once each. */
+    for (uint32_t b = 6; b <= LC_SH_MAX_BANDS; b++) {
+        lc_engine_light l = {.type = LC_ENGINE_LIGHT_POINT, .color = {1, 0.8f, 0.6f}, .intensity = 5,
+                             .position = {0.5f, 0.8f, 0.5f}};
+        lc_engine_state st = {0};
+        st.lights = &l;
+        st.n_lights = 1;
+        st.settings = lc_engine_default_settings(f.bake);
+        st.settings.bands = b;
+        st.settings.chroma_compression = b == 7;
+        st.settings.chroma_bands = 2;
+        st.settings.sh_lightmap = 1;
+        st.settings.progressive = 0;
+        char label[64];
+        snprintf(label, sizeof label, "bands %u", b);
+        double m = relight_both(gpu, f.engine, f.v, &st, label, 0);
+        fprintf(stderr, "%s: worst %.3g\n", label, m);
+        worst = fmax(worst, m);
+    }
+    fprintf(stderr, "fuzz: worst EGL/CPU difference %.3g\n", worst);
+    lc_engine_release(gpu);
+    fixture_release(&f);
+}
+
+/* AUTO on a software rasterizer picks the CPU backend (and the engine logs why). */
+static void test_auto(int software) {
+    static char obj[1 << 15];
+    obj[0] = 0;
+    fixture_inward_box(obj, sizeof obj, 1.0f, 2, "wall", 1);
+    const char *flags[] = {"--quality", "draft", "--surfels", "512", NULL};
+    fixture f;
+    if (fixture_bake(&f, obj, "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n", flags) != 0) {
+        CHECK(0, "auto scene bake failed");
+        return;
+    }
+    char err[512];
+    lc_engine *e = lc_engine_create(f.bake, LC_BACKEND_AUTO, 0, err, sizeof err);
+    CHECK(e != NULL, "auto engine: %s", err);
+    if (e) {
+        const char *want = software ? "cpu" : "egl";
+        CHECK(strcmp(lc_engine_backend_name(e), want) == 0, "AUTO picked %s, expected %s (software device: %d)",
+              lc_engine_backend_name(e), want, software);
+        lc_engine_release(e);
+    }
+    fixture_release(&f);
+}
+
+/* A broken shader fails with the compiler's info log in the error; a good one compiles. */
+static void test_compile_errors(void) {
+    char err[1024] = "";
+    lc_egl_context *c = lc_egl_create(err, sizeof err);
+    CHECK(c != NULL, "context: %s", err);
+    if (!c) return;
+    const char *bad = "#version 430 core\nlayout(local_size_x = 1) in;\nvoid main() { undeclared_thing = 1; }\n";
+    GLuint p = lc_gl_compile_program("broken.comp", bad, err, sizeof err);
+    CHECK(p == 0, "a broken shader compiled");
+    CHECK(strstr(err, "broken.comp") && strstr(err, "undeclared_thing"), "error lacks the info log: %s", err);
+    fprintf(stderr, "broken shader error: %s\n", err);
+    const char *good = "#version 430 core\nlayout(local_size_x = 1) in;\n"
+                       "layout(std430, binding = 0) buffer B { float x[]; };\nvoid main() { x[0] = 1.0; }\n";
+    p = lc_gl_compile_program("good.comp", good, err, sizeof err);
+    CHECK(p != 0, "a good shader failed: %s", err);
+    if (p) glDeleteProgram(p);
+    CHECK(lc_gl_shader_source("gather") != NULL && lc_gl_shader_source("nope") == NULL, "embedded shader table");
+    lc_egl_release(c);
+}
+
+int main(void) {
+    char err[512] = "";
+    /* Probe: no EGL display at all is a skip, not a failure. */
+    lc_egl_context *probe = lc_egl_create(err, sizeof err);
+    if (!probe) {
+        fprintf(stderr, "SKIP: no EGL display: %s\n", err);
+        return CHECK_SKIP_RC;
+    }
+    int software = lc_egl_is_software(probe);
+    fprintf(stderr, "EGL: %s%s\n", lc_egl_description(probe), software ? " (software)" : "");
+    lc_egl_release(probe);
+
+    test_compile_errors();
+    test_auto(software);
+    test_cornell("draft", 3);
+    test_fuzz();
+    if (getenv("LUCENT_EGL_BENCH")) test_cornell("moderate", 3); /* timings for the report */
+    CHECK_DONE();
+}
