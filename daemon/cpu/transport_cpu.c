@@ -380,6 +380,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     fr->lightmap_height = v->lightmap_height;
     fr->lightmap = t->lightmap;
     fr->sh_bands = (uint32_t)bands;
+    fr->sh_stride = (uint32_t)cap;
     fr->lightmap_sh = st->sh_lightmap ? t->lightmap_sh : NULL;
     fr->n_caches = v->n_caches;
     fr->cache_sh = t->cache_sh;

@@ -93,9 +93,11 @@ typedef struct lc_engine_frame {
     uint32_t lightmap_width, lightmap_height;
     const float *lightmap;    /* W*H*3: irradiance E (W/m^2, RGB) for the texel normal; empty texels 0 */
     uint32_t sh_bands;        /* bands of cache_sh / lightmap_sh */
-    const float *lightmap_sh; /* W*H*bands^2*3 radiance SH (RGB interleaved per coefficient), or NULL */
+    uint32_t sh_stride;       /* coefficients per record in cache_sh / lightmap_sh (>= bands^2; the
+                                 first bands^2 are set) */
+    const float *lightmap_sh; /* W*H*sh_stride*3 radiance SH (RGB interleaved per coefficient), or NULL */
     uint32_t n_caches;
-    const float *cache_sh;    /* n_caches*bands^2*3 incident radiance SH at each cache */
+    const float *cache_sh;    /* n_caches*sh_stride*3 incident radiance SH at each cache */
     uint32_t grid_dims[3];
     float grid_origin[3], grid_cell;
     const float *grid_sh;     /* cells*9*3: L2 irradiance SH (cosine-convolved: E(n) = sum c_i y_i(n)) */

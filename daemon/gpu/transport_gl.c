@@ -1,24 +1,578 @@
-/* transport_gl: the EGL/GL 4.3 compute implementation of the transport pipeline.
- * Not built yet: creation fails cleanly so AUTO falls back to the CPU backend. */
+/* transport_gl: the EGL/GL 4.3 compute implementation of the transport pipeline
+ * (transport.h), stage for stage the same as the CPU reference (cpu/transport_cpu.c):
+ *
+ *   per pass: radiosity.comp (B = B0 + albedo E_ind), pull.comp once per BFS level bottom-up,
+ *             chroma.comp (RGB -> YCoCg at the nodes, when compressing), gather.comp (cache
+ *             SH; compiled per band count), feedback.comp (E_ind per surfel)
+ *   then:     lightmap.comp, grid.comp, objects.comp
+ *
+ * The static bake data is uploaded once at create; B0 and the object positions each run.
+ * E_ind stays on the GPU across runs (progressive mode). Outputs are read back into host
+ * arrays owned by the impl, laid out exactly as the CPU backend's (cache SH at a stride of
+ * LC_SH_MAX_COEFFS coefficients).
+ *
+ * Buffer limits: random-access buffers must fit one SSBO binding (<= 128 MiB, llvmpipe's
+ * MAX_SHADER_STORAGE_BLOCK_SIZE); the two big per-cache arrays (links, full cache SH) are
+ * bound as windows of whole caches, one gather dispatch per window. Dispatches are 2-D so
+ * no axis exceeds 65535 groups.
+ *
+ * Stage timings: GL timestamp queries (glQueryCounter) at each stage boundary, resolved
+ * after the read-back (no extra stalls); the read-back of each output is timed on the CPU
+ * clock and added to the stage that produced it.
+ *
+ * Threads: everything runs on the engine's compute thread; run() re-makes the context
+ * current if the engine moved to another thread. */
+#include <math.h>
 #include <stdlib.h>
+#include <string.h>
+#include <time.h>
 
 #include "engine/transport.h"
+#include "gpu/egl_context.h"
+#include "gpu/gl_util.h"
 #include "util/log.h"
+#include "util/sh.h"
 
+#define TGL_LOCAL 64 /* local_size_x of every shader */
+#define TGL_CAP LC_SH_MAX_COEFFS
+#define TGL_MAX_STAMPS 160 /* 5 per pass x 17 passes + 4 */
+#define TGL_MAX_BOUNCES 16
+
+/* std430 mirrors of the shader structs (see shaders/<name>.comp). */
+typedef struct {
+    float normal[3], area, albedo[3];
+    uint32_t cache;
+} tgl_surfel;
+typedef struct {
+    uint32_t child[2], first_surfel, area_bits; /* area_bits: the leaf surfel's area */
+} tgl_node;
+typedef struct {
+    float normal[3];
+    uint32_t flags, link_count, pad[3];
+} tgl_cache;
+_Static_assert(sizeof(tgl_surfel) == 32 && sizeof(tgl_node) == 16 && sizeof(tgl_cache) == 32, "std430 layout");
+_Static_assert(sizeof(lc_lcb_link) == 12, "links are uploaded as mapped");
+
+enum { TGL_RADIOSITY, TGL_PULL, TGL_CHROMA, TGL_FEEDBACK, TGL_LIGHTMAP, TGL_GRID, TGL_OBJECTS, TGL_N_PROGS };
+static const char *const tgl_prog_names[TGL_N_PROGS] = {"radiosity", "pull", "chroma", "feedback",
+                                                        "lightmap", "grid", "objects"};
+
+typedef struct tgl {
+    const lc_lcb_view *v;
+    lc_egl_context *egl; /* owned */
+    int lost;            /* a run saw a lost context: every later run fails fast */
+    uint32_t cells;
+    size_t texels;
+    uint32_t chunk;      /* caches per gather window */
+    GLuint prog[TGL_N_PROGS];
+    GLuint gather[LC_SH_MAX_BANDS + 1][LC_SH_MAX_BANDS + 1]; /* [bands][Co/Cg bands], compiled on first use */
+    /* Static (create): */
+    GLuint b_surfels, b_nodes, b_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
+    uint32_t n_feedback;
+    /* Per run: */
+    GLuint b_b0, b_radiosity, b_e_ind, b_flux, b_cache_sh, b_sh9, b_lightmap, b_grid_sh, b_obj_pos, b_obj_sh;
+    uint32_t gpu_object_cap;
+    GLuint queries[TGL_MAX_STAMPS];
+    /* Host outputs (owned; the frame points here until the next run): */
+    float *radiosity, *flux, *cache_sh, *cache_tmp, *lightmap, *lightmap_sh, *grid_sh, *object_sh;
+    uint32_t object_cap;
+} tgl;
+
+static double tgl_now_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+/* Runs on the compute thread; frees everything, tolerating a half-built impl. */
+static void tgl_release(void *impl) {
+    tgl *t = impl;
+    if (!t) return;
+    if (t->egl && lc_egl_make_current(t->egl, NULL, 0) == 0) {
+        for (int i = 0; i < TGL_N_PROGS; i++)
+            if (t->prog[i]) glDeleteProgram(t->prog[i]);
+        for (int b = 0; b <= LC_SH_MAX_BANDS; b++)
+            for (int c = 0; c <= LC_SH_MAX_BANDS; c++)
+                if (t->gather[b][c]) glDeleteProgram(t->gather[b][c]);
+        GLuint bufs[] = {t->b_surfels, t->b_nodes,     t->b_links,   t->b_caches, t->b_lm_index, t->b_grid_index,
+                         t->b_cone,    t->b_shk,       t->b_list,    t->b_b0,     t->b_radiosity, t->b_e_ind,
+                         t->b_flux,    t->b_cache_sh,  t->b_sh9,     t->b_lightmap, t->b_grid_sh, t->b_obj_pos,
+                         t->b_obj_sh};
+        glDeleteBuffers((GLsizei)(sizeof bufs / sizeof bufs[0]), bufs); /* 0 names are ignored */
+        if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
+    }
+    lc_egl_release(t->egl);
+    free(t->radiosity);
+    free(t->flux);
+    free(t->cache_sh);
+    free(t->cache_tmp);
+    free(t->lightmap);
+    free(t->lightmap_sh);
+    free(t->grid_sh);
+    free(t->object_sh);
+    free(t);
+}
+
+/* The gather program for (bands, Co/Cg bands); compiled on first use because the
+ * accumulators are sized at compile time. 0 with err on a compile failure. */
+static GLuint tgl_gather_program(tgl *t, int bands, int ncc_bands, char *err, size_t errlen) {
+    GLuint *slot = &t->gather[bands][ncc_bands];
+    if (*slot) return *slot;
+    char defs[160], name[48];
+    snprintf(defs, sizeof defs, "#define BANDS %d\n#define NC %d\n#define NCC %d\n#define CHROMA %d\n", bands,
+             bands * bands, ncc_bands * ncc_bands, ncc_bands < bands);
+    snprintf(name, sizeof name, "gather.comp (bands %d, chroma bands %d)", bands, ncc_bands);
+    double t0 = tgl_now_ms();
+    *slot = lc_gl_compile_program_defs(name, lc_gl_shader_source("gather"), defs, err, errlen);
+    if (*slot) lc_debug("egl", "compiled %s in %.1f ms", name, tgl_now_ms() - t0);
+    return *slot;
+}
+
+/* Drivers (llvmpipe among them) translate a program to machine code at its first dispatch:
+ * one empty dispatch each (count 0: every invocation returns at once) moves that cost from
+ * the first relight to create. Any valid buffer will do at each binding. Compute thread. */
+static void tgl_warm_up(tgl *t, GLuint prog) {
+    glUseProgram(prog);
+    for (GLuint b = 0; b < 8; b++) lc_gl_bind(b, t->b_cone, 0, 256 * 8 * 4);
+    glProgramUniform1ui(prog, 0, 0);
+    glDispatchCompute(1, 1, 1);
+    glUseProgram(0);
+}
+
+/* Runs on the compute thread. threads == -1: called by AUTO, which wants a hardware GPU. */
 static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t errlen) {
-    (void)v;
-    (void)threads;
-    lc_set_err(err, errlen, "the EGL backend is not implemented in this build");
+    tgl *t = calloc(1, sizeof *t);
+    void *host = NULL; /* staging for the packed uploads */
+    if (!t) {
+        lc_set_err(err, errlen, "out of memory");
+        return NULL;
+    }
+    t->v = v;
+    t->cells = v->grid_dims[0] * v->grid_dims[1] * v->grid_dims[2];
+    t->texels = (size_t)v->lightmap_width * v->lightmap_height;
+    t->egl = lc_egl_create(err, errlen);
+    if (!t->egl) goto err;
+    if (threads == -1 && lc_egl_is_software(t->egl)) {
+        lc_set_err(err, errlen, "EGL device is a software rasterizer (llvmpipe); the CPU backend is faster here");
+        goto err;
+    }
+
+    /* Limits: everything read at random must fit one binding; links and the full cache SH
+     * are windowed per `chunk` caches. */
+    GLint64 max_block = 0;
+    GLint align = 16;
+    glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &max_block);
+    glGetIntegerv(GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT, &align);
+    size_t limit = (size_t)max_block < LC_GL_MAX_BINDING ? (size_t)max_block : LC_GL_MAX_BINDING;
+    struct {
+        const char *what;
+        size_t bytes;
+    } need[] = {{"surfels", (size_t)v->n_surfels * sizeof(tgl_surfel)},
+                {"nodes", (size_t)v->n_nodes * sizeof(tgl_node)},
+                {"node flux", (size_t)v->n_nodes * 12},
+                {"caches", (size_t)v->n_caches * sizeof(tgl_cache)},
+                {"cache L2 SH", (size_t)v->n_caches * 108},
+                {"surfel radiosity", (size_t)v->n_surfels * 12},
+                {"lightmap", t->texels * 12},
+                {"grid SH", (size_t)t->cells * 108}};
+    for (size_t i = 0; i < sizeof need / sizeof need[0]; i++)
+        if (need[i].bytes > limit) {
+            lc_set_err(err, errlen, "%s needs %zu MiB, over the %zu MiB shader storage block limit", need[i].what,
+                       need[i].bytes >> 20, limit >> 20);
+            goto err;
+        }
+    size_t per_cache = (size_t)v->links_per_cache * sizeof(lc_lcb_link);
+    if (per_cache < TGL_CAP * 12) per_cache = TGL_CAP * 12;
+    size_t chunk = limit / per_cache;
+    /* Whole multiples of 256 caches keep every window offset aligned (256 * 12 * k bytes). */
+    chunk -= chunk % 256;
+    if (align > 3072) {
+        lc_set_err(err, errlen, "SSBO offset alignment %d is not supported", align);
+        goto err;
+    }
+    if (chunk == 0) {
+        lc_set_err(err, errlen, "%u links per cache do not fit a shader storage window", v->links_per_cache);
+        goto err;
+    }
+    t->chunk = chunk > v->n_caches ? (v->n_caches ? v->n_caches : 1) : (uint32_t)chunk;
+
+    /* Programs: all fixed ones now (a broken shader fails creation), gather for the bake's
+     * default bands now and the others on first use. */
+    for (int i = 0; i < TGL_N_PROGS; i++) {
+        t->prog[i] = lc_gl_compile_program(tgl_prog_names[i], lc_gl_shader_source(tgl_prog_names[i]), err, errlen);
+        if (!t->prog[i]) goto err;
+    }
+    int def_bands = v->sh_bands >= 1 && v->sh_bands <= LC_SH_MAX_BANDS ? (int)v->sh_bands : 3;
+    if (!tgl_gather_program(t, def_bands, def_bands, err, errlen)) goto err;
+
+    /* Static uploads, packed into the std430 structs through one staging allocation. */
+    size_t stage_bytes = (size_t)v->n_surfels * sizeof(tgl_surfel);
+    if ((size_t)v->n_nodes * sizeof(tgl_node) > stage_bytes) stage_bytes = (size_t)v->n_nodes * sizeof(tgl_node);
+    if ((size_t)v->n_caches * sizeof(tgl_cache) > stage_bytes) stage_bytes = (size_t)v->n_caches * sizeof(tgl_cache);
+    host = malloc(stage_bytes ? stage_bytes : 16);
+    if (!host) goto oom;
+    tgl_surfel *sf = host;
+    for (uint32_t s = 0; s < v->n_surfels; s++) {
+        memcpy(sf[s].normal, v->surfels[s].normal, sizeof sf[s].normal);
+        sf[s].area = v->surfels[s].area;
+        memcpy(sf[s].albedo, v->surfels[s].albedo, sizeof sf[s].albedo);
+        sf[s].cache = v->surfels[s].cache;
+    }
+    if (!(t->b_surfels = lc_gl_buffer((size_t)v->n_surfels * sizeof *sf, sf, "surfels", err, errlen))) goto err;
+    tgl_node *nd = host;
+    for (uint32_t i = 0; i < v->n_nodes; i++) {
+        const lc_lcb_node *n = &v->nodes[i];
+        nd[i].child[0] = n->child[0];
+        nd[i].child[1] = n->child[1];
+        nd[i].first_surfel = n->first_surfel;
+        float area = n->child[0] == LC_NONE ? v->surfels[n->first_surfel].area : 0.0f;
+        memcpy(&nd[i].area_bits, &area, sizeof area);
+    }
+    if (!(t->b_nodes = lc_gl_buffer((size_t)v->n_nodes * sizeof *nd, nd, "nodes", err, errlen))) goto err;
+    tgl_cache *cc = host;
+    for (uint32_t c = 0; c < v->n_caches; c++) {
+        memset(&cc[c], 0, sizeof cc[c]);
+        memcpy(cc[c].normal, v->caches[c].normal, sizeof cc[c].normal);
+        cc[c].flags = v->caches[c].flags;
+        cc[c].link_count = v->caches[c].link_count;
+    }
+    if (!(t->b_caches = lc_gl_buffer((size_t)v->n_caches * sizeof *cc, cc, "caches", err, errlen))) goto err;
+    free(host);
+    host = NULL;
+    /* Which caches some surfel reads: the only ones intermediate passes need. */
+    uint8_t *used = calloc(v->n_caches ? v->n_caches : 1, 1);
+    uint32_t *list = calloc(v->n_caches ? v->n_caches : 1, sizeof *list);
+    host = list;
+    if (!used || !list) {
+        free(used);
+        goto oom;
+    }
+    for (uint32_t s = 0; s < v->n_surfels; s++)
+        if (v->surfels[s].cache != LC_NONE) used[v->surfels[s].cache] = 1;
+    for (uint32_t c = 0; c < v->n_caches; c++)
+        if (used[c]) list[t->n_feedback++] = c;
+    free(used);
+    if (!(t->b_list = lc_gl_buffer((size_t)t->n_feedback * 4, list, "feedback cache list", err, errlen))) goto err;
+    free(host);
+    host = NULL;
+    if (!(t->b_links = lc_gl_buffer((size_t)v->n_caches * v->links_per_cache * sizeof(lc_lcb_link), v->links,
+                                    "links", err, errlen)))
+        goto err;
+    if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) goto err;
+    if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) goto err;
+    float cone[256][8];
+    lc_transport_cone_table(cone);
+    if (!(t->b_cone = lc_gl_buffer(sizeof cone, cone, "cone table", err, errlen))) goto err;
+    for (int i = 0; i < TGL_N_PROGS; i++) tgl_warm_up(t, t->prog[i]);
+    tgl_warm_up(t, t->gather[def_bands][def_bands]);
+    /* SH normalisation for the generic (> 4 bands) path, computed as lc_sh_eval does. */
+    double shk[TGL_CAP];
+    for (int l = 0; l < LC_SH_MAX_BANDS; l++)
+        for (int m = 0; m <= l; m++) {
+            double ratio = 1.0;
+            for (int k = l - m + 1; k <= l + m; k++) ratio /= (double)k;
+            double k_lm = sqrt((2 * l + 1) / (4.0 * M_PI) * ratio);
+            shk[l * l + l + m] = m == 0 ? k_lm : M_SQRT2 * k_lm;
+            if (m) shk[l * l + l - m] = 0;
+        }
+    if (!(t->b_shk = lc_gl_buffer(sizeof shk, shk, "SH normalisation", err, errlen))) goto err;
+
+    /* Per-run buffers (zeroed). */
+    size_t s12 = (size_t)v->n_surfels * 12;
+    if (!(t->b_b0 = lc_gl_buffer(s12, NULL, "B0", err, errlen))) goto err;
+    if (!(t->b_radiosity = lc_gl_buffer(s12, NULL, "radiosity", err, errlen))) goto err;
+    if (!(t->b_e_ind = lc_gl_buffer(s12, NULL, "E_ind", err, errlen))) goto err;
+    if (!(t->b_flux = lc_gl_buffer((size_t)v->n_nodes * 12, NULL, "node flux", err, errlen))) goto err;
+    if (!(t->b_cache_sh = lc_gl_buffer((size_t)v->n_caches * TGL_CAP * 12, NULL, "cache SH", err, errlen))) goto err;
+    if (!(t->b_sh9 = lc_gl_buffer((size_t)v->n_caches * 108, NULL, "cache L2 SH", err, errlen))) goto err;
+    if (!(t->b_lightmap = lc_gl_buffer(t->texels * 12, NULL, "lightmap", err, errlen))) goto err;
+    if (!(t->b_grid_sh = lc_gl_buffer((size_t)t->cells * 108, NULL, "grid SH", err, errlen))) goto err;
+    glGenQueries(TGL_MAX_STAMPS, t->queries);
+
+    /* Host outputs, sized as the CPU backend's. */
+    t->radiosity = calloc((size_t)v->n_surfels * 3 + 1, sizeof(float));
+    t->flux = calloc((size_t)v->n_nodes * 3 + 1, sizeof(float));
+    t->cache_sh = calloc((size_t)v->n_caches * TGL_CAP * 3 + 1, sizeof(float));
+    t->cache_tmp = calloc((size_t)v->n_caches * TGL_CAP * 3 + 1, sizeof(float));
+    t->lightmap = calloc(t->texels * 3 + 1, sizeof(float));
+    t->grid_sh = calloc((size_t)t->cells * 27 + 1, sizeof(float));
+    if (!t->radiosity || !t->flux || !t->cache_sh || !t->cache_tmp || !t->lightmap || !t->grid_sh) goto oom;
+    if (lc_gl_check("egl transport: create", err, errlen) != 0) goto err;
+    lc_info("egl", "transport ready: %s; %u surfels, %u nodes in %u levels, %u caches x %u links (%u per window)",
+            lc_egl_description(t->egl), v->n_surfels, v->n_nodes, v->n_levels, v->n_caches, v->links_per_cache,
+            t->chunk);
+    return t;
+oom:
+    lc_set_err(err, errlen, "egl transport: out of memory");
+err:
+    free(host);
+    tgl_release(t);
     return NULL;
 }
 
-static void tgl_release(void *impl) { (void)impl; }
+/* --- run ------------------------------------------------------------------------------------- */
 
-static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *frame, char *err, size_t errlen) {
-    (void)impl;
-    (void)in;
-    (void)frame;
-    lc_set_err(err, errlen, "the EGL backend is not implemented in this build");
+typedef struct {
+    int n;
+    int stage[TGL_MAX_STAMPS]; /* the stage the interval ending at stamp i belongs to */
+} tgl_stamps;
+
+/* Marks the end of a `stage` interval (the first call marks the start). Compute thread. */
+static void tgl_stamp(tgl *t, tgl_stamps *s, int stage) {
+    if (s->n >= TGL_MAX_STAMPS) return; /* bounded by TGL_MAX_BOUNCES; never expected */
+    s->stage[s->n] = stage;
+    glQueryCounter(t->queries[s->n++], GL_TIMESTAMP);
+}
+
+static void tgl_uniform_count(GLuint prog, size_t n) { glProgramUniform1ui(prog, 0, (GLuint)n); }
+
+/* Reads bytes of buf into dst, timing it into ms. */
+static void tgl_read(GLuint buf, size_t bytes, void *dst, double *ms) {
+    double t0 = tgl_now_ms();
+    if (bytes) glGetNamedBufferSubData(buf, 0, (GLsizeiptr)bytes, dst);
+    *ms += tgl_now_ms() - t0;
+}
+
+/* Runs on the compute thread. */
+static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr, char *err, size_t errlen) {
+    tgl *t = impl;
+    const lc_lcb_view *v = t->v;
+    const lc_engine_settings *st = &in->settings;
+    int bands = (int)st->bands;
+    int chroma = st->chroma_compression && st->chroma_bands < st->bands;
+    if (t->lost) {
+        lc_set_err(err, errlen, "egl transport: the GL context was lost; recreate the engine");
+        return -1;
+    }
+    if (bands < 1 || bands > LC_SH_MAX_BANDS) {
+        lc_set_err(err, errlen, "/settings/bands: %d is outside 1..%d", bands, LC_SH_MAX_BANDS);
+        return -1;
+    }
+    if (st->bounces > TGL_MAX_BOUNCES) {
+        lc_set_err(err, errlen, "/settings/bounces: %u is over %d", st->bounces, TGL_MAX_BOUNCES);
+        return -1;
+    }
+    if (lc_egl_make_current(t->egl, err, errlen) != 0) return -1;
+    int ncc_bands = chroma ? (int)st->chroma_bands : bands;
+    GLuint gather = t->gather[bands][ncc_bands];
+    if (!gather) { /* first use of this band count */
+        if (!(gather = tgl_gather_program(t, bands, ncc_bands, err, errlen))) return -1;
+        tgl_warm_up(t, gather);
+    }
+    const int nc = bands * bands;
+    const GLbitfield ssbo = GL_SHADER_STORAGE_BARRIER_BIT;
+    tgl_stamps ts = {0};
+    int rc = 0;
+    tgl_stamp(t, &ts, 0);
+
+    glNamedBufferSubData(t->b_b0, 0, (GLsizeiptr)((size_t)v->n_surfels * 12), in->b0);
+    if (in->reset_feedback) glClearNamedBufferData(t->b_e_ind, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
+    /* One window (the usual case) lets intermediate passes gather only the feedback caches. */
+    int single_window = t->chunk >= v->n_caches;
+
+    for (uint32_t pass = 0; pass <= st->bounces; pass++) {
+        int last = pass == st->bounces;
+        /* B = B0 + albedo E_ind */
+        glUseProgram(t->prog[TGL_RADIOSITY]);
+        lc_gl_bind(0, t->b_surfels, 0, (size_t)v->n_surfels * sizeof(tgl_surfel));
+        lc_gl_bind(1, t->b_b0, 0, (size_t)v->n_surfels * 12);
+        lc_gl_bind(2, t->b_e_ind, 0, (size_t)v->n_surfels * 12);
+        lc_gl_bind(3, t->b_radiosity, 0, (size_t)v->n_surfels * 12);
+        tgl_uniform_count(t->prog[TGL_RADIOSITY], v->n_surfels);
+        lc_gl_dispatch_1d(v->n_surfels, TGL_LOCAL);
+        glMemoryBarrier(ssbo);
+        tgl_stamp(t, &ts, LC_STAGE_BOUNCE);
+
+        /* Pull, deepest level first: each level reads the one below. */
+        glUseProgram(t->prog[TGL_PULL]);
+        lc_gl_bind(0, t->b_nodes, 0, (size_t)v->n_nodes * sizeof(tgl_node));
+        lc_gl_bind(1, t->b_radiosity, 0, (size_t)v->n_surfels * 12);
+        lc_gl_bind(2, t->b_flux, 0, (size_t)v->n_nodes * 12);
+        for (uint32_t lv = v->n_levels; lv-- > 0;) {
+            uint32_t begin = v->levels[lv], count = v->levels[lv + 1] - begin;
+            glProgramUniform1ui(t->prog[TGL_PULL], 1, begin);
+            tgl_uniform_count(t->prog[TGL_PULL], count);
+            lc_gl_dispatch_1d(count, TGL_LOCAL);
+            glMemoryBarrier(ssbo);
+        }
+        tgl_stamp(t, &ts, LC_STAGE_PULL);
+        if (chroma) {
+            glUseProgram(t->prog[TGL_CHROMA]);
+            lc_gl_bind(0, t->b_flux, 0, (size_t)v->n_nodes * 12);
+            tgl_uniform_count(t->prog[TGL_CHROMA], v->n_nodes);
+            lc_gl_dispatch_1d(v->n_nodes, TGL_LOCAL);
+            glMemoryBarrier(ssbo);
+        }
+        tgl_stamp(t, &ts, LC_STAGE_CHROMA);
+
+        /* Gather */
+        glUseProgram(gather);
+        lc_gl_bind(1, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
+        lc_gl_bind(2, t->b_flux, 0, (size_t)v->n_nodes * 12);
+        lc_gl_bind(3, t->b_cone, 0, 256 * 8 * 4);
+        lc_gl_bind(5, t->b_sh9, 0, (size_t)v->n_caches * 108);
+        lc_gl_bind(6, t->b_list, 0, (size_t)t->n_feedback * 4);
+        lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
+        glProgramUniform1ui(gather, 2, v->links_per_cache);
+        const size_t link_bytes = (size_t)v->links_per_cache * sizeof(lc_lcb_link), sh_bytes = (size_t)nc * 12;
+        if (!last && single_window && t->n_feedback < v->n_caches) {
+            lc_gl_bind(0, t->b_links, 0, (size_t)v->n_caches * link_bytes);
+            lc_gl_bind(4, t->b_cache_sh, 0, (size_t)v->n_caches * sh_bytes);
+            glProgramUniform1ui(gather, 1, 0);
+            glProgramUniform1ui(gather, 3, 1);
+            tgl_uniform_count(gather, t->n_feedback);
+            lc_gl_dispatch_1d(t->n_feedback, TGL_LOCAL);
+        } else {
+            glProgramUniform1ui(gather, 3, 0);
+            for (uint32_t c0 = 0; c0 < v->n_caches; c0 += t->chunk) {
+                uint32_t cnt = v->n_caches - c0 < t->chunk ? v->n_caches - c0 : t->chunk;
+                lc_gl_bind(0, t->b_links, c0 * link_bytes, cnt * link_bytes);
+                lc_gl_bind(4, t->b_cache_sh, c0 * sh_bytes, cnt * sh_bytes);
+                glProgramUniform1ui(gather, 1, c0);
+                tgl_uniform_count(gather, cnt);
+                lc_gl_dispatch_1d(cnt, TGL_LOCAL);
+            }
+        }
+        glMemoryBarrier(ssbo);
+        tgl_stamp(t, &ts, LC_STAGE_GATHER);
+
+        /* Feedback for the next pass (and, progressive, for the next relight). */
+        glUseProgram(t->prog[TGL_FEEDBACK]);
+        lc_gl_bind(0, t->b_surfels, 0, (size_t)v->n_surfels * sizeof(tgl_surfel));
+        lc_gl_bind(1, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
+        lc_gl_bind(2, t->b_sh9, 0, (size_t)v->n_caches * 108);
+        lc_gl_bind(3, t->b_e_ind, 0, (size_t)v->n_surfels * 12);
+        tgl_uniform_count(t->prog[TGL_FEEDBACK], v->n_surfels);
+        glProgramUniform1i(t->prog[TGL_FEEDBACK], 2, bands);
+        lc_gl_dispatch_1d(v->n_surfels, TGL_LOCAL);
+        glMemoryBarrier(ssbo);
+        tgl_stamp(t, &ts, LC_STAGE_BOUNCE);
+        if ((rc = lc_gl_check("egl transport: bounce pass", err, errlen)) != 0) goto gl_err;
+    }
+
+    /* Lightmap: irradiance of each texel's cache for the cache normal. */
+    glUseProgram(t->prog[TGL_LIGHTMAP]);
+    lc_gl_bind(0, t->b_lm_index, 0, t->texels * 4);
+    lc_gl_bind(1, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
+    lc_gl_bind(2, t->b_sh9, 0, (size_t)v->n_caches * 108);
+    lc_gl_bind(3, t->b_lightmap, 0, t->texels * 12);
+    tgl_uniform_count(t->prog[TGL_LIGHTMAP], t->texels);
+    glProgramUniform1i(t->prog[TGL_LIGHTMAP], 2, bands);
+    lc_gl_dispatch_1d(t->texels, TGL_LOCAL);
+    tgl_stamp(t, &ts, LC_STAGE_LIGHTMAP);
+
+    /* Grid: cosine-convolved L2 SH per sample. */
+    glUseProgram(t->prog[TGL_GRID]);
+    lc_gl_bind(0, t->b_grid_index, 0, (size_t)t->cells * 4);
+    lc_gl_bind(1, t->b_sh9, 0, (size_t)v->n_caches * 108);
+    lc_gl_bind(2, t->b_grid_sh, 0, (size_t)t->cells * 108);
+    tgl_uniform_count(t->prog[TGL_GRID], t->cells);
+    glProgramUniform1i(t->prog[TGL_GRID], 2, bands);
+    lc_gl_dispatch_1d(t->cells, TGL_LOCAL);
+    glMemoryBarrier(ssbo);
+    tgl_stamp(t, &ts, LC_STAGE_GRID);
+
+    /* Objects: positions uploaded each run (the buffers grow with the object count). */
+    if (in->n_objects > t->gpu_object_cap) {
+        GLuint old[2] = {t->b_obj_pos, t->b_obj_sh};
+        glDeleteBuffers(2, old);
+        t->b_obj_pos = t->b_obj_sh = 0;
+        t->gpu_object_cap = 0;
+        if (!(t->b_obj_pos = lc_gl_buffer((size_t)in->n_objects * 12, NULL, "object positions", err, errlen)))
+            return -1;
+        if (!(t->b_obj_sh = lc_gl_buffer((size_t)in->n_objects * 108, NULL, "object SH", err, errlen))) return -1;
+        t->gpu_object_cap = in->n_objects;
+    }
+    if (in->n_objects > t->object_cap) {
+        float *o = realloc(t->object_sh, (size_t)in->n_objects * 27 * sizeof(float));
+        if (!o) {
+            lc_set_err(err, errlen, "egl transport: out of memory for %u objects", in->n_objects);
+            return -1;
+        }
+        t->object_sh = o;
+        t->object_cap = in->n_objects;
+    }
+    if (in->n_objects) {
+        glNamedBufferSubData(t->b_obj_pos, 0, (GLsizeiptr)((size_t)in->n_objects * 12), in->object_pos);
+        GLuint p = t->prog[TGL_OBJECTS];
+        glUseProgram(p);
+        lc_gl_bind(0, t->b_obj_pos, 0, (size_t)in->n_objects * 12);
+        lc_gl_bind(1, t->b_grid_sh, 0, (size_t)t->cells * 108);
+        lc_gl_bind(2, t->b_obj_sh, 0, (size_t)in->n_objects * 108);
+        tgl_uniform_count(p, in->n_objects);
+        glProgramUniform3fv(p, 2, 1, v->grid_origin);
+        glProgramUniform1f(p, 3, v->grid_cell);
+        glProgramUniform3ui(p, 4, v->grid_dims[0], v->grid_dims[1], v->grid_dims[2]);
+        lc_gl_dispatch_1d(in->n_objects, TGL_LOCAL);
+    }
+    tgl_stamp(t, &ts, LC_STAGE_OBJECTS);
+    glUseProgram(0);
+    if ((rc = lc_gl_check("egl transport: outputs", err, errlen)) != 0) goto gl_err;
+
+    /* Read-back: shader writes must be visible to buffer reads. */
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    double rb[LC_STAGE_COUNT] = {0};
+    tgl_read(t->b_radiosity, (size_t)v->n_surfels * 12, t->radiosity, &rb[LC_STAGE_BOUNCE]);
+    tgl_read(t->b_flux, (size_t)v->n_nodes * 12, t->flux, &rb[LC_STAGE_PULL]);
+    tgl_read(t->b_cache_sh, (size_t)v->n_caches * nc * 12, t->cache_tmp, &rb[LC_STAGE_GATHER]);
+    double t0 = tgl_now_ms();
+    /* GPU stride is bands^2; the frame's (as the CPU backend's) is LC_SH_MAX_COEFFS. */
+    for (uint32_t c = 0; c < v->n_caches; c++)
+        memcpy(t->cache_sh + (size_t)c * TGL_CAP * 3, t->cache_tmp + (size_t)c * nc * 3, (size_t)nc * 3 * sizeof(float));
+    rb[LC_STAGE_GATHER] += tgl_now_ms() - t0;
+    tgl_read(t->b_lightmap, t->texels * 12, t->lightmap, &rb[LC_STAGE_LIGHTMAP]);
+    t0 = tgl_now_ms();
+    if (st->sh_lightmap) { /* a per-texel copy of the cache SH: cheaper on the host than read back */
+        if (!t->lightmap_sh) t->lightmap_sh = calloc(t->texels * TGL_CAP * 3 + 1, sizeof(float));
+        if (!t->lightmap_sh) {
+            lc_set_err(err, errlen, "egl transport: out of memory for the SH lightmap");
+            return -1;
+        }
+        for (size_t i = 0; i < t->texels; i++) {
+            uint32_t c = v->lightmap[i];
+            float *dst = t->lightmap_sh + i * TGL_CAP * 3;
+            if (c == LC_NONE)
+                memset(dst, 0, TGL_CAP * 3 * sizeof(float));
+            else
+                memcpy(dst, t->cache_sh + (size_t)c * TGL_CAP * 3, TGL_CAP * 3 * sizeof(float));
+        }
+    }
+    rb[LC_STAGE_LIGHTMAP] += tgl_now_ms() - t0;
+    tgl_read(t->b_grid_sh, (size_t)t->cells * 108, t->grid_sh, &rb[LC_STAGE_GRID]);
+    tgl_read(t->b_obj_sh, (size_t)in->n_objects * 108, t->object_sh, &rb[LC_STAGE_OBJECTS]);
+    if ((rc = lc_gl_check("egl transport: read-back", err, errlen)) != 0) goto gl_err;
+
+    /* Stage times from the timestamps (all available: the read-back waited for the GPU). */
+    double ms[LC_STAGE_COUNT] = {0};
+    GLuint64 prev = 0;
+    for (int i = 0; i < ts.n; i++) {
+        GLuint64 now = 0;
+        glGetQueryObjectui64v(t->queries[i], GL_QUERY_RESULT, &now);
+        if (i > 0 && now >= prev) ms[ts.stage[i]] += (double)(now - prev) * 1e-6;
+        prev = now;
+    }
+    for (int s = LC_STAGE_BOUNCE; s <= LC_STAGE_CHROMA; s++) fr->stage_ms[s] = ms[s] + rb[s];
+
+    fr->lightmap_width = v->lightmap_width;
+    fr->lightmap_height = v->lightmap_height;
+    fr->lightmap = t->lightmap;
+    fr->sh_bands = (uint32_t)bands;
+    fr->sh_stride = TGL_CAP;
+    fr->lightmap_sh = st->sh_lightmap ? t->lightmap_sh : NULL;
+    fr->n_caches = v->n_caches;
+    fr->cache_sh = t->cache_sh;
+    memcpy(fr->grid_dims, v->grid_dims, sizeof fr->grid_dims);
+    memcpy(fr->grid_origin, v->grid_origin, sizeof fr->grid_origin);
+    fr->grid_cell = v->grid_cell;
+    fr->grid_sh = t->grid_sh;
+    fr->n_objects = in->n_objects;
+    fr->object_sh = t->object_sh;
+    fr->surfel_radiosity = t->radiosity;
+    fr->node_flux = chroma ? NULL : t->flux; /* YCoCg when compressing */
+    return 0;
+gl_err:
+    glUseProgram(0);
+    if (rc == -2) t->lost = 1;
     return -1;
 }
 

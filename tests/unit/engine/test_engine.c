@@ -49,7 +49,7 @@ static void test_closed_box(void) {
     }
     double mean = sum / n;
     CHECK(fabs(mean / expect - 1) < 0.02, "closed box: mean texel irradiance %.4f, expected %.4f (2%%)", mean, expect);
-    CHECK(worst < 0.08, "closed box: worst texel off by %.1f%%", worst * 100);
+    CHECK(worst < 0.03, "closed box: worst texel off by %.1f%%", worst * 100);
     /* Surfel radiosity. */
     double bsum = 0;
     for (uint32_t s = 0; s < f.v->n_surfels; s++) bsum += fr->surfel_radiosity[3 * s];
