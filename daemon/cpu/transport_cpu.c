@@ -137,6 +137,114 @@ static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
     d[2] = z * inv;
 }
 
+#define TCPU_BLOCK 16
+
+/* Blocked gather for bands <= 4, the common case: links in blocks of 16 as structure-of-
+ * arrays so the octahedral decode, the SH basis and the accumulation vectorise; per-lane
+ * partial sums avoid float reductions (which the compiler may not reorder). Built for AVX2
+ * and a baseline, chosen at load time. Writes acc[channel][coefficient]. */
+__attribute__((target_clones("avx2", "default"))) static void
+tcpu_gather_blocked(const tcpu *t, const lc_lcb_link *lk, uint32_t used, int bands, int ncc, float acc[3][16]) {
+    float lane[3][16][TCPU_BLOCK];
+    memset(lane, 0, sizeof lane);
+    const int nc = bands * bands;
+    for (uint32_t k0 = 0; k0 < used; k0 += TCPU_BLOCK) {
+        uint32_t n = used - k0 < TCPU_BLOCK ? used - k0 : TCPU_BLOCK;
+        float p0[TCPU_BLOCK], p1[TCPU_BLOCK], p2[TCPU_BLOCK], hl[4][TCPU_BLOCK];
+        float dx[TCPU_BLOCK], dy[TCPU_BLOCK], dz[TCPU_BLOCK];
+        uint32_t packed[TCPU_BLOCK];
+        for (uint32_t i = 0; i < TCPU_BLOCK; i++) { /* gathers: not vectorised, kept apart */
+            if (i < n) {
+                const lc_lcb_link *l = &lk[k0 + i];
+                const float *phi = t->flux + 3 * (size_t)l->node;
+                p0[i] = phi[0] * l->factor;
+                p1[i] = phi[1] * l->factor;
+                p2[i] = phi[2] * l->factor;
+                packed[i] = l->dir_cone;
+                const float *h = t->cone[l->dir_cone >> 24];
+                for (int b = 0; b < 4; b++) hl[b][i] = h[b];
+            } else {
+                p0[i] = p1[i] = p2[i] = 0;
+                packed[i] = 0;
+                for (int b = 0; b < 4; b++) hl[b][i] = 0;
+            }
+        }
+        for (uint32_t i = 0; i < TCPU_BLOCK; i++) { /* octahedral decode, branch-free */
+            float u = (float)(packed[i] & 0xFFFu) * (2.0f / 4095.0f) - 1.0f;
+            float w = (float)((packed[i] >> 12) & 0xFFFu) * (2.0f / 4095.0f) - 1.0f;
+            float z = 1.0f - fabsf(u) - fabsf(w);
+            float fold = z < 0 ? -z : 0.0f;
+            u += u >= 0 ? -fold : fold;
+            w += w >= 0 ? -fold : fold;
+            float inv = 1.0f / sqrtf(u * u + w * w + z * z);
+            dx[i] = u * inv;
+            dy[i] = w * inv;
+            dz[i] = z * inv;
+        }
+        float y[16][TCPU_BLOCK];
+        for (uint32_t i = 0; i < TCPU_BLOCK; i++) {
+            float x = dx[i], yy = dy[i], z = dz[i];
+            y[0][i] = 0.282094791774f * hl[0][i];
+            y[1][i] = 0.488602511903f * yy * hl[1][i];
+            y[2][i] = 0.488602511903f * z * hl[1][i];
+            y[3][i] = 0.488602511903f * x * hl[1][i];
+            y[4][i] = 1.092548430592f * x * yy * hl[2][i];
+            y[5][i] = 1.092548430592f * yy * z * hl[2][i];
+            y[6][i] = 0.315391565253f * (3.0f * z * z - 1.0f) * hl[2][i];
+            y[7][i] = 1.092548430592f * x * z * hl[2][i];
+            y[8][i] = 0.546274215296f * (x * x - yy * yy) * hl[2][i];
+            float z2 = z * z;
+            y[9][i] = 0.590043589927f * yy * (3.0f * x * x - yy * yy) * hl[3][i];
+            y[10][i] = 2.890611442641f * x * yy * z * hl[3][i];
+            y[11][i] = 0.457045799464f * yy * (5.0f * z2 - 1.0f) * hl[3][i];
+            y[12][i] = 0.373176332590f * z * (5.0f * z2 - 3.0f) * hl[3][i];
+            y[13][i] = 0.457045799464f * x * (5.0f * z2 - 1.0f) * hl[3][i];
+            y[14][i] = 1.445305721321f * z * (x * x - yy * yy) * hl[3][i];
+            y[15][i] = 0.590043589927f * x * (x * x - 3.0f * yy * yy) * hl[3][i];
+        }
+        for (int j = 0; j < nc; j++)
+            for (uint32_t i = 0; i < TCPU_BLOCK; i++) lane[0][j][i] += y[j][i] * p0[i];
+        for (int j = 0; j < ncc; j++)
+            for (uint32_t i = 0; i < TCPU_BLOCK; i++) {
+                lane[1][j][i] += y[j][i] * p1[i];
+                lane[2][j][i] += y[j][i] * p2[i];
+            }
+    }
+    for (int ch = 0; ch < 3; ch++)
+        for (int j = 0; j < 16; j++) {
+            float sum = 0;
+            for (uint32_t i = 0; i < TCPU_BLOCK; i++) sum += lane[ch][j][i];
+            acc[ch][j] = sum;
+        }
+}
+
+/* Any bands (1..8): one link at a time through the generic SH evaluation. */
+static void tcpu_gather_generic(const tcpu *t, const lc_lcb_link *lk, uint32_t used, int bands, int ncc,
+                                float acc[3][TCPU_MAX_COEFFS]) {
+    static const int band_of[TCPU_MAX_COEFFS] = {
+        0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5,
+        5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7};
+    const int nc = bands * bands;
+    memset(acc, 0, 3 * TCPU_MAX_COEFFS * sizeof(float));
+    for (uint32_t k = 0; k < used; k++) {
+        const float *phi = t->flux + 3 * (size_t)lk[k].node;
+        float d[3], y[TCPU_MAX_COEFFS];
+        tcpu_oct_decode(lk[k].dir_cone, d);
+        lc_sh_eval_fast(bands, d[0], d[1], d[2], y);
+        const float *h = t->cone[lk[k].dir_cone >> 24];
+        float f = lk[k].factor;
+        float p0 = phi[0] * f, p1 = phi[1] * f, p2 = phi[2] * f;
+        for (int j = 0; j < nc; j++) {
+            float w = h[band_of[j]] * y[j];
+            acc[0][j] += w * p0;
+            if (j < ncc) {
+                acc[1][j] += w * p1;
+                acc[2][j] += w * p2;
+            }
+        }
+    }
+}
+
 static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
     (void)thread;
     const tcpu_gather_job *job = ctx;
@@ -145,37 +253,21 @@ static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
     const int nc = job->bands * job->bands;
     const int ncc = job->chroma ? job->chroma_bands * job->chroma_bands : nc;
     const uint32_t nl = v->links_per_cache;
-    static const int band_of[TCPU_MAX_COEFFS] = {
-        0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5,
-        5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7};
     for (size_t i = begin; i < end; i++) {
         uint32_t c = job->list ? job->list[i] : (uint32_t)i;
-        float acc0[TCPU_MAX_COEFFS], acc1[TCPU_MAX_COEFFS], acc2[TCPU_MAX_COEFFS];
-        memset(acc0, 0, sizeof(float) * nc);
-        memset(acc1, 0, sizeof(float) * nc);
-        memset(acc2, 0, sizeof(float) * nc);
         const lc_lcb_link *lk = v->links + (size_t)c * nl;
         uint32_t used = v->caches[c].link_count;
-        for (uint32_t k = 0; k < used; k++) {
-            const float *phi = t->flux + 3 * (size_t)lk[k].node;
-            float d[3], y[TCPU_MAX_COEFFS];
-            tcpu_oct_decode(lk[k].dir_cone, d);
-            lc_sh_eval_fast(job->bands, d[0], d[1], d[2], y);
-            const float *h = t->cone[lk[k].dir_cone >> 24];
-            float f = lk[k].factor;
-            float p0 = phi[0] * f, p1 = phi[1] * f, p2 = phi[2] * f;
-            for (int j = 0; j < nc; j++) {
-                float w = h[band_of[j]] * y[j];
-                acc0[j] += w * p0;
-                if (j < ncc) {
-                    acc1[j] += w * p1;
-                    acc2[j] += w * p2;
-                }
-            }
+        float acc[3][TCPU_MAX_COEFFS];
+        if (job->bands <= 4) {
+            float a16[3][16];
+            tcpu_gather_blocked(t, lk, used, job->bands, ncc, a16);
+            for (int ch = 0; ch < 3; ch++) memcpy(acc[ch], a16[ch], sizeof a16[ch]);
+        } else {
+            tcpu_gather_generic(t, lk, used, job->bands, ncc, acc);
         }
         float *out = t->cache_sh + (size_t)c * t->coeff_cap * 3;
         for (int j = 0; j < nc; j++) {
-            float a = acc0[j], b = acc1[j], g = acc2[j];
+            float a = acc[0][j], b = j < ncc ? acc[1][j] : 0, g = j < ncc ? acc[2][j] : 0;
             if (job->chroma) { /* Y, Co, Cg -> RGB (Malvar-Sullivan YCoCg-R, linear) */
                 float tt = a - g;
                 out[3 * j + 1] = a + g;
