@@ -551,6 +551,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
         !st->settings.progressive) {
         free(emission);
         e->frame.revision = st->revision;
+        e->frame.stages_run = 0;
         for (int i = 0; i < LC_STAGE_COUNT; i++) e->frame.stage_ms[i] = 0;
         e->frame.total_ms = engine_now_ms() - t0;
         *frame = &e->frame;
@@ -577,9 +578,11 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     }
 
     double t1 = engine_now_ms();
+    uint32_t stages_run = 0;
     if (lights_changed || objects_changed) {
         engine_direct_job job = {e, st->lights, st->n_lights};
         lc_parallel_for(v->n_surfels, 256, engine_direct_range, &job);
+        stages_run |= 1u << LC_STAGE_DIRECT;
     }
     int sky_on = st->environment.kind != LC_ENV_NONE && st->environment.intensity > 0;
     if (sky_on && !e->sky_valid) {
@@ -637,6 +640,12 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     e->settings = st->settings;
     e->have_state = 1;
     fr.stage_ms[LC_STAGE_DIRECT] = t2 - t1;
+    /* The transport always runs its stages (chroma only when compressing). */
+    stages_run |= (1u << LC_STAGE_BOUNCE) | (1u << LC_STAGE_PULL) | (1u << LC_STAGE_GATHER) |
+                  (1u << LC_STAGE_LIGHTMAP) | (1u << LC_STAGE_GRID) | (1u << LC_STAGE_OBJECTS);
+    if (st->settings.chroma_compression && st->settings.chroma_bands < st->settings.bands)
+        stages_run |= 1u << LC_STAGE_CHROMA;
+    fr.stages_run = stages_run;
     fr.revision = st->revision;
     fr.total_ms = engine_now_ms() - t0;
     e->frame = fr;

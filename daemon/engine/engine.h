@@ -107,6 +107,7 @@ typedef struct lc_engine_frame {
     const float *node_flux;        /* n_nodes*3: pulled flux (W) of the last pass, for tests/debug */
     double stage_ms[LC_STAGE_COUNT];
     double total_ms;
+    uint32_t stages_run; /* bit per lc_engine_stage that ran (skipped stages: inputs unchanged) */
 } lc_engine_frame;
 
 typedef struct lc_engine lc_engine;

@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
+#include <time.h>
 
 #include "engine/engine.h"
 #include "lcb/lcb.h"
@@ -22,9 +23,37 @@ static int cmp_double(const void *a, const void *b) {
 
 typedef struct {
     char file[512], backend[16];
-    uint32_t surfels, caches, links, bands;
+    uint32_t surfels, caches, links, bands, nodes;
     double stage_ms[LC_STAGE_COUNT], total_ms, peak_mib;
+    double gather_links;         /* links evaluated per relight (all passes) */
+    double gather_bytes, gather_flops, pull_bytes;
 } bench_row;
+
+/* Memory bandwidth of this machine for a large copy (GB/s, read + write counted), the
+ * yardstick for the per-stage byte counts. */
+static double bench_copy_bandwidth(void) {
+    size_t n = (size_t)256 << 20;
+    char *a = malloc(n), *b = malloc(n);
+    if (!a || !b) {
+        free(a);
+        free(b);
+        return 0;
+    }
+    memset(a, 1, n);
+    memset(b, 2, n);
+    double best = 0;
+    for (int r = 0; r < 3; r++) {
+        struct timespec t0, t1;
+        clock_gettime(CLOCK_MONOTONIC, &t0);
+        memcpy(b, a, n);
+        clock_gettime(CLOCK_MONOTONIC, &t1);
+        double s = (double)(t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9;
+        if (s > 0 && 2.0 * n / s / 1e9 > best) best = 2.0 * n / s / 1e9;
+    }
+    free(a);
+    free(b);
+    return best;
+}
 
 /* A light that moves a little every run, so direct light and the transport really rerun. */
 static void bench_state(const lc_lcb_view *v, int run, lc_engine_light *light, lc_engine_state *st,
@@ -96,6 +125,26 @@ static int bench_one(const char *path, lc_backend_kind kind, int runs, int bounc
     row->caches = v->n_caches;
     row->links = v->links_per_cache;
     row->bands = settings.bands;
+    row->nodes = v->n_nodes;
+    /* Work model of the gather (runtime projection): per used link 12 B link + 12 B node flux
+     * read; ~20 flops decode + bands^2 * (basis ~3 + weight 1 + 3 FMAs = 10). Earlier
+     * feedback passes gather only the caches surfels read. */
+    {
+        double all = 0, feedback = 0;
+        unsigned char *fb = calloc(v->n_caches ? v->n_caches : 1, 1);
+        for (uint32_t s = 0; fb && s < v->n_surfels; s++)
+            if (v->surfels[s].cache != LC_NONE) fb[v->surfels[s].cache] = 1;
+        for (uint32_t c = 0; c < v->n_caches; c++) {
+            all += v->caches[c].link_count;
+            if (fb && fb[c]) feedback += v->caches[c].link_count;
+        }
+        free(fb);
+        double nc = (double)settings.bands * settings.bands;
+        row->gather_links = all + bounces * feedback;
+        row->gather_bytes = row->gather_links * 24.0 + (double)v->n_caches * nc * 12.0 * (bounces + 1);
+        row->gather_flops = row->gather_links * (20.0 + 10.0 * nc);
+        row->pull_bytes = (double)v->n_nodes * 36.0 * (bounces + 1);
+    }
     for (int s = 0; s <= LC_STAGE_COUNT; s++) {
         double *x = samples + (size_t)s * runs;
         qsort(x, (size_t)runs, sizeof *x, cmp_double);
@@ -161,6 +210,17 @@ int main(int argc, char **argv) {
         for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8.2f", rows[i].stage_ms[s]);
         printf(" %8.2f %8.0f\n", rows[i].total_ms, rows[i].peak_mib);
     }
+    double bw = bench_copy_bandwidth();
+    printf("\nwhere the time goes (this machine: memcpy %.1f GB/s read+write):\n", bw);
+    printf("%-28s %-4s %12s %10s %10s %10s %10s\n", "bake", "bk", "links/relight", "gather MB", "GB/s", "GFLOP/s",
+           "pull GB/s");
+    for (int i = 0; i < nrows; i++) {
+        const char *base = strrchr(rows[i].file, '/');
+        double gs = rows[i].stage_ms[LC_STAGE_GATHER] * 1e-3, ps = rows[i].stage_ms[LC_STAGE_PULL] * 1e-3;
+        printf("%-28.28s %-4s %12.0f %10.1f %10.2f %10.2f %10.2f\n", base ? base + 1 : rows[i].file, rows[i].backend,
+               rows[i].gather_links, rows[i].gather_bytes / 1e6, gs > 0 ? rows[i].gather_bytes / gs / 1e9 : 0,
+               gs > 0 ? rows[i].gather_flops / gs / 1e9 : 0, ps > 0 ? rows[i].pull_bytes / ps / 1e9 : 0);
+    }
     printf("\npaper (PIC, Sponza, 10585 caches; surfel light + pull + cache light, ms):\n"
            "  moderate (3 bands, 128 links, 32k surfels): CPU i7-4510U 2 cores 33.8, i7-4790S 21.1; GTX 980 3.65\n"
            "  high     (4 bands, 254 links, 128k surfels): CPU i7-4510U 198, i7-4790S 131; GTX 980 7.17\n"
@@ -171,7 +231,7 @@ int main(int argc, char **argv) {
             fprintf(stderr, "lucent-bench: cannot write %s\n", json);
             return 1;
         }
-        fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"results\": [", runs, bounces);
+        fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"memcpy_gbps\": %.2f, \"results\": [", runs, bounces, bw);
         for (int i = 0; i < nrows; i++) {
             fprintf(out, "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"surfels\": %u, \"caches\": %u, \"links\": %u, "
                          "\"bands\": %u, \"stages_ms\": {",
@@ -179,7 +239,10 @@ int main(int argc, char **argv) {
                     rows[i].bands);
             for (int s = 0; s < LC_STAGE_COUNT; s++)
                 fprintf(out, "%s\"%s\": %.4f", s ? ", " : "", stage_names[s], rows[i].stage_ms[s]);
-            fprintf(out, "}, \"total_ms\": %.4f, \"peak_rss_mib\": %.1f}", rows[i].total_ms, rows[i].peak_mib);
+            fprintf(out, "}, \"total_ms\": %.4f, \"peak_rss_mib\": %.1f, \"gather_links\": %.0f, "
+                         "\"gather_bytes\": %.0f, \"gather_flops\": %.0f, \"pull_bytes\": %.0f}",
+                    rows[i].total_ms, rows[i].peak_mib, rows[i].gather_links, rows[i].gather_bytes,
+                    rows[i].gather_flops, rows[i].pull_bytes);
         }
         fprintf(out, "\n]}\n");
         fclose(out);

@@ -213,8 +213,24 @@ static void test_lights_and_occlusion(void) {
     }
     CHECK(checked > 20 && bad == 0, "sky: %d of %d open floor surfels differ from rho*pi*L", bad, checked);
 
+    /* Incremental work: only what a change touches reruns. */
+    lc_engine_light moving = {.type = LC_ENGINE_LIGHT_POINT, .color = {1, 1, 1}, .intensity = 5, .position = {1, 1, 0}};
+    st.environment.kind = LC_ENV_NONE;
+    st.lights = &moving;
+    st.n_lights = 1;
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    CHECK(fr->stages_run & (1u << LC_STAGE_DIRECT), "a light change reruns direct light");
+    st.settings.bounces = 1; /* settings only: direct light is reused */
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    CHECK(!(fr->stages_run & (1u << LC_STAGE_DIRECT)) && (fr->stages_run & (1u << LC_STAGE_GATHER)),
+          "a settings change skips direct light, reruns the transport (stages 0x%x)", fr->stages_run);
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0 && fr->stages_run == 0,
+          "an unchanged state without progressive refinement does nothing (stages 0x%x)", fr->stages_run);
+    st.settings.bounces = 0;
+
     /* Bad state is refused with the field named, and the engine keeps working. */
     light.intensity = NAN;
+    st.lights = &light;
     st.n_lights = 1;
     CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == -1 && strstr(err, "/lights/0/intensity"),
           "NaN intensity: %s", err);

@@ -77,6 +77,36 @@ int main(void) {
     CHECK_NEAR(lc_sh_cosine_factor(2), M_PI / 4, 1e-12);
     CHECK_NEAR(lc_sh_cosine_factor(4), -M_PI / 24, 1e-12);
 
+    /* Zonal rotation (PIC eq. 5, the runtime projection): a uniform cone of half-angle alpha
+     * around any direction d projects to Omega * h_l(cos alpha) * y_lm(d), checked against
+     * direct numeric integration of y_lm over the cone. */
+    {
+        lc_rng rng = lc_rng_seed(3, 0);
+        double worst_rot = 0;
+        for (int trial = 0; trial < 6; trial++) {
+            float d[3];
+            fib_dir((int)(lc_rng_float(&rng) * 999), 1000, d);
+            double ca = cos(0.2 + 1.2 * lc_rng_float(&rng));
+            double num[C] = {0};
+            const int M = 400000;
+            for (int i = 0; i < M; i++) {
+                float w[3];
+                fib_dir(i, M, w);
+                if (w[0] * d[0] + w[1] * d[1] + w[2] * d[2] < ca) continue;
+                float yy[C];
+                lc_sh_eval(B, w, yy);
+                for (int k = 0; k < C; k++) num[k] += yy[k] * (4 * M_PI / M);
+            }
+            float yd[C];
+            lc_sh_eval(B, d, yd);
+            double omega = 2 * M_PI * (1 - ca);
+            for (int l = 0; l < B; l++)
+                for (int k = l * l; k < (l + 1) * (l + 1); k++)
+                    worst_rot = fmax(worst_rot, fabs(num[k] - omega * lc_sh_cone_ratio(l, ca) * yd[k]));
+        }
+        CHECK(worst_rot < 2e-3, "rotated cone projection differs from integration by %g", worst_rot);
+    }
+
     /* The fast float path equals the generic evaluation. */
     for (int i = 0; i < 1000; i++) {
         float dd[3], ya[16], yb[16];
