@@ -63,7 +63,7 @@ static void engine_embree_error(void *user, enum RTCError code, const char *str)
 
 lc_engine_settings lc_engine_default_settings(const lc_lcb *bake) {
     const lc_lcb_view *v = lc_lcb_get(bake);
-    lc_engine_settings s = {.bounces = 2,
+    lc_engine_settings s = {.bounces = 1,
                             .bands = v->sh_bands ? v->sh_bands : 3,
                             .progressive = 1,
                             .chroma_compression = 0,

@@ -132,7 +132,8 @@ int lc_engine_validate_state(const lc_engine *e, const lc_engine_state *state, c
 int lc_engine_relight(lc_engine *e, const lc_engine_state *state, const lc_engine_frame **frame, char *err,
                       size_t errlen);
 
-/* Default settings: bounces 2, bands = the bake's, progressive on, no chroma compression. */
+/* Default settings: bounces 1 (two passes) with progressive on, so further bounces
+ * accumulate over successive relights; bands = the bake's; no chroma compression. */
 lc_engine_settings lc_engine_default_settings(const lc_lcb *bake);
 
 #endif
