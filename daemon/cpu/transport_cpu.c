@@ -468,19 +468,11 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
         tcpu_grid_sample(t, in->object_pos + 3 * (size_t)i, t->object_sh + 27 * (size_t)i);
     fr->stage_ms[LC_STAGE_OBJECTS] = tcpu_now_ms() - t3;
 
-    fr->lightmap_width = v->lightmap_width;
-    fr->lightmap_height = v->lightmap_height;
+    /* Arrays only: the engine front fills the dimensions from the bake and the settings. */
     fr->lightmap = t->lightmap;
-    fr->sh_bands = (uint32_t)bands;
-    fr->sh_stride = (uint32_t)cap;
     fr->lightmap_sh = st->sh_lightmap ? t->lightmap_sh : NULL;
-    fr->n_caches = v->n_caches;
     fr->cache_sh = t->cache_sh;
-    memcpy(fr->grid_dims, v->grid_dims, sizeof fr->grid_dims);
-    memcpy(fr->grid_origin, v->grid_origin, sizeof fr->grid_origin);
-    fr->grid_cell = v->grid_cell;
     fr->grid_sh = t->grid_sh;
-    fr->n_objects = in->n_objects;
     fr->object_sh = t->object_sh;
     fr->surfel_radiosity = t->radiosity;
     fr->node_flux = chroma ? NULL : t->flux; /* YCoCg when compressing */

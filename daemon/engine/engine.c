@@ -639,6 +639,15 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     e->env = st->environment;
     e->settings = st->settings;
     e->have_state = 1;
+    fr.lightmap_width = v->lightmap_width;
+    fr.lightmap_height = v->lightmap_height;
+    fr.sh_bands = st->settings.bands;
+    fr.sh_stride = LC_SH_MAX_COEFFS; /* both backends keep full-size records */
+    fr.n_caches = v->n_caches;
+    memcpy(fr.grid_dims, v->grid_dims, sizeof fr.grid_dims);
+    memcpy(fr.grid_origin, v->grid_origin, sizeof fr.grid_origin);
+    fr.grid_cell = v->grid_cell;
+    fr.n_objects = st->n_objects;
     fr.stage_ms[LC_STAGE_DIRECT] = t2 - t1;
     /* The transport always runs its stages (chroma only when compressing). */
     stages_run |= (1u << LC_STAGE_BOUNCE) | (1u << LC_STAGE_PULL) | (1u << LC_STAGE_GATHER) |

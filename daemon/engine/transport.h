@@ -35,8 +35,9 @@ typedef struct lc_transport_ops {
     /* Returns an implementation handle or NULL with err set. The view must outlive it. */
     void *(*create)(const lc_lcb_view *v, int threads, char *err, size_t errlen);
     void (*release)(void *impl);
-    /* Fills the frame's output arrays (owned by impl, valid until the next run) and the
-     * stage timings BOUNCE..CHROMA. */
+    /* Fills the frame's output array pointers (owned by impl, valid until the next run;
+     * records are LC_SH_MAX_COEFFS coefficients wide) and the stage timings BOUNCE..CHROMA.
+     * The engine fills the dimensions. */
     int (*run)(void *impl, const lc_transport_input *in, lc_engine_frame *frame, char *err, size_t errlen);
 } lc_transport_ops;
 

@@ -553,19 +553,11 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
     }
     for (int s = LC_STAGE_BOUNCE; s <= LC_STAGE_CHROMA; s++) fr->stage_ms[s] = ms[s] + rb[s];
 
-    fr->lightmap_width = v->lightmap_width;
-    fr->lightmap_height = v->lightmap_height;
+    /* Arrays only: the engine front fills the dimensions from the bake and the settings. */
     fr->lightmap = t->lightmap;
-    fr->sh_bands = (uint32_t)bands;
-    fr->sh_stride = TGL_CAP;
     fr->lightmap_sh = st->sh_lightmap ? t->lightmap_sh : NULL;
-    fr->n_caches = v->n_caches;
     fr->cache_sh = t->cache_sh;
-    memcpy(fr->grid_dims, v->grid_dims, sizeof fr->grid_dims);
-    memcpy(fr->grid_origin, v->grid_origin, sizeof fr->grid_origin);
-    fr->grid_cell = v->grid_cell;
     fr->grid_sh = t->grid_sh;
-    fr->n_objects = in->n_objects;
     fr->object_sh = t->object_sh;
     fr->surfel_radiosity = t->radiosity;
     fr->node_flux = chroma ? NULL : t->flux; /* YCoCg when compressing */
