@@ -21,6 +21,7 @@
 #include "bake/texels.h"
 #include "bake/uvgen.h"
 #include "lcb/lcb.h"
+#include "util/clock.h"
 #include "util/fsutil.h"
 #include "util/log.h"
 #include "util/parallel.h"
@@ -184,18 +185,12 @@ int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, ch
 
 /* --- helpers ------------------------------------------------------------------------------ */
 
-static double bake_now(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
 #define BAKE_N_STAGES 11
 
 /* Records a finished stage and, unless quiet, says so (one line per stage: the long ones
  * also draw their own progress). */
 static void bake_stage(lc_bake_report *r, const char *name, double *t0, int quiet) {
-    double t = bake_now();
+    double t = (lc_clock_ms() * 1e-3);
     if (r->n_stages < LC_BAKE_MAX_STAGES) {
         r->stages[r->n_stages].name = name;
         r->stages[r->n_stages].seconds = t - *t0;
@@ -459,7 +454,7 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
 
     lc_parallel_set_threads(s->threads);
     lc_progress_set_enabled(!s->quiet);
-    double t_start = bake_now(), t0 = t_start;
+    double t_start = (lc_clock_ms() * 1e-3), t0 = t_start;
 
     /* 1. import */
     lc_import_params ip = {.scale = s->scale, .flip_winding = s->flip_winding};
@@ -713,7 +708,7 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
 
     struct stat st;
     r->file_bytes = stat(s->output, &st) == 0 ? (unsigned long long)st.st_size : 0;
-    r->total_seconds = bake_now() - t_start;
+    r->total_seconds = (lc_clock_ms() * 1e-3) - t_start;
     struct rusage ru;
     getrusage(RUSAGE_SELF, &ru);
     r->peak_rss_kib = ru.ru_maxrss;

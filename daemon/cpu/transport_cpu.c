@@ -6,6 +6,7 @@
 #include <time.h>
 
 #include "engine/transport.h"
+#include "util/clock.h"
 #include "util/log.h"
 #include "util/parallel.h"
 #include "util/sh.h"
@@ -36,12 +37,6 @@ void lc_transport_cone_table(float table[256][8]) {
         double alpha = q / 255.0 * M_PI;
         for (int l = 0; l < 8; l++) table[q][l] = (float)lc_sh_cone_ratio(l, cos(alpha));
     }
-}
-
-static double tcpu_now_ms(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 
 static void tcpu_release(void *impl) {
@@ -380,13 +375,13 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
 
     for (uint32_t pass = 0; pass <= st->bounces; pass++) {
         int last = pass == st->bounces;
-        t1 = tcpu_now_ms();
+        t1 = lc_clock_ms();
         for (uint32_t s = 0; s < v->n_surfels; s++) {
             const float *alb = v->surfels[s].albedo;
             for (int k = 0; k < 3; k++)
                 t->radiosity[3 * s + k] = in->b0[3 * s + k] + alb[k] * t->e_ind[3 * s + k];
         }
-        double t2 = tcpu_now_ms();
+        double t2 = lc_clock_ms();
         ms_bounce += t2 - t1;
         tcpu_pull(t);
         if (chroma) /* the pull is linear, so convert once at the nodes: RGB -> Y, Co, Cg */
@@ -397,17 +392,17 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
                 f[1] = co;
                 f[2] = cg;
             }
-        double t3 = tcpu_now_ms();
+        double t3 = lc_clock_ms();
         ms_pull += t3 - t2;
         /* Intermediate passes only need the caches some surfel reads. */
         tcpu_gather_job job = {t, last ? NULL : t->feedback_list, bands, (int)st->chroma_bands, chroma};
         lc_parallel_for(last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
-        double t4 = tcpu_now_ms();
+        double t4 = lc_clock_ms();
         ms_gather += t4 - t3;
         /* Feedback for the next pass (and, progressive, for the next relight). */
         tcpu_feedback_job fj = {t, bands};
         lc_parallel_for(v->n_surfels, 1024, tcpu_feedback_range, &fj);
-        ms_bounce += tcpu_now_ms() - t4;
+        ms_bounce += lc_clock_ms() - t4;
     }
     fr->stage_ms[LC_STAGE_BOUNCE] = ms_bounce;
     fr->stage_ms[LC_STAGE_PULL] = ms_pull;
@@ -415,7 +410,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     fr->stage_ms[LC_STAGE_CHROMA] = 0;
 
     /* Lightmap: each texel shows its cache's irradiance for the cache normal. */
-    t1 = tcpu_now_ms();
+    t1 = lc_clock_ms();
     size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
     if (st->sh_lightmap && !t->lightmap_sh) {
         t->lightmap_sh = calloc(texels * cap * 3, sizeof(float));
@@ -436,7 +431,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
         tcpu_irradiance(sh, bands, 1, v->caches[c].normal, e);
         if (st->sh_lightmap) memcpy(t->lightmap_sh + i * cap * 3, sh, cap * 3 * sizeof(float));
     }
-    double t2 = tcpu_now_ms();
+    double t2 = lc_clock_ms();
     fr->stage_ms[LC_STAGE_LIGHTMAP] = t2 - t1;
 
     /* Grid: cosine-convolved L2 irradiance SH per sample. */
@@ -452,7 +447,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
         for (int j = 0; j < nc9; j++)
             for (int k = 0; k < 3; k++) g[3 * j + k] = a[j] * sh[3 * j + k];
     }
-    double t3 = tcpu_now_ms();
+    double t3 = lc_clock_ms();
     fr->stage_ms[LC_STAGE_GRID] = t3 - t2;
 
     if (in->n_objects > t->object_cap) {
@@ -466,7 +461,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     }
     for (uint32_t i = 0; i < in->n_objects; i++)
         tcpu_grid_sample(t, in->object_pos + 3 * (size_t)i, t->object_sh + 27 * (size_t)i);
-    fr->stage_ms[LC_STAGE_OBJECTS] = tcpu_now_ms() - t3;
+    fr->stage_ms[LC_STAGE_OBJECTS] = lc_clock_ms() - t3;
 
     /* Arrays only: the engine front fills the dimensions from the bake and the settings. */
     fr->lightmap = t->lightmap;

@@ -12,6 +12,7 @@
 #include <time.h>
 
 #include "engine/transport.h"
+#include "util/clock.h"
 #include "util/log.h"
 #include "util/parallel.h"
 #include "util/rng.h"
@@ -49,12 +50,6 @@ struct lc_engine {
     int have_state;
     lc_engine_frame frame;
 };
-
-static double engine_now_ms(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 static void engine_embree_error(void *user, enum RTCError code, const char *str) {
     (void)user;
@@ -527,7 +522,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
                       size_t errlen) {
     const lc_lcb_view *v = e->v;
     if (lc_engine_validate_state(e, st, err, errlen) != 0) return -1;
-    double t0 = engine_now_ms();
+    double t0 = lc_clock_ms();
 
     /* What changed since the last relight. */
     size_t nm = (size_t)v->n_materials * 3;
@@ -553,7 +548,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
         e->frame.revision = st->revision;
         e->frame.stages_run = 0;
         for (int i = 0; i < LC_STAGE_COUNT; i++) e->frame.stage_ms[i] = 0;
-        e->frame.total_ms = engine_now_ms() - t0;
+        e->frame.total_ms = lc_clock_ms() - t0;
         *frame = &e->frame;
         return 0;
     }
@@ -577,7 +572,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
         e->sky_valid = 0;
     }
 
-    double t1 = engine_now_ms();
+    double t1 = lc_clock_ms();
     uint32_t stages_run = 0;
     if (lights_changed || objects_changed) {
         engine_direct_job job = {e, st->lights, st->n_lights};
@@ -616,7 +611,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
             e->b0[3 * s + k] = (float)M_PI * em + sf->albedo[k] * (e->e_direct[3 * s + k] + fmaxf(0.0f, es));
         }
     }
-    double t2 = engine_now_ms();
+    double t2 = lc_clock_ms();
 
     lc_transport_input in = {.b0 = e->b0,
                              .settings = st->settings,
@@ -656,7 +651,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
         stages_run |= 1u << LC_STAGE_CHROMA;
     fr.stages_run = stages_run;
     fr.revision = st->revision;
-    fr.total_ms = engine_now_ms() - t0;
+    fr.total_ms = lc_clock_ms() - t0;
     e->frame = fr;
     *frame = &e->frame;
     return 0;

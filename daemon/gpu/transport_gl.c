@@ -30,6 +30,7 @@
 #include "engine/transport.h"
 #include "gpu/egl_context.h"
 #include "gpu/gl_util.h"
+#include "util/clock.h"
 #include "util/log.h"
 #include "util/sh.h"
 
@@ -78,12 +79,6 @@ typedef struct tgl {
     uint32_t object_cap;
 } tgl;
 
-static double tgl_now_ms(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
 /* Runs on the compute thread; frees everything, tolerating a half-built impl. */
 static void tgl_release(void *impl) {
     tgl *t = impl;
@@ -122,9 +117,9 @@ static GLuint tgl_gather_program(tgl *t, int bands, int ncc_bands, char *err, si
     snprintf(defs, sizeof defs, "#define BANDS %d\n#define NC %d\n#define NCC %d\n#define CHROMA %d\n", bands,
              bands * bands, ncc_bands * ncc_bands, ncc_bands < bands);
     snprintf(name, sizeof name, "gather.comp (bands %d, chroma bands %d)", bands, ncc_bands);
-    double t0 = tgl_now_ms();
+    double t0 = lc_clock_ms();
     *slot = lc_gl_compile_program_defs(name, lc_gl_shader_source("gather"), defs, err, errlen);
-    if (*slot) lc_debug("egl", "compiled %s in %.1f ms", name, tgl_now_ms() - t0);
+    if (*slot) lc_debug("egl", "compiled %s in %.1f ms", name, lc_clock_ms() - t0);
     return *slot;
 }
 
@@ -328,9 +323,9 @@ static void tgl_uniform_count(GLuint prog, size_t n) { glProgramUniform1ui(prog,
 
 /* Reads bytes of buf into dst, timing it into ms. */
 static void tgl_read(GLuint buf, size_t bytes, void *dst, double *ms) {
-    double t0 = tgl_now_ms();
+    double t0 = lc_clock_ms();
     if (bytes) glGetNamedBufferSubData(buf, 0, (GLsizeiptr)bytes, dst);
-    *ms += tgl_now_ms() - t0;
+    *ms += lc_clock_ms() - t0;
 }
 
 /* Runs on the compute thread. */
@@ -515,13 +510,13 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
     tgl_read(t->b_radiosity, (size_t)v->n_surfels * 12, t->radiosity, &rb[LC_STAGE_BOUNCE]);
     tgl_read(t->b_flux, (size_t)v->n_nodes * 12, t->flux, &rb[LC_STAGE_PULL]);
     tgl_read(t->b_cache_sh, (size_t)v->n_caches * nc * 12, t->cache_tmp, &rb[LC_STAGE_GATHER]);
-    double t0 = tgl_now_ms();
+    double t0 = lc_clock_ms();
     /* GPU stride is bands^2; the frame's (as the CPU backend's) is LC_SH_MAX_COEFFS. */
     for (uint32_t c = 0; c < v->n_caches; c++)
         memcpy(t->cache_sh + (size_t)c * TGL_CAP * 3, t->cache_tmp + (size_t)c * nc * 3, (size_t)nc * 3 * sizeof(float));
-    rb[LC_STAGE_GATHER] += tgl_now_ms() - t0;
+    rb[LC_STAGE_GATHER] += lc_clock_ms() - t0;
     tgl_read(t->b_lightmap, t->texels * 12, t->lightmap, &rb[LC_STAGE_LIGHTMAP]);
-    t0 = tgl_now_ms();
+    t0 = lc_clock_ms();
     if (st->sh_lightmap) { /* a per-texel copy of the cache SH: cheaper on the host than read back */
         if (!t->lightmap_sh) t->lightmap_sh = calloc(t->texels * TGL_CAP * 3 + 1, sizeof(float));
         if (!t->lightmap_sh) {
@@ -537,7 +532,7 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
                 memcpy(dst, t->cache_sh + (size_t)c * TGL_CAP * 3, TGL_CAP * 3 * sizeof(float));
         }
     }
-    rb[LC_STAGE_LIGHTMAP] += tgl_now_ms() - t0;
+    rb[LC_STAGE_LIGHTMAP] += lc_clock_ms() - t0;
     tgl_read(t->b_grid_sh, (size_t)t->cells * 108, t->grid_sh, &rb[LC_STAGE_GRID]);
     tgl_read(t->b_obj_sh, (size_t)in->n_objects * 108, t->object_sh, &rb[LC_STAGE_OBJECTS]);
     if ((rc = lc_gl_check("egl transport: read-back", err, errlen)) != 0) goto gl_err;
