@@ -15,7 +15,7 @@
 
 #include "lcb/lcb.h"
 
-#define LC_ENGINE_ID_MAX 64
+#define LC_ENGINE_ID_MAX 65 /* ids up to 64 bytes, as lucent/1 allows */
 #define LC_ENGINE_MAX_LIGHTS 1024
 #define LC_ENGINE_MAX_OBJECTS 4096
 

@@ -1,0 +1,242 @@
+/* compute: the relight thread (see compute.h). Locks: `lock` guards pending, latest,
+ * sequence, stop, count and every lc_published refcount. */
+#include "compute.h"
+
+#include <libwebsockets.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "engine/engine.h"
+#include "util/clock.h"
+#include "util/log.h"
+
+typedef struct compute_job {
+    lc_engine_state st;
+    lc_engine_light *lights;
+    lc_engine_object *objects;
+    float *emission;
+    char (*object_ids)[LC_PROTO_ID_MAX + 1];
+} compute_job;
+
+struct lc_compute {
+    const lc_lcb *bake;
+    struct lws_context *ctx;
+    int backend, threads;
+    pthread_t thread;
+    pthread_mutex_t lock;
+    pthread_cond_t cond;
+    compute_job *pending;   /* guarded by lock: newest unstarted submission */
+    lc_published *latest;   /* guarded by lock */
+    uint64_t sequence;      /* guarded by lock: publications so far */
+    uint64_t count;         /* guarded by lock */
+    int stop;               /* guarded by lock */
+    int ready;              /* guarded by lock: 1 engine up, -1 failed */
+    char start_err[512];
+    char backend_name[16];
+};
+
+static void compute_job_free(compute_job *j) {
+    if (!j) return;
+    free(j->lights);
+    free(j->objects);
+    free(j->emission);
+    free(j->object_ids);
+    free(j);
+}
+
+static void published_free(lc_published *p) {
+    if (!p) return;
+    free(p->lightmap);
+    free(p->grid_sh);
+    free(p->object_ids);
+    free(p->object_sh);
+    free(p);
+}
+
+/* Compute thread. */
+static lc_published *compute_publish(const lc_engine_frame *fr, compute_job *job) {
+    lc_published *p = calloc(1, sizeof *p);
+    if (!p) return NULL;
+    size_t texels = (size_t)fr->lightmap_width * fr->lightmap_height;
+    size_t cells = (size_t)fr->grid_dims[0] * fr->grid_dims[1] * fr->grid_dims[2];
+    p->lightmap = malloc(texels * 3 * sizeof(float));
+    p->grid_sh = malloc(cells * 27 * sizeof(float));
+    p->object_sh = malloc(((size_t)fr->n_objects + 1) * 27 * sizeof(float));
+    p->object_ids = malloc(((size_t)fr->n_objects + 1) * sizeof *p->object_ids);
+    if (!p->lightmap || !p->grid_sh || !p->object_sh || !p->object_ids) {
+        published_free(p);
+        return NULL;
+    }
+    memcpy(p->lightmap, fr->lightmap, texels * 3 * sizeof(float));
+    memcpy(p->grid_sh, fr->grid_sh, cells * 27 * sizeof(float));
+    if (fr->n_objects) {
+        memcpy(p->object_sh, fr->object_sh, (size_t)fr->n_objects * 27 * sizeof(float));
+        memcpy(p->object_ids, job->object_ids, (size_t)fr->n_objects * sizeof *p->object_ids);
+    }
+    p->refs = 1;
+    p->revision = fr->revision;
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    p->timestamp_us = (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
+    p->relight_ms = fr->total_ms;
+    p->lm_w = fr->lightmap_width;
+    p->lm_h = fr->lightmap_height;
+    memcpy(p->grid_dims, fr->grid_dims, sizeof p->grid_dims);
+    p->n_objects = fr->n_objects;
+    return p;
+}
+
+static void *compute_main(void *arg) {
+    lc_compute *c = arg;
+    char err[512];
+    lc_engine *e = lc_engine_create(c->bake, (lc_backend_kind)c->backend, c->threads, err, sizeof err);
+    pthread_mutex_lock(&c->lock);
+    if (!e) {
+        snprintf(c->start_err, sizeof c->start_err, "%s", err);
+        c->ready = -1;
+    } else {
+        snprintf(c->backend_name, sizeof c->backend_name, "%s", lc_engine_backend_name(e));
+        c->ready = 1;
+    }
+    pthread_cond_broadcast(&c->cond);
+    pthread_mutex_unlock(&c->lock);
+    if (!e) return NULL;
+    for (;;) {
+        pthread_mutex_lock(&c->lock);
+        while (!c->pending && !c->stop) pthread_cond_wait(&c->cond, &c->lock);
+        if (!c->pending) { /* stop, nothing left in flight */
+            pthread_mutex_unlock(&c->lock);
+            break;
+        }
+        compute_job *job = c->pending;
+        c->pending = NULL;
+        pthread_mutex_unlock(&c->lock);
+
+        const lc_engine_frame *fr;
+        lc_published *p = NULL;
+        if (lc_engine_relight(e, &job->st, &fr, err, sizeof err) != 0)
+            lc_error("compute", "relight of revision %llu failed: %s", (unsigned long long)job->st.revision, err);
+        else
+            p = compute_publish(fr, job);
+        compute_job_free(job);
+        if (!p) continue;
+        pthread_mutex_lock(&c->lock);
+        lc_published *old = c->latest;
+        c->latest = p;
+        c->sequence++;
+        c->count++;
+        if (old && --old->refs == 0) published_free(old);
+        pthread_mutex_unlock(&c->lock);
+        lws_cancel_service(c->ctx); /* the only lws call allowed off the service thread */
+    }
+    lc_engine_release(e);
+    return NULL;
+}
+
+lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, struct lws_context *ctx, char *err,
+                             size_t errlen) {
+    lc_compute *c = calloc(1, sizeof *c);
+    if (!c) {
+        lc_set_err(err, errlen, "out of memory");
+        return NULL;
+    }
+    c->bake = bake;
+    c->ctx = ctx;
+    c->backend = backend;
+    c->threads = threads;
+    pthread_mutex_init(&c->lock, NULL);
+    pthread_cond_init(&c->cond, NULL);
+    if (pthread_create(&c->thread, NULL, compute_main, c) != 0) {
+        lc_set_err(err, errlen, "cannot start the compute thread");
+        free(c);
+        return NULL;
+    }
+    pthread_mutex_lock(&c->lock);
+    while (c->ready == 0) pthread_cond_wait(&c->cond, &c->lock);
+    int ok = c->ready == 1;
+    pthread_mutex_unlock(&c->lock);
+    if (!ok) {
+        lc_set_err(err, errlen, "relight engine: %s", c->start_err);
+        pthread_join(c->thread, NULL);
+        free(c);
+        return NULL;
+    }
+    return c;
+}
+
+int lc_compute_submit(lc_compute *c, const lc_state *state) {
+    compute_job *j = calloc(1, sizeof *j);
+    if (!j) return -1;
+    if (lc_state_to_engine(state, &j->st, &j->lights, &j->objects, &j->emission) != 0) {
+        free(j);
+        return -1;
+    }
+    j->object_ids = calloc(state->n_objects ? state->n_objects : 1, sizeof *j->object_ids);
+    if (!j->object_ids) {
+        compute_job_free(j);
+        return -1;
+    }
+    for (uint32_t i = 0; i < state->n_objects; i++)
+        memcpy(j->object_ids[i], state->objects[i].id, sizeof j->object_ids[i]);
+    pthread_mutex_lock(&c->lock);
+    compute_job *old = c->pending; /* latest wins */
+    c->pending = j;
+    pthread_cond_signal(&c->cond);
+    pthread_mutex_unlock(&c->lock);
+    compute_job_free(old);
+    return 0;
+}
+
+lc_published *lc_compute_take_newer(lc_compute *c, uint64_t *seen) {
+    lc_published *p = NULL;
+    pthread_mutex_lock(&c->lock);
+    if (c->latest && c->sequence > *seen) {
+        p = c->latest;
+        p->refs++;
+        *seen = c->sequence;
+    }
+    pthread_mutex_unlock(&c->lock);
+    return p;
+}
+
+void lc_published_release(lc_compute *c, lc_published *p) {
+    if (!p) return;
+    pthread_mutex_lock(&c->lock);
+    int last = --p->refs == 0;
+    pthread_mutex_unlock(&c->lock);
+    if (last) published_free(p);
+}
+
+lc_published *lc_published_ref(lc_compute *c, lc_published *p) {
+    pthread_mutex_lock(&c->lock);
+    p->refs++;
+    pthread_mutex_unlock(&c->lock);
+    return p;
+}
+
+uint64_t lc_compute_count(lc_compute *c) {
+    pthread_mutex_lock(&c->lock);
+    uint64_t n = c->count;
+    pthread_mutex_unlock(&c->lock);
+    return n;
+}
+
+const char *lc_compute_backend(lc_compute *c) { return c->backend_name; }
+
+void lc_compute_stop(lc_compute *c) {
+    if (!c) return;
+    pthread_mutex_lock(&c->lock);
+    c->stop = 1;
+    compute_job *pending = c->pending; /* not started: dropped; the one in flight finishes */
+    c->pending = NULL;
+    pthread_cond_broadcast(&c->cond);
+    pthread_mutex_unlock(&c->lock);
+    compute_job_free(pending);
+    pthread_join(c->thread, NULL);
+    if (c->latest) published_free(c->latest);
+    pthread_mutex_destroy(&c->lock);
+    pthread_cond_destroy(&c->cond);
+    free(c);
+}

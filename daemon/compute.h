@@ -1,0 +1,49 @@
+/* compute: the relight engine on its own thread. The service thread submits state copies
+ * (latest wins: a submission replaces one not yet started, so a burst of updates costs one
+ * relight); the compute thread relights, publishes an immutable, refcounted result under
+ * `compute.lock`, and wakes the service thread with lws_cancel_service(). */
+#ifndef LC_COMPUTE_H
+#define LC_COMPUTE_H
+#include <stdint.h>
+
+#include "lcb/lcb.h"
+#include "state.h"
+
+struct lws_context;
+
+/* One relight's outputs. Immutable once published; free with lc_published_release. */
+typedef struct lc_published {
+    int refs; /* guarded by compute.lock */
+    uint64_t revision;
+    uint64_t timestamp_us; /* when the relight finished (µs since the epoch) */
+    double relight_ms;
+    uint32_t lm_w, lm_h;
+    float *lightmap; /* W*H*3 irradiance */
+    uint32_t grid_dims[3];
+    float *grid_sh; /* cells*27 */
+    uint32_t n_objects;
+    char (*object_ids)[LC_PROTO_ID_MAX + 1];
+    float *object_sh; /* n_objects*27 */
+} lc_published;
+
+typedef struct lc_compute lc_compute;
+
+/* Starts the thread and creates the engine on it (the EGL context belongs to that thread).
+ * Returns NULL with err when the engine cannot start. */
+lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, struct lws_context *ctx, char *err,
+                             size_t errlen);
+/* Service thread: submit the state to relight (copied). */
+int lc_compute_submit(lc_compute *c, const lc_state *state);
+/* Service thread: a new reference to the newest result (NULL before the first), or NULL if
+ * its revision/sequence is not newer than *seen (then *seen is unchanged). */
+lc_published *lc_compute_take_newer(lc_compute *c, uint64_t *seen);
+void lc_published_release(lc_compute *c, lc_published *p);
+/* Service thread: another reference to p (which the caller holds). */
+lc_published *lc_published_ref(lc_compute *c, lc_published *p);
+/* Relights finished so far, and the last relight's milliseconds (for /metrics). */
+uint64_t lc_compute_count(lc_compute *c);
+/* Finishes the relight in flight and joins the thread. NULL-safe. */
+void lc_compute_stop(lc_compute *c);
+const char *lc_compute_backend(lc_compute *c);
+
+#endif

@@ -1,0 +1,173 @@
+/* config: the option table and the JSON config file (see config.h). */
+#include "config.h"
+
+#include <cjson/cJSON.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "util/fsutil.h"
+#include "util/log.h"
+
+#ifndef LUCENT_DEFAULT_BAKE
+#define LUCENT_DEFAULT_BAKE "cornell.lcb"
+#endif
+
+#define OFF(f) offsetof(lc_config, f)
+static const lc_opt config_options[] = {
+    {"config", LC_OPT_STRING, OFF(config_file), 0, LC_CONFIG_PATH_MAX, NULL, NULL,
+     "JSON config file (keys are these option names; flags override it)", "FILE", NULL},
+    {"bake", LC_OPT_STRING, OFF(bake), 1, LC_CONFIG_PATH_MAX, LUCENT_DEFAULT_BAKE, NULL,
+     "bake file to serve (default: the embedded Cornell box)", "FILE", NULL},
+    {"listen", LC_OPT_STRING, OFF(listen), 1, 128, "127.0.0.1", NULL, "interface address to listen on", "ADDR",
+     NULL},
+    {"port", LC_OPT_INT, OFF(port), 0, 65535, "7700", NULL, "TCP port (0 = any free port, logged)", NULL, NULL},
+    {"state-dir", LC_OPT_STRING, OFF(state_dir), 1, LC_CONFIG_PATH_MAX, "lucent-state", NULL,
+     "directory of the journal and snapshot", "DIR", NULL},
+    {"fsync", LC_OPT_ENUM, OFF(fsync_mode), 0, 0, "always", "always|everysec",
+     "journal durability: fsync before every ok, or once a second", NULL, NULL},
+    {"controller-tokens", LC_OPT_STRING, OFF(controller_tokens), 0, LC_CONFIG_TOKENS_MAX, NULL, NULL,
+     "comma-separated tokens with the controller role (none = no authentication: every client controls)",
+     "LIST", NULL},
+    {"viewer-tokens", LC_OPT_STRING, OFF(viewer_tokens), 0, LC_CONFIG_TOKENS_MAX, NULL, NULL,
+     "comma-separated tokens with the viewer role", "LIST", NULL},
+    {"origins", LC_OPT_STRING, OFF(origins), 0, LC_CONFIG_TOKENS_MAX, NULL, NULL,
+     "comma-separated Origin allow-list for browsers (none = any; clients without Origin always pass)", "LIST",
+     NULL},
+    {"www", LC_OPT_STRING, OFF(www), 0, LC_CONFIG_PATH_MAX, NULL, NULL, "directory of static files served over HTTP",
+     "DIR", NULL},
+    {"max-message", LC_OPT_INT, OFF(max_message), 1024, 16777216, "65536", NULL, "largest text message (bytes)",
+     NULL, NULL},
+    {"max-depth", LC_OPT_INT, OFF(max_depth), 4, 64, "16", NULL, "deepest JSON nesting", NULL, NULL},
+    {"max-batch", LC_OPT_INT, OFF(max_batch), 1, 4096, "64", NULL, "ops per batch", NULL, NULL},
+    {"max-lights", LC_OPT_INT, OFF(max_lights), 1, 1024, "1024", NULL, "lights held", NULL, NULL},
+    {"max-objects", LC_OPT_INT, OFF(max_objects), 1, 4096, "4096", NULL, "object instances held", NULL, NULL},
+    {"max-clients", LC_OPT_INT, OFF(max_clients), 1, 100000, "1000", NULL, "connected clients", NULL, NULL},
+    {"rate", LC_OPT_INT, OFF(rate), 1, 100000, "100", NULL, "requests per second per connection (burst 2x)", NULL,
+     NULL},
+    {"hello-timeout", LC_OPT_INT, OFF(hello_timeout), 1, 600, "5", NULL, "seconds a client has to send hello",
+     NULL, NULL},
+    {"backend", LC_OPT_ENUM, OFF(backend), 0, 0, "auto", "auto|cpu|egl", "relight backend", NULL, NULL},
+    {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "relight threads (0 = all cores)", NULL, NULL},
+    {"tile", LC_OPT_INT, OFF(tile), 8, 256, "32", NULL, "lightmap tile size for delta frames (texels)", NULL, NULL},
+    {"keyframe-interval", LC_OPT_INT, OFF(keyframe_interval), 1, 100000, "30", NULL,
+     "frames between lightmap keyframes", NULL, NULL},
+    {"delta-threshold", LC_OPT_FLOAT, OFF(delta_threshold), 0, 1, "0.001", NULL,
+     "relative texel change that puts a tile in a delta frame", NULL, NULL},
+    {"compact-bytes", LC_OPT_INT, OFF(compact_bytes), 4096, 1073741824, "1048576", NULL,
+     "journal size that triggers a snapshot", NULL, NULL},
+    {"log-level", LC_OPT_ENUM, OFF(log_level), 0, 0, "info", "debug|info|warn|error", "log level", NULL, NULL},
+    {"check-config", LC_OPT_BOOL, OFF(check_config), 0, 1, "false", NULL,
+     "validate the configuration and the bake file, then exit (0 valid, 2 invalid)", NULL, NULL},
+    {NULL, 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL},
+};
+#undef OFF
+
+const lc_opt *lc_config_options(void) { return config_options; }
+
+/* Applies a JSON object of option names to values (strings, numbers, booleans). */
+static int config_apply_json(lc_config *c, const char *path, char *err, size_t errlen) {
+    size_t len;
+    char *text = lc_fs_read(path, 1 << 20, &len, err, errlen);
+    if (!text) return -1;
+    cJSON *root = cJSON_ParseWithLength(text, len);
+    free(text);
+    if (!cJSON_IsObject(root)) {
+        lc_set_err(err, errlen, "%s: not a JSON object (check the syntax)", path);
+        cJSON_Delete(root);
+        return -1;
+    }
+    int rc = 0;
+    for (const cJSON *it = root->child; it; it = it->next) {
+        char value[LC_CONFIG_TOKENS_MAX];
+        if (cJSON_IsString(it)) snprintf(value, sizeof value, "%s", it->valuestring);
+        else if (cJSON_IsBool(it)) snprintf(value, sizeof value, "%s", cJSON_IsTrue(it) ? "true" : "false");
+        else if (cJSON_IsNumber(it)) snprintf(value, sizeof value, "%.17g", it->valuedouble);
+        else if (cJSON_IsArray(it)) { /* token lists may be arrays of strings */
+            size_t n = 0;
+            value[0] = 0;
+            for (const cJSON *e = it->child; e; e = e->next) {
+                if (!cJSON_IsString(e)) {
+                    lc_set_err(err, errlen, "%s: \"%s\" must hold strings", path, it->string);
+                    rc = -1;
+                    break;
+                }
+                n += (size_t)snprintf(value + n, sizeof value - n, "%s%s", n ? "," : "", e->valuestring);
+                if (n >= sizeof value) {
+                    lc_set_err(err, errlen, "%s: \"%s\" is too long", path, it->string);
+                    rc = -1;
+                    break;
+                }
+            }
+            if (rc) break;
+        } else {
+            lc_set_err(err, errlen, "%s: \"%s\" must be a string, number or boolean", path, it->string);
+            rc = -1;
+            break;
+        }
+        if (!strcmp(it->string, "config")) {
+            lc_set_err(err, errlen, "%s: \"config\" cannot be set inside a config file", path);
+            rc = -1;
+            break;
+        }
+        char oerr[512];
+        if (lc_opt_set(config_options, c, it->string, value, oerr, sizeof oerr) != 0) {
+            lc_set_err(err, errlen, "%s: %s", path, oerr);
+            rc = -1;
+            break;
+        }
+    }
+    cJSON_Delete(root);
+    return rc;
+}
+
+int lc_config_load(lc_config *c, int argc, char **argv, char *err, size_t errlen) {
+    memset(c, 0, sizeof *c);
+    if (lc_opt_defaults(config_options, c, err, errlen) != 0) return -1;
+    /* First pass only to find --config; the file sits under the flags. */
+    lc_config probe;
+    memset(&probe, 0, sizeof probe);
+    char *pos[1];
+    if (lc_opt_parse(config_options, &probe, argc, argv, 1, pos, 0, err, errlen) < 0) return -1;
+    if (probe.config_file[0] && config_apply_json(c, probe.config_file, err, errlen) != 0) return -1;
+    if (lc_opt_parse(config_options, c, argc, argv, 1, pos, 0, err, errlen) < 0) return -1;
+    return lc_config_validate(c, err, errlen);
+}
+
+int lc_config_has_token(const char *list, const char *token) {
+    size_t tl = strlen(token);
+    for (const char *p = list; *p;) {
+        const char *comma = strchr(p, ',');
+        size_t len = comma ? (size_t)(comma - p) : strlen(p);
+        if (len == tl && strncmp(p, token, len) == 0) return 1;
+        if (!comma) break;
+        p = comma + 1;
+    }
+    return 0;
+}
+
+int lc_config_validate(const lc_config *c, char *err, size_t errlen) {
+    /* A token in both lists would make the role ambiguous. */
+    for (const char *p = c->viewer_tokens; *p;) {
+        const char *comma = strchr(p, ',');
+        char tok[LC_CONFIG_TOKENS_MAX];
+        size_t len = comma ? (size_t)(comma - p) : strlen(p);
+        memcpy(tok, p, len);
+        tok[len] = 0;
+        if (len == 0) {
+            lc_set_err(err, errlen, "--viewer-tokens: empty token in the list");
+            return -1;
+        }
+        if (lc_config_has_token(c->controller_tokens, tok)) {
+            lc_set_err(err, errlen, "--viewer-tokens: token '%s' is also a controller token", tok);
+            return -1;
+        }
+        if (!comma) break;
+        p = comma + 1;
+    }
+    if (c->viewer_tokens[0] && !c->controller_tokens[0]) {
+        lc_set_err(err, errlen, "--viewer-tokens without --controller-tokens would let anyone control; set both");
+        return -1;
+    }
+    return 0;
+}

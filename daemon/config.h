@@ -1,0 +1,50 @@
+/* config: lucentd's settings. One option table (name, type, bounds, default, help) drives
+ * the JSON config file, the command-line flags (which override the file), --help and
+ * --check-config. */
+#ifndef LC_CONFIG_H
+#define LC_CONFIG_H
+#include <stddef.h>
+
+#include "util/opt.h"
+
+#define LC_CONFIG_PATH_MAX 1024
+#define LC_CONFIG_TOKENS_MAX 2048
+
+typedef struct lc_config {
+    char config_file[LC_CONFIG_PATH_MAX];
+    char bake[LC_CONFIG_PATH_MAX];
+    char listen[128];
+    int port;
+    char state_dir[LC_CONFIG_PATH_MAX];
+    int fsync_mode; /* 0 always, 1 everysec */
+    char controller_tokens[LC_CONFIG_TOKENS_MAX]; /* comma-separated; empty = no auth, everyone controls */
+    char viewer_tokens[LC_CONFIG_TOKENS_MAX];
+    char origins[LC_CONFIG_TOKENS_MAX];           /* comma-separated allow-list; empty = any */
+    char www[LC_CONFIG_PATH_MAX];
+    int max_message;
+    int max_depth;
+    int max_batch;
+    int max_lights;
+    int max_objects;
+    int max_clients;
+    int rate;          /* requests per second per connection */
+    int hello_timeout; /* seconds */
+    int backend;       /* 0 auto, 1 cpu, 2 egl */
+    int threads;
+    int tile;          /* lightmap tile size for delta frames */
+    int keyframe_interval;
+    double delta_threshold; /* relative change that marks a tile dirty */
+    int compact_bytes; /* journal size that triggers a snapshot */
+    int log_level;
+    int check_config;
+} lc_config;
+
+const lc_opt *lc_config_options(void);
+/* Defaults, then --config FILE (found in argv), then the flags. Returns 0 or -1 with err. */
+int lc_config_load(lc_config *c, int argc, char **argv, char *err, size_t errlen);
+/* Cross-field checks (tokens, paths). */
+int lc_config_validate(const lc_config *c, char *err, size_t errlen);
+/* 1 if token is in the comma-separated list. */
+int lc_config_has_token(const char *list, const char *token);
+
+#endif

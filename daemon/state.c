@@ -1,0 +1,358 @@
+/* state: the dynamic scene state and its atomic, validated changes (see state.h). */
+#include "state.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "util/log.h"
+
+static void state_err(lc_proto_error *err, const char *code, int batch, uint32_t op, const char *field,
+                      const char *fmt, const char *arg) {
+    if (!err) return;
+    snprintf(err->code, sizeof err->code, "%s", code);
+    if (batch) snprintf(err->pointer, sizeof err->pointer, "/ops/%u%s", op, field);
+    else snprintf(err->pointer, sizeof err->pointer, "%s", field);
+    snprintf(err->message, sizeof err->message, fmt, arg);
+}
+
+int lc_state_init(lc_state *s, const lc_lcb *bake, const lc_state_limits *limits) {
+    memset(s, 0, sizeof *s);
+    s->scene = lc_lcb_get(bake);
+    s->limits = *limits;
+    uint32_t nm = s->scene->n_materials;
+    s->emission = calloc(nm ? nm : 1, sizeof *s->emission);
+    if (!s->emission) return -1;
+    for (uint32_t m = 0; m < nm; m++) memcpy(s->emission[m], s->scene->materials[m].emission, sizeof s->emission[m]);
+    lc_engine_settings d = lc_engine_default_settings(bake);
+    s->settings.present = (1u << LC_SET_BOUNCES) | (1u << LC_SET_BANDS) | (1u << LC_SET_PROGRESSIVE) |
+                          (1u << LC_SET_CHROMA) | (1u << LC_SET_CHROMA_BANDS);
+    s->settings.bounces = d.bounces;
+    s->settings.bands = d.bands;
+    s->settings.progressive = d.progressive;
+    s->settings.chroma_compression = d.chroma_compression;
+    s->settings.chroma_bands = d.chroma_bands;
+    s->environment.kind = 0;
+    s->environment.intensity = 1;
+    return 0;
+}
+
+void lc_state_release(lc_state *s) {
+    if (!s) return;
+    free(s->lights);
+    free(s->objects);
+    free(s->emission);
+    memset(s, 0, sizeof *s);
+}
+
+int lc_state_clone(lc_state *dst, const lc_state *src) {
+    *dst = *src;
+    dst->lights = NULL;
+    dst->objects = NULL;
+    dst->emission = NULL;
+    uint32_t nm = src->scene->n_materials ? src->scene->n_materials : 1;
+    dst->lights = malloc((src->n_lights ? src->n_lights : 1) * sizeof *dst->lights);
+    dst->objects = malloc((src->n_objects ? src->n_objects : 1) * sizeof *dst->objects);
+    dst->emission = malloc(nm * sizeof *dst->emission);
+    if (!dst->lights || !dst->objects || !dst->emission) {
+        lc_state_release(dst);
+        return -1;
+    }
+    memcpy(dst->lights, src->lights, src->n_lights * sizeof *dst->lights);
+    memcpy(dst->objects, src->objects, src->n_objects * sizeof *dst->objects);
+    memcpy(dst->emission, src->emission, src->scene->n_materials * sizeof *dst->emission);
+    return 0;
+}
+
+/* Binary search in an id-sorted array of records whose first member is the id. Returns the
+ * index, or -(insertion point) - 1. */
+static long state_find(const void *base, uint32_t n, size_t stride, const char *id) {
+    long lo = 0, hi = (long)n - 1;
+    while (lo <= hi) {
+        long mid = (lo + hi) / 2;
+        int c = strcmp((const char *)base + (size_t)mid * stride, id);
+        if (c == 0) return mid;
+        if (c < 0) lo = mid + 1;
+        else hi = mid - 1;
+    }
+    return -lo - 1;
+}
+
+/* Inserts or replaces the record (sorted by id). The array has room for one more. */
+static void state_upsert(void *base, uint32_t *n, size_t stride, const void *rec) {
+    long at = state_find(base, *n, stride, (const char *)rec);
+    char *b = base;
+    if (at >= 0) {
+        memcpy(b + (size_t)at * stride, rec, stride);
+        return;
+    }
+    size_t pos = (size_t)(-at - 1);
+    memmove(b + (pos + 1) * stride, b + pos * stride, (*n - pos) * stride);
+    memcpy(b + pos * stride, rec, stride);
+    (*n)++;
+}
+
+static int state_remove(void *base, uint32_t *n, size_t stride, const char *id) {
+    long at = state_find(base, *n, stride, id);
+    if (at < 0) return -1;
+    char *b = base;
+    memmove(b + (size_t)at * stride, b + ((size_t)at + 1) * stride, (*n - (size_t)at - 1) * stride);
+    (*n)--;
+    return 0;
+}
+
+static long state_asset(const lc_lcb_view *v, const char *name) {
+    for (uint32_t i = 0; i < v->n_assets; i++)
+        if (strcmp(v->assets[i].name, name) == 0) return i;
+    return -1;
+}
+
+static long state_material(const lc_lcb_view *v, const char *name) {
+    for (uint32_t i = 0; i < v->n_materials; i++)
+        if (strcmp(v->materials[i].name, name) == 0) return i;
+    return -1;
+}
+
+/* Applies one op to s (which has spare capacity for one more light and object). */
+static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32_t i, lc_proto_error *err) {
+    switch (op->type) {
+    case LC_REQ_LIGHT_SET: {
+        if (state_find(s->lights, s->n_lights, sizeof *s->lights, op->light.id) < 0 &&
+            s->n_lights >= s->limits.max_lights) {
+            char lim[32];
+            snprintf(lim, sizeof lim, "%u", s->limits.max_lights);
+            state_err(err, "limit_exceeded", batch, i, "/light/id", "the server holds at most %s lights", lim);
+            return -1;
+        }
+        state_upsert(s->lights, &s->n_lights, sizeof *s->lights, &op->light);
+        return 0;
+    }
+    case LC_REQ_LIGHT_REMOVE:
+        if (state_remove(s->lights, &s->n_lights, sizeof *s->lights, op->target) != 0) {
+            state_err(err, "unknown_id", batch, i, "/light_id", "no light with id '%s'", op->target);
+            return -1;
+        }
+        return 0;
+    case LC_REQ_OBJECT_SET: {
+        if (state_asset(s->scene, op->object.asset) < 0) {
+            state_err(err, "unknown_asset", batch, i, "/object/asset", "the scene has no asset '%s'", op->object.asset);
+            return -1;
+        }
+        if (state_find(s->objects, s->n_objects, sizeof *s->objects, op->object.id) < 0 &&
+            s->n_objects >= s->limits.max_objects) {
+            char lim[32];
+            snprintf(lim, sizeof lim, "%u", s->limits.max_objects);
+            state_err(err, "limit_exceeded", batch, i, "/object/id", "the server holds at most %s objects", lim);
+            return -1;
+        }
+        state_upsert(s->objects, &s->n_objects, sizeof *s->objects, &op->object);
+        return 0;
+    }
+    case LC_REQ_OBJECT_REMOVE:
+        if (state_remove(s->objects, &s->n_objects, sizeof *s->objects, op->target) != 0) {
+            state_err(err, "unknown_id", batch, i, "/object_id", "no object with id '%s'", op->target);
+            return -1;
+        }
+        return 0;
+    case LC_REQ_MATERIAL_SET: {
+        long m = state_material(s->scene, op->target);
+        if (m < 0) {
+            state_err(err, "unknown_material", batch, i, "/material", "the scene has no material '%s'", op->target);
+            return -1;
+        }
+        memcpy(s->emission[m], op->emission, sizeof s->emission[m]);
+        return 0;
+    }
+    case LC_REQ_ENVIRONMENT_SET:
+        s->environment = op->environment;
+        return 0;
+    case LC_REQ_SETTINGS_SET: {
+        const lc_proto_settings *n = &op->settings;
+        lc_proto_settings next = s->settings;
+        if (n->present & (1u << LC_SET_BOUNCES)) next.bounces = n->bounces;
+        if (n->present & (1u << LC_SET_BANDS)) next.bands = n->bands;
+        if (n->present & (1u << LC_SET_PROGRESSIVE)) next.progressive = n->progressive;
+        if (n->present & (1u << LC_SET_CHROMA)) next.chroma_compression = n->chroma_compression;
+        if (n->present & (1u << LC_SET_CHROMA_BANDS)) next.chroma_bands = n->chroma_bands;
+        if (!(n->present & (1u << LC_SET_CHROMA_BANDS)) && next.chroma_bands > next.bands)
+            next.chroma_bands = next.bands; /* follow a band reduction */
+        if (next.chroma_bands < 1 || next.chroma_bands > next.bands) {
+            state_err(err, "out_of_range", batch, i, "/settings/chroma_bands", "%s", "chroma_bands must be in 1..bands");
+            return -1;
+        }
+        s->settings = next;
+        return 0;
+    }
+    default:
+        state_err(err, "invalid", batch, i, "/type", "%s", "not a change operation");
+        return -1;
+    }
+}
+
+int lc_state_apply(lc_state *s, const lc_proto_op *ops, uint32_t n_ops, int batch, lc_proto_error *err) {
+    lc_state next;
+    if (lc_state_clone(&next, s) != 0) goto oom;
+    /* Room for every op to insert. */
+    lc_proto_light *l = realloc(next.lights, ((size_t)next.n_lights + n_ops + 1) * sizeof *l);
+    if (!l) goto oom_next;
+    next.lights = l;
+    lc_proto_object *o = realloc(next.objects, ((size_t)next.n_objects + n_ops + 1) * sizeof *o);
+    if (!o) goto oom_next;
+    next.objects = o;
+    for (uint32_t i = 0; i < n_ops; i++)
+        if (state_apply_one(&next, &ops[i], batch, i, err) != 0) {
+            lc_state_release(&next);
+            return -1;
+        }
+    next.revision = s->revision + 1;
+    lc_state_release(s);
+    *s = next;
+    return 0;
+oom_next:
+    lc_state_release(&next);
+oom:
+    state_err(err, "internal", 0, 0, "", "%s", "out of memory applying the change");
+    return -1;
+}
+
+int lc_state_restore(lc_state *s, const lc_proto_parsed_state *p, lc_proto_error *err) {
+    lc_state next;
+    if (lc_state_clone(&next, s) != 0) {
+        state_err(err, "internal", 0, 0, "", "%s", "out of memory");
+        return -1;
+    }
+    next.n_lights = next.n_objects = 0;
+    if (p->n_lights > s->limits.max_lights || p->n_objects > s->limits.max_objects) {
+        lc_state_release(&next);
+        state_err(err, "limit_exceeded", 0, 0, "", "%s", "the snapshot holds more lights or objects than the limits");
+        return -1;
+    }
+    lc_proto_light *l = realloc(next.lights, ((size_t)p->n_lights + 1) * sizeof *l);
+    lc_proto_object *o = l ? realloc(next.objects, ((size_t)p->n_objects + 1) * sizeof *o) : NULL;
+    if (l) next.lights = l;
+    if (o) next.objects = o;
+    if (!l || !o) {
+        lc_state_release(&next);
+        state_err(err, "internal", 0, 0, "", "%s", "out of memory");
+        return -1;
+    }
+    for (uint32_t i = 0; i < p->n_lights; i++) state_upsert(next.lights, &next.n_lights, sizeof *l, &p->lights[i]);
+    for (uint32_t i = 0; i < p->n_objects; i++) {
+        if (state_asset(next.scene, p->objects[i].asset) < 0) {
+            state_err(err, "unknown_asset", 0, 0, "/objects", "the bake has no asset '%s' (was it rebaked?)",
+                      p->objects[i].asset);
+            lc_state_release(&next);
+            return -1;
+        }
+        state_upsert(next.objects, &next.n_objects, sizeof *o, &p->objects[i]);
+    }
+    for (uint32_t i = 0; i < p->n_materials; i++) {
+        long m = state_material(next.scene, p->material_names[i]);
+        if (m >= 0) memcpy(next.emission[m], p->material_emission[i], sizeof next.emission[m]);
+        else lc_warn("state", "snapshot material '%s' is not in the bake; ignored", p->material_names[i]);
+    }
+    next.environment = p->environment;
+    lc_proto_settings st = next.settings;
+    const lc_proto_settings *ps = &p->settings;
+    if (ps->present & (1u << LC_SET_BOUNCES)) st.bounces = ps->bounces;
+    if (ps->present & (1u << LC_SET_BANDS)) st.bands = ps->bands;
+    if (ps->present & (1u << LC_SET_PROGRESSIVE)) st.progressive = ps->progressive;
+    if (ps->present & (1u << LC_SET_CHROMA)) st.chroma_compression = ps->chroma_compression;
+    if (ps->present & (1u << LC_SET_CHROMA_BANDS)) st.chroma_bands = ps->chroma_bands;
+    if (st.chroma_bands > st.bands) st.chroma_bands = st.bands;
+    next.settings = st;
+    next.revision = p->revision;
+    lc_state_release(s);
+    *s = next;
+    return 0;
+}
+
+int lc_state_to_proto(const lc_state *s, lc_proto_state *out, lc_proto_material_state **mats) {
+    uint32_t nm = s->scene->n_materials;
+    lc_proto_material_state *m = calloc(nm ? nm : 1, sizeof *m);
+    if (!m) return -1;
+    for (uint32_t i = 0; i < nm; i++) {
+        m[i].name = s->scene->materials[i].name;
+        memcpy(m[i].emission, s->emission[i], sizeof m[i].emission);
+    }
+    memset(out, 0, sizeof *out);
+    out->revision = s->revision;
+    out->lights = s->lights;
+    out->n_lights = s->n_lights;
+    out->objects = s->objects;
+    out->n_objects = s->n_objects;
+    out->materials = m;
+    out->n_materials = nm;
+    out->environment = s->environment;
+    out->settings = s->settings;
+    *mats = m;
+    return 0;
+}
+
+int lc_state_to_engine(const lc_state *s, lc_engine_state *out, lc_engine_light **lights, lc_engine_object **objects,
+                       float **emission) {
+    const lc_lcb_view *v = s->scene;
+    *lights = calloc(s->n_lights ? s->n_lights : 1, sizeof **lights);
+    *objects = calloc(s->n_objects ? s->n_objects : 1, sizeof **objects);
+    *emission = malloc((v->n_materials ? v->n_materials : 1) * 3 * sizeof **emission);
+    if (!*lights || !*objects || !*emission) {
+        free(*lights);
+        free(*objects);
+        free(*emission);
+        *lights = NULL;
+        *objects = NULL;
+        *emission = NULL;
+        return -1;
+    }
+    for (uint32_t i = 0; i < s->n_lights; i++) {
+        const lc_proto_light *p = &s->lights[i];
+        lc_engine_light *l = &(*lights)[i];
+        snprintf(l->id, sizeof l->id, "%s", p->id);
+        l->type = (lc_engine_light_type)p->type;
+        memcpy(l->color, p->color, sizeof l->color);
+        l->intensity = p->intensity;
+        l->range = p->range;
+        memcpy(l->position, p->position, sizeof l->position);
+        memcpy(l->direction, p->direction, sizeof l->direction);
+        l->inner_cone = p->inner_cone;
+        l->outer_cone = p->outer_cone;
+        l->shape = p->shape ? LC_AREA_DISC : LC_AREA_QUAD;
+        memcpy(l->size, p->size, sizeof l->size);
+        memcpy(l->tangent, p->tangent, sizeof l->tangent);
+        if (l->tangent[0] == 0 && l->tangent[1] == 0 && l->tangent[2] == 0) {
+            /* Any direction perpendicular to the light's: the engine orthonormalises. */
+            l->tangent[0] = fabsf(l->direction[0]) < 0.9f ? 1.0f : 0.0f;
+            l->tangent[1] = fabsf(l->direction[0]) < 0.9f ? 0.0f : 1.0f;
+        }
+    }
+    for (uint32_t i = 0; i < s->n_objects; i++) {
+        const lc_proto_object *p = &s->objects[i];
+        lc_engine_object *o = &(*objects)[i];
+        snprintf(o->id, sizeof o->id, "%s", p->id);
+        o->asset = (uint32_t)state_asset(v, p->asset);
+        memcpy(o->translation, p->translation, sizeof o->translation);
+        memcpy(o->rotation, p->rotation, sizeof o->rotation);
+        memcpy(o->scale, p->scale, sizeof o->scale);
+        o->visible = p->visible;
+    }
+    memcpy(*emission, s->emission, (size_t)v->n_materials * 3 * sizeof **emission);
+    memset(out, 0, sizeof *out);
+    out->lights = *lights;
+    out->n_lights = s->n_lights;
+    out->objects = *objects;
+    out->n_objects = s->n_objects;
+    out->material_emission = *emission;
+    out->environment.kind = (lc_engine_env_kind)s->environment.kind;
+    memcpy(out->environment.color, s->environment.color, sizeof out->environment.color);
+    memcpy(out->environment.sh, s->environment.sh, sizeof out->environment.sh);
+    out->environment.intensity = s->environment.intensity;
+    out->settings.bounces = s->settings.bounces;
+    out->settings.bands = s->settings.bands;
+    out->settings.progressive = s->settings.progressive;
+    out->settings.chroma_compression = s->settings.chroma_compression;
+    out->settings.chroma_bands = s->settings.chroma_bands;
+    out->settings.sh_lightmap = 0;
+    out->revision = s->revision;
+    return 0;
+}

@@ -1,0 +1,56 @@
+/* state: the daemon's dynamic scene state — lights, object instances, material emission,
+ * environment, settings — and its revision. Changes are validated against the bake (asset
+ * and material names) and the limits, then applied atomically: a batch either applies
+ * entirely (one revision) or not at all.
+ * Thread: owned by the service (event-loop) thread; the compute thread gets copies
+ * (lc_state_clone) handed over under the compute lock. */
+#ifndef LC_STATE_H
+#define LC_STATE_H
+#include <stdint.h>
+
+#include "engine/engine.h"
+#include "lcb/lcb.h"
+#include "lucent_proto.h"
+
+typedef struct lc_state_limits {
+    uint32_t max_lights, max_objects;
+} lc_state_limits;
+
+typedef struct lc_state {
+    const lc_lcb_view *scene; /* borrowed: asset and material names */
+    lc_state_limits limits;
+    uint64_t revision;
+    lc_proto_light *lights; /* sorted by id */
+    uint32_t n_lights;
+    lc_proto_object *objects; /* sorted by id */
+    uint32_t n_objects;
+    float (*emission)[3];     /* per bake material */
+    lc_proto_environment environment;
+    lc_proto_settings settings; /* every field present */
+} lc_state;
+
+/* Initial state: no lights or objects (the bake's own lights are offered by lc_state_seed),
+ * the bake's material emission, no environment, engine default settings. */
+int lc_state_init(lc_state *s, const lc_lcb *bake, const lc_state_limits *limits);
+void lc_state_release(lc_state *s);
+/* Deep copy (dst uninitialised). Returns 0 or -1 (out of memory). */
+int lc_state_clone(lc_state *dst, const lc_state *src);
+
+/* Validates and applies ops atomically. On success increments the revision once and returns
+ * 0; on failure returns -1, fills err (the pointer is into the request: "/light/id" for a
+ * single change, "/ops/2/light/id" inside a batch) and leaves the state untouched. */
+int lc_state_apply(lc_state *s, const lc_proto_op *ops, uint32_t n_ops, int batch, lc_proto_error *err);
+
+/* Replaces the whole state (restore from a snapshot); validates names and limits. */
+int lc_state_restore(lc_state *s, const lc_proto_parsed_state *p, lc_proto_error *err);
+
+/* Views for messages / the snapshot file (pointers into s; materials array malloc'd into
+ * *mats, caller frees). */
+int lc_state_to_proto(const lc_state *s, lc_proto_state *out, lc_proto_material_state **mats);
+
+/* Engine input: fills *out with arrays malloc'd into *lights / *objects / *emission
+ * (caller frees). */
+int lc_state_to_engine(const lc_state *s, lc_engine_state *out, lc_engine_light **lights, lc_engine_object **objects,
+                       float **emission);
+
+#endif

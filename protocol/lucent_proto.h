@@ -1,0 +1,244 @@
+/* liblucent-proto: lucent/1 messages (PROTOCOL.md) for the daemon, the client and tests.
+ * Parses and validates client requests into C structs (every field checked, errors carry a
+ * stable code and an RFC 6901 pointer), builds server messages as JSON text, encodes and
+ * decodes binary frame headers, RGB9E5 and tiles. No I/O, no globals: thread-safe.
+ * Ownership: builders return malloc'd NUL-terminated text (caller frees with free());
+ * parsed requests own their op array (lc_proto_request_release). */
+#ifndef LC_PROTO_H
+#define LC_PROTO_H
+#include <stddef.h>
+#include <stdint.h>
+
+#define LC_PROTO_NAME "lucent/1"
+#define LC_PROTO_SUBPROTOCOL "lucent.v1"
+#define LC_PROTO_ID_MAX 64      /* bytes in a light/object id or request id string */
+#define LC_PROTO_NAME_MAX 128   /* client names */
+#define LC_PROTO_TOKEN_MAX 256
+#define LC_FRAME_MAGIC 0x3146434Cu /* "LCF1" little-endian */
+#define LC_FRAME_HEADER_SIZE 64
+
+typedef enum {
+    LC_REQ_HELLO = 0,
+    LC_REQ_SUBSCRIBE,
+    LC_REQ_UNSUBSCRIBE,
+    LC_REQ_LIGHT_SET,
+    LC_REQ_LIGHT_REMOVE,
+    LC_REQ_OBJECT_SET,
+    LC_REQ_OBJECT_REMOVE,
+    LC_REQ_MATERIAL_SET,
+    LC_REQ_ENVIRONMENT_SET,
+    LC_REQ_SETTINGS_SET,
+    LC_REQ_BATCH,
+    LC_REQ_STATE_GET,
+    LC_REQ_SNAPSHOT,
+    LC_REQ_PING,
+    LC_REQ_COUNT
+} lc_req_type;
+
+/* "light.set" etc. */
+const char *lc_proto_type_name(lc_req_type t);
+/* 1 for the change requests (light.set .. settings.set, batch): controller only. */
+int lc_proto_is_change(lc_req_type t);
+
+typedef enum { LC_STREAM_LIGHTMAP = 1, LC_STREAM_SHGRID = 2, LC_STREAM_OBJECTS = 3 } lc_stream;
+typedef enum { LC_ENC_RGB9E5 = 1, LC_ENC_RGBA16F = 2, LC_ENC_F32 = 3 } lc_encoding;
+const char *lc_proto_stream_name(lc_stream s);
+const char *lc_proto_encoding_name(lc_encoding e);
+
+/* Request id: absent, a string (1..64 bytes) or an integer in [0, 2^53). */
+typedef struct lc_proto_id {
+    int kind; /* 0 none, 1 string, 2 integer */
+    char str[LC_PROTO_ID_MAX + 1];
+    int64_t num;
+} lc_proto_id;
+
+typedef enum { LC_PLIGHT_POINT = 0, LC_PLIGHT_SPOT, LC_PLIGHT_DIRECTIONAL, LC_PLIGHT_AREA } lc_proto_light_type;
+
+/* Fields and ranges as PROTOCOL.md §4.3; defaults filled in by the parser. */
+typedef struct lc_proto_light {
+    char id[LC_PROTO_ID_MAX + 1];
+    lc_proto_light_type type;
+    float color[3];
+    float intensity, range;
+    float position[3], direction[3]; /* direction normalised by the parser */
+    float inner_cone, outer_cone;
+    int shape;                       /* 0 quad, 1 disc */
+    float size[2];
+    float tangent[3];                /* zero when not given */
+} lc_proto_light;
+
+typedef struct lc_proto_object {
+    char id[LC_PROTO_ID_MAX + 1];
+    char asset[LC_PROTO_ID_MAX + 1];
+    float translation[3], rotation[4], scale[3]; /* rotation normalised by the parser */
+    int visible;
+} lc_proto_object;
+
+typedef struct lc_proto_environment {
+    int kind; /* 0 none, 1 constant, 2 sh */
+    float color[3];
+    float sh[27];
+    float intensity;
+} lc_proto_environment;
+
+/* settings.set: `present` has bit (1 << field) for each field given. */
+enum { LC_SET_BOUNCES = 0, LC_SET_BANDS, LC_SET_PROGRESSIVE, LC_SET_CHROMA, LC_SET_CHROMA_BANDS };
+typedef struct lc_proto_settings {
+    uint32_t present;
+    uint32_t bounces, bands, chroma_bands;
+    int progressive, chroma_compression;
+} lc_proto_settings;
+
+/* One change. For removes, `target` holds the id; for material.set, `target` the name. */
+typedef struct lc_proto_op {
+    lc_req_type type; /* LC_REQ_LIGHT_SET .. LC_REQ_SETTINGS_SET */
+    char target[LC_PROTO_ID_MAX + 1];
+    lc_proto_light light;
+    lc_proto_object object;
+    float emission[3];
+    lc_proto_environment environment;
+    lc_proto_settings settings;
+} lc_proto_op;
+
+typedef struct lc_proto_request {
+    lc_req_type type;
+    lc_proto_id id;
+    /* hello */
+    char client[LC_PROTO_NAME_MAX + 1];
+    char token[LC_PROTO_TOKEN_MAX + 1];
+    uint32_t encodings; /* bit (1 << lc_encoding) per encoding listed */
+    /* subscribe / unsubscribe */
+    lc_stream stream;
+    lc_encoding encoding; /* the stream's default when not given */
+    double max_rate;      /* 0 = unlimited */
+    /* ping */
+    double ping_t;
+    /* change requests: 1 op, or the batch's ops (malloc'd, owned) */
+    lc_proto_op *ops;
+    uint32_t n_ops;
+} lc_proto_request;
+
+typedef struct lc_proto_limits {
+    size_t max_message; /* bytes (65536) */
+    int max_depth;      /* JSON nesting (16) */
+    uint32_t max_batch; /* ops per batch (64) */
+} lc_proto_limits;
+
+/* Error: stable code (PROTOCOL.md §5.2), RFC 6901 pointer, human message. */
+typedef struct lc_proto_error {
+    char code[32];
+    char pointer[160];
+    char message[256];
+} lc_proto_error;
+
+void lc_proto_default_limits(lc_proto_limits *lim);
+
+/* Parses one text message (len bytes, need not be NUL-terminated). Checks size, nesting
+ * depth (before building any tree), JSON syntax, type, every field's type and range. On
+ * failure returns -1 with err filled (and out->id set when the message had a readable id,
+ * so the error can echo it). On success returns 0; release with lc_proto_request_release. */
+int lc_proto_parse_request(const char *text, size_t len, const lc_proto_limits *lim, lc_proto_request *out,
+                           lc_proto_error *err);
+void lc_proto_request_release(lc_proto_request *r);
+
+/* --- server messages ------------------------------------------------------------------------ */
+
+typedef struct lc_proto_welcome {
+    const char *server; /* "lucentd/0.1.0" */
+    const char *role;   /* "viewer" | "controller" */
+    uint64_t revision;
+    uint32_t lightmap_width, lightmap_height, tile;
+    float grid_origin[3], grid_cell;
+    uint32_t grid_dims[3];
+    uint32_t bands;
+    const char *const *assets;
+    uint32_t n_assets;
+    const char *const *materials;
+    uint32_t n_materials;
+    lc_proto_limits limits;
+    uint32_t max_lights, max_objects, rate;
+} lc_proto_welcome;
+
+typedef struct lc_proto_material_state {
+    const char *name;
+    float emission[3];
+} lc_proto_material_state;
+
+/* The whole dynamic state (also the daemon's snapshot file format). */
+typedef struct lc_proto_state {
+    uint64_t revision;
+    const lc_proto_light *lights;
+    uint32_t n_lights;
+    const lc_proto_object *objects;
+    uint32_t n_objects;
+    const lc_proto_material_state *materials;
+    uint32_t n_materials;
+    lc_proto_environment environment;
+    lc_proto_settings settings; /* all fields present */
+} lc_proto_state;
+
+char *lc_proto_build_welcome(const lc_proto_id *id, const lc_proto_welcome *w);
+char *lc_proto_build_ok(const lc_proto_id *id, uint64_t revision);
+char *lc_proto_build_error(const lc_proto_id *id, const lc_proto_error *e);
+char *lc_proto_build_changed(uint64_t revision, const char *by, const lc_proto_op *ops, uint32_t n_ops);
+char *lc_proto_build_state(const lc_proto_id *id, const lc_proto_state *st);
+char *lc_proto_build_pong(const lc_proto_id *id, double t, uint64_t server_time_us);
+/* One op as the JSON request that would make it (journal records). */
+char *lc_proto_build_op(const lc_proto_op *op);
+
+/* Parses a `state` message (snapshot file). Arrays are malloc'd into *lights, *objects,
+ * *materials (names malloc'd too); free with lc_proto_state_free_parsed. */
+typedef struct lc_proto_parsed_state {
+    uint64_t revision;
+    lc_proto_light *lights;
+    uint32_t n_lights;
+    lc_proto_object *objects;
+    uint32_t n_objects;
+    char (*material_names)[LC_PROTO_ID_MAX + 1];
+    float (*material_emission)[3];
+    uint32_t n_materials;
+    lc_proto_environment environment;
+    lc_proto_settings settings;
+} lc_proto_parsed_state;
+int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *out, lc_proto_error *err);
+void lc_proto_parsed_state_free(lc_proto_parsed_state *s);
+
+/* --- binary frames (PROTOCOL.md §6) ------------------------------------------------------- */
+
+enum { LC_FRAME_KEYFRAME = 1u << 0, LC_FRAME_DELTA = 1u << 1 };
+
+typedef struct lc_frame_header {
+    uint16_t version; /* 1 */
+    uint8_t stream, encoding;
+    uint16_t flags;
+    uint32_t tile_count;
+    uint64_t revision, sequence, timestamp_us;
+    uint32_t width, height, depth, tile_size;
+    uint32_t payload_length;
+    uint32_t crc; /* filled by lc_frame_finish / checked by lc_frame_parse */
+} lc_frame_header;
+
+/* Writes header (64 B) + tile table + payload into out (capacity cap). Computes the CRC.
+ * Returns the frame length, or 0 if it does not fit. */
+size_t lc_frame_write(const lc_frame_header *h, const uint32_t *tiles, const void *payload, uint8_t *out,
+                      size_t cap);
+/* Parses and checks a frame: magic, version, header size, flags (exactly one of keyframe /
+ * delta), lengths consistent with len, tile indices ascending and inside the image, CRC.
+ * Pointers point into data. Returns 0 or -1 with err (code "bad_frame"). */
+int lc_frame_parse(const uint8_t *data, size_t len, lc_frame_header *h, const uint8_t **tile_table,
+                   const uint8_t **payload, lc_proto_error *err);
+
+/* Bytes per lightmap texel / per SH value for an encoding (0 when not allowed). */
+size_t lc_frame_texel_bytes(lc_encoding e);
+size_t lc_frame_sh_value_bytes(lc_encoding e);
+
+/* GL RGB9_E5 (shared exponent) — the same bits a GL upload of GL_RGB9_E5 expects. */
+uint32_t lc_rgb9e5_encode(const float rgb[3]);
+void lc_rgb9e5_decode(uint32_t v, float rgb[3]);
+
+/* Lightmap tiles: number of tiles for W x H with tile side S; texel rectangle of tile t. */
+uint32_t lc_tiles_count(uint32_t w, uint32_t h, uint32_t s);
+void lc_tile_rect(uint32_t w, uint32_t h, uint32_t s, uint32_t t, uint32_t *x0, uint32_t *y0, uint32_t *x1,
+                  uint32_t *y1);
+
+#endif

@@ -1,0 +1,247 @@
+/* proto_frame: lucent/1 binary data frames (PROTOCOL.md §6), RGB9E5 and lightmap tiles.
+ * Byte order is written and read explicitly (little-endian on any host). */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "lucent_proto.h"
+#include "util/crc32.h"
+
+#define PROTO_FRAME_CRC_OFFSET 60
+#define PROTO_OBJECT_ID_BYTES 64
+#define PROTO_SH_VALUES 27
+
+static void proto_put16(uint8_t *p, uint16_t v) {
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+}
+
+static void proto_put32(uint8_t *p, uint32_t v) {
+    for (int i = 0; i < 4; i++) p[i] = (uint8_t)(v >> (8 * i));
+}
+
+static void proto_put64(uint8_t *p, uint64_t v) {
+    for (int i = 0; i < 8; i++) p[i] = (uint8_t)(v >> (8 * i));
+}
+
+static uint16_t proto_get16(const uint8_t *p) {
+    return (uint16_t)(p[0] | p[1] << 8);
+}
+
+static uint32_t proto_get32(const uint8_t *p) {
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static uint64_t proto_get64(const uint8_t *p) {
+    return (uint64_t)proto_get32(p) | (uint64_t)proto_get32(p + 4) << 32;
+}
+
+size_t lc_frame_texel_bytes(lc_encoding e) {
+    switch (e) {
+    case LC_ENC_RGB9E5: return 4;
+    case LC_ENC_RGBA16F: return 8;
+    case LC_ENC_F32: return 12;
+    default: return 0;
+    }
+}
+
+size_t lc_frame_sh_value_bytes(lc_encoding e) {
+    switch (e) {
+    case LC_ENC_RGBA16F: return 2;
+    case LC_ENC_F32: return 4;
+    default: return 0;
+    }
+}
+
+uint32_t lc_tiles_count(uint32_t w, uint32_t h, uint32_t s) {
+    if (!s) return 0;
+    uint64_t n = (uint64_t)((w + (uint64_t)s - 1) / s) * ((h + (uint64_t)s - 1) / s);
+    return n > UINT32_MAX ? UINT32_MAX : (uint32_t)n;
+}
+
+void lc_tile_rect(uint32_t w, uint32_t h, uint32_t s, uint32_t t, uint32_t *x0, uint32_t *y0, uint32_t *x1,
+                  uint32_t *y1) {
+    *x0 = *y0 = *x1 = *y1 = 0;
+    if (!s || !w || !h) return;
+    uint64_t tw = (w + (uint64_t)s - 1) / s;
+    uint64_t ax = (t % tw) * s, ay = (t / tw) * s;
+    /* tiles past the image clip to an empty rectangle */
+    if (ax > w) ax = w;
+    if (ay > h) ay = h;
+    uint64_t bx = ax + s < w ? ax + s : w, by = ay + s < h ? ay + s : h;
+    *x0 = (uint32_t)ax;
+    *y0 = (uint32_t)ay;
+    *x1 = (uint32_t)bx;
+    *y1 = (uint32_t)by;
+}
+
+size_t lc_frame_write(const lc_frame_header *h, const uint32_t *tiles, const void *payload, uint8_t *out,
+                      size_t cap) {
+    if (!h || !out) return 0;
+    uint64_t total = LC_FRAME_HEADER_SIZE + (uint64_t)h->tile_count * 4 + h->payload_length;
+    if (total > cap || (h->tile_count && !tiles) || (h->payload_length && !payload)) return 0;
+    uint8_t *p = out;
+    proto_put32(p + 0, LC_FRAME_MAGIC);
+    proto_put16(p + 4, h->version ? h->version : 1);
+    p[6] = h->stream;
+    p[7] = h->encoding;
+    proto_put16(p + 8, h->flags);
+    proto_put16(p + 10, LC_FRAME_HEADER_SIZE);
+    proto_put32(p + 12, h->tile_count);
+    proto_put64(p + 16, h->revision);
+    proto_put64(p + 24, h->sequence);
+    proto_put64(p + 32, h->timestamp_us);
+    proto_put32(p + 40, h->width);
+    proto_put32(p + 44, h->height);
+    proto_put32(p + 48, h->depth);
+    proto_put32(p + 52, h->tile_size);
+    proto_put32(p + 56, h->payload_length);
+    for (uint32_t i = 0; i < h->tile_count; i++) proto_put32(p + LC_FRAME_HEADER_SIZE + 4 * (size_t)i, tiles[i]);
+    if (h->payload_length) memcpy(p + LC_FRAME_HEADER_SIZE + 4 * (size_t)h->tile_count, payload, h->payload_length);
+    /* CRC over bytes 0..59, then everything after the header */
+    uint32_t crc = lc_crc32(0, p, PROTO_FRAME_CRC_OFFSET);
+    crc = lc_crc32(crc, p + LC_FRAME_HEADER_SIZE, (size_t)total - LC_FRAME_HEADER_SIZE);
+    proto_put32(p + PROTO_FRAME_CRC_OFFSET, crc);
+    return (size_t)total;
+}
+
+static int proto_bad(lc_proto_error *err, const char *fmt, const char *detail) {
+    if (err) {
+        snprintf(err->code, sizeof err->code, "bad_frame");
+        err->pointer[0] = 0;
+        snprintf(err->message, sizeof err->message, fmt, detail);
+    }
+    return -1;
+}
+
+/* a * b, saturating at UINT64_MAX (any such product exceeds every real length) */
+static uint64_t proto_mul(uint64_t a, uint64_t b) {
+    if (a && b > (UINT64_MAX / 2) / a) return UINT64_MAX;
+    return a * b;
+}
+
+int lc_frame_parse(const uint8_t *data, size_t len, lc_frame_header *h, const uint8_t **tile_table,
+                   const uint8_t **payload, lc_proto_error *err) {
+    lc_frame_header tmp;
+    if (!h) h = &tmp;
+    memset(h, 0, sizeof *h);
+    if (tile_table) *tile_table = NULL;
+    if (payload) *payload = NULL;
+    if (err) memset(err, 0, sizeof *err);
+    if (!data || len < LC_FRAME_HEADER_SIZE) return proto_bad(err, "%s", "shorter than the 64-byte header");
+    if (proto_get32(data) != LC_FRAME_MAGIC) return proto_bad(err, "%s", "bad magic");
+    h->version = proto_get16(data + 4);
+    h->stream = data[6];
+    h->encoding = data[7];
+    h->flags = proto_get16(data + 8);
+    uint16_t hsize = proto_get16(data + 10);
+    h->tile_count = proto_get32(data + 12);
+    h->revision = proto_get64(data + 16);
+    h->sequence = proto_get64(data + 24);
+    h->timestamp_us = proto_get64(data + 32);
+    h->width = proto_get32(data + 40);
+    h->height = proto_get32(data + 44);
+    h->depth = proto_get32(data + 48);
+    h->tile_size = proto_get32(data + 52);
+    h->payload_length = proto_get32(data + 56);
+    h->crc = proto_get32(data + 60);
+    if (h->version != 1) return proto_bad(err, "%s", "unsupported version");
+    if (hsize != LC_FRAME_HEADER_SIZE) return proto_bad(err, "%s", "header size is not 64");
+    uint64_t total = LC_FRAME_HEADER_SIZE + (uint64_t)h->tile_count * 4 + h->payload_length;
+    if (total != len) return proto_bad(err, "%s", "length does not match tile count and payload length");
+    uint32_t crc = lc_crc32(0, data, PROTO_FRAME_CRC_OFFSET);
+    crc = lc_crc32(crc, data + LC_FRAME_HEADER_SIZE, len - LC_FRAME_HEADER_SIZE);
+    if (crc != h->crc) return proto_bad(err, "%s", "CRC mismatch");
+
+    if (h->flags != LC_FRAME_KEYFRAME && h->flags != LC_FRAME_DELTA)
+        return proto_bad(err, "%s", "flags must be exactly one of keyframe / delta");
+    int key = h->flags == LC_FRAME_KEYFRAME;
+    if (key && h->tile_count) return proto_bad(err, "%s", "a keyframe has no tile table");
+    const uint8_t *tiles = data + LC_FRAME_HEADER_SIZE;
+    uint64_t expect;
+    switch (h->stream) {
+    case LC_STREAM_LIGHTMAP: {
+        size_t tb = lc_frame_texel_bytes((lc_encoding)h->encoding);
+        if (!tb) return proto_bad(err, "%s", "bad lightmap encoding");
+        if (!h->width || !h->height || h->depth != 1) return proto_bad(err, "%s", "bad lightmap dimensions");
+        if (key) {
+            expect = proto_mul(proto_mul(h->width, h->height), tb);
+            break;
+        }
+        if (!h->tile_size) return proto_bad(err, "%s", "a delta needs a tile size");
+        uint64_t ntiles = (uint64_t)((h->width + (uint64_t)h->tile_size - 1) / h->tile_size) *
+                          ((h->height + (uint64_t)h->tile_size - 1) / h->tile_size);
+        expect = 0;
+        for (uint32_t i = 0; i < h->tile_count; i++) {
+            uint32_t t = proto_get32(tiles + 4 * (size_t)i), x0, y0, x1, y1;
+            if (t >= ntiles) return proto_bad(err, "%s", "tile index outside the image");
+            if (i && t <= proto_get32(tiles + 4 * (size_t)(i - 1)))
+                return proto_bad(err, "%s", "tile indices not strictly ascending");
+            lc_tile_rect(h->width, h->height, h->tile_size, t, &x0, &y0, &x1, &y1);
+            uint64_t bytes = proto_mul(proto_mul(x1 - x0, y1 - y0), tb);
+            if (bytes > h->payload_length - expect) /* also keeps the sum from wrapping */
+                return proto_bad(err, "%s", "payload length does not match the tiles");
+            expect += bytes;
+        }
+        break;
+    }
+    case LC_STREAM_SHGRID:
+    case LC_STREAM_OBJECTS: {
+        size_t vb = lc_frame_sh_value_bytes((lc_encoding)h->encoding);
+        if (!vb) return proto_bad(err, "%s", "bad SH encoding");
+        if (!key) return proto_bad(err, "%s", "SH streams send keyframes only");
+        if (h->tile_size) return proto_bad(err, "%s", "tile size must be 0 for SH streams");
+        if (h->stream == LC_STREAM_SHGRID) {
+            if (!h->width || !h->height || !h->depth) return proto_bad(err, "%s", "bad grid dimensions");
+            expect = proto_mul(proto_mul(proto_mul(h->width, h->height), h->depth), PROTO_SH_VALUES * vb);
+        } else {
+            if (h->height != 1 || h->depth != 1) return proto_bad(err, "%s", "objects: height and depth must be 1");
+            expect = proto_mul(h->width, PROTO_OBJECT_ID_BYTES + PROTO_SH_VALUES * vb);
+        }
+        break;
+    }
+    default:
+        return proto_bad(err, "%s", "unknown stream");
+    }
+    if (expect != h->payload_length) return proto_bad(err, "%s", "payload length does not match the stream");
+    if (tile_table) *tile_table = tiles;
+    if (payload) *payload = tiles + 4 * (size_t)h->tile_count;
+    return 0;
+}
+
+/* --- RGB9E5: EXT_texture_shared_exponent, N = 9, B = 15, Emax = 31 ----------------------- */
+
+#define PROTO_E5_N 9
+#define PROTO_E5_B 15
+#define PROTO_E5_MAX 65408.0 /* (2^9 - 1) / 2^9 * 2^(31 - 15) */
+
+static double proto_e5_clamp(float v) {
+    if (!(v > 0)) return 0; /* negatives and NaN */
+    return v > PROTO_E5_MAX ? PROTO_E5_MAX : (double)v;
+}
+
+uint32_t lc_rgb9e5_encode(const float rgb[3]) {
+    double r = proto_e5_clamp(rgb[0]), g = proto_e5_clamp(rgb[1]), b = proto_e5_clamp(rgb[2]);
+    double m = fmax(r, fmax(g, b));
+    int fl = -PROTO_E5_B - 1; /* floor(log2(m)), at least -B-1 */
+    if (m > 0) {
+        int e;
+        frexp(m, &e); /* m = f * 2^e, f in [0.5, 1) */
+        if (e - 1 > fl) fl = e - 1;
+    }
+    int exp = fl + 1 + PROTO_E5_B;
+    double max_s = floor(m / ldexp(1.0, exp - PROTO_E5_B - PROTO_E5_N) + 0.5);
+    if (max_s >= (1 << PROTO_E5_N)) exp++;
+    double scale = ldexp(1.0, exp - PROTO_E5_B - PROTO_E5_N);
+    uint32_t rs = (uint32_t)floor(r / scale + 0.5), gs = (uint32_t)floor(g / scale + 0.5),
+             bs = (uint32_t)floor(b / scale + 0.5);
+    return rs | gs << 9 | bs << 18 | (uint32_t)exp << 27;
+}
+
+void lc_rgb9e5_decode(uint32_t v, float rgb[3]) {
+    int exp = (int)(v >> 27);
+    double scale = ldexp(1.0, exp - PROTO_E5_B - PROTO_E5_N);
+    rgb[0] = (float)((v & 0x1FF) * scale);
+    rgb[1] = (float)(((v >> 9) & 0x1FF) * scale);
+    rgb[2] = (float)(((v >> 18) & 0x1FF) * scale);
+}

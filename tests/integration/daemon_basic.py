@@ -1,0 +1,281 @@
+#!/usr/bin/python3
+"""lucentd end to end on loopback: handshake and hello, welcome, subscribe and a lightmap
+keyframe (header fields and CRC checked), light.set -> ok -> a frame of that revision,
+state.get, errors with codes and pointers, roles by token, kill -9 durability (state and
+revision exactly as acknowledged), SIGTERM (close 1001, exit 0), /healthz and /metrics.
+Uses Python's websockets, a different implementation from the server's."""
+import asyncio
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import tempfile
+import urllib.request
+import zlib
+
+import websockets
+
+BIN = os.environ["LUCENT_BINARY_DIR"]
+LUCENTD = os.path.join(BIN, "bin", "lucentd")
+BAKE = os.path.join(BIN, "cornell.lcb")
+FAILS = []
+
+
+def check(cond, msg):
+    if not cond:
+        FAILS.append(msg)
+        print("FAIL:", msg, file=sys.stderr)
+
+
+def start(state_dir, *extra):
+    p = subprocess.Popen([LUCENTD, "--bake", BAKE, "--port", "0", "--state-dir", state_dir, "--backend", "cpu",
+                          "--log-level", "warn", *extra], stdout=subprocess.PIPE, text=True)
+    line = p.stdout.readline()
+    if "port=" not in line:
+        p.kill()
+        raise SystemExit("lucentd did not start: %r" % line)
+    return p, int(line.strip().split("port=")[1])
+
+
+def parse_frame(data):
+    magic, ver, stream, enc, flags, hsize, tiles, rev, seq, ts, w, h, d, tile, plen, crc = struct.unpack_from(
+        "<IHBBHHIQQQIIIIII", data, 0)
+    return dict(magic=magic, version=ver, stream=stream, encoding=enc, flags=flags, header_size=hsize, tiles=tiles,
+                revision=rev, sequence=seq, width=w, height=h, depth=d, tile=tile, payload=plen, crc=crc,
+                crc_ok=zlib.crc32(data[:60] + data[64:]) == crc, length_ok=len(data) == 64 + 4 * tiles + plen)
+
+
+async def recv_json(ws, want_type=None, timeout=10):
+    while True:
+        m = await asyncio.wait_for(ws.recv(), timeout)
+        if isinstance(m, bytes):
+            continue
+        msg = json.loads(m)
+        if want_type is None or msg.get("type") == want_type:
+            return msg
+
+
+async def recv_frame(ws, min_revision=0, timeout=15):
+    while True:
+        m = await asyncio.wait_for(ws.recv(), timeout)
+        if isinstance(m, bytes):
+            f = parse_frame(m)
+            if f["revision"] >= min_revision:
+                return f, m
+
+
+async def hello(port, token="", name="test"):
+    ws = await websockets.connect("ws://127.0.0.1:%d/" % port, subprotocols=["lucent.v1"], max_size=2**24)
+    await ws.send(json.dumps({"type": "hello", "id": 1, "client": name, "token": token}))
+    return ws, await recv_json(ws)
+
+
+async def scenario(state_dir):
+    p, port = start(state_dir)
+    try:
+        # Subprotocol required.
+        try:
+            ws = await websockets.connect("ws://127.0.0.1:%d/" % port)
+            await ws.close()
+            check(False, "a handshake without lucent.v1 was accepted")
+        except Exception:
+            pass
+        ws, welcome = await hello(port)
+        check(welcome.get("type") == "welcome" and welcome.get("id") == 1, "welcome: %r" % welcome)
+        check(welcome.get("role") == "controller" and welcome.get("protocol") == "lucent/1", "role/protocol")
+        lm = welcome["scene"]["lightmap"]
+        await ws.send(json.dumps({"type": "subscribe", "id": "s1", "stream": "lightmap", "encoding": "rgb9e5"}))
+        ok = await recv_json(ws, "ok")
+        check(ok.get("id") == "s1", "subscribe ok echoes id")
+        f, raw = await recv_frame(ws)
+        check(f["magic"] == 0x3146434C and f["version"] == 1 and f["header_size"] == 64, "frame header %r" % f)
+        check(f["crc_ok"] and f["length_ok"], "frame CRC/length")
+        check(f["flags"] == 1 and f["stream"] == 1 and f["encoding"] == 1, "keyframe of the lightmap in rgb9e5")
+        check((f["width"], f["height"]) == (lm["width"], lm["height"]), "frame dims match welcome")
+        check(f["payload"] == lm["width"] * lm["height"] * 4, "rgb9e5 payload size")
+        # A change: ok with revision 1, then a frame reflecting it.
+        await ws.send(json.dumps({"type": "light.set", "id": 7, "light": {
+            "id": "key", "type": "point", "position": [0.28, 0.4, 0.28], "intensity": 3}}))
+        ok = await recv_json(ws, "ok")
+        check(ok.get("id") == 7 and ok.get("revision") == 1, "light.set ok: %r" % ok)
+        f, raw = await recv_frame(ws, 1)
+        check(f["revision"] == 1 and f["sequence"] >= 2 and f["crc_ok"], "frame for revision 1: %r" % f)
+        await ws.send(json.dumps({"type": "state.get", "id": "st"}))
+        st = await recv_json(ws, "state")
+        check(st.get("revision") == 1 and [l["id"] for l in st.get("lights", [])] == ["key"], "state: %r" % st)
+        # Errors carry codes and pointers, and the connection stays usable.
+        await ws.send(json.dumps({"type": "frobnicate", "id": 3}))
+        e = await recv_json(ws, "error")
+        check(e.get("code") == "unknown_type" and e.get("id") == 3, "unknown type: %r" % e)
+        await ws.send(json.dumps({"type": "light.set", "light": {"id": "x", "type": "point", "position": [0, 0, 0],
+                                                                 "intensity": -1}}))
+        e = await recv_json(ws, "error")
+        check(e.get("code") == "out_of_range" and e.get("pointer") == "/light/intensity", "range: %r" % e)
+        await ws.send(json.dumps({"type": "batch", "ops": [
+            {"type": "light.set", "light": {"id": "b1", "type": "point", "position": [0, 0.3, 0]}},
+            {"type": "object.set", "object": {"id": "o", "asset": "nope"}}]}))
+        e = await recv_json(ws, "error")
+        check(e.get("code") == "unknown_asset" and e.get("pointer") == "/ops/1/object/asset", "batch: %r" % e)
+        await ws.send(b"\x00\x01")
+        e = await recv_json(ws, "error")
+        check(e.get("code") == "binary_not_allowed", "binary: %r" % e)
+        await ws.send(json.dumps({"type": "ping", "id": "p", "t": 1.5}))
+        pong = await recv_json(ws, "pong")
+        check(pong.get("t") == 1.5, "pong")
+        # Coalescing: 100 rapid updates give frames for a handful of revisions, the last final.
+        base = st["revision"]
+        for i in range(100):
+            await ws.send(json.dumps({"type": "light.set", "light": {
+                "id": "anim", "type": "point", "position": [0.1 + 0.003 * i, 0.4, 0.28], "intensity": 2}}))
+        revisions, oks = set(), 0
+        final = base + 100
+        while True:
+            m = await asyncio.wait_for(ws.recv(), 30)
+            if isinstance(m, bytes):
+                fr = parse_frame(m)
+                revisions.add(fr["revision"])
+                if fr["revision"] == final and oks == 100:
+                    break
+            elif json.loads(m).get("type") == "ok":
+                oks += 1
+        check(len(revisions) <= 40 and max(revisions) == final,
+              "coalescing: frames for %d revisions (max %d, final %d)" % (len(revisions), max(revisions), final))
+        # A second client sees `changed`.
+        ws2, w2 = await hello(port, name="watcher")
+        await ws.send(json.dumps({"type": "light.remove", "light_id": "key", "id": 9}))
+        await recv_json(ws, "ok")
+        ch = await recv_json(ws2, "changed")
+        check(ch.get("revision") == final + 1 and ch.get("by") == "test", "changed broadcast: %r" % ch)
+        # HTTP on the same port.
+        body = urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=5).read().decode()
+        check(body.startswith("ok"), "healthz: %r" % body)
+        metrics = urllib.request.urlopen("http://127.0.0.1:%d/metrics" % port, timeout=5).read().decode()
+        check("lucent_clients 2" in metrics and "lucent_errors_total{code=\"unknown_type\"} 1" in metrics,
+              "metrics: %r" % metrics[:400])
+        await ws2.close()
+        await ws.close()
+    finally:
+        p.send_signal(signal.SIGKILL)  # no chance to flush: durability must come from the journal
+        p.wait()
+
+    # After kill -9: the state and revision are exactly those acknowledged.
+    p, port = start(state_dir)
+    try:
+        ws, welcome = await hello(port)
+        check(welcome.get("revision") == 102, "revision after kill -9: %r" % welcome.get("revision"))
+        await ws.send(json.dumps({"type": "state.get"}))
+        st = await recv_json(ws, "state")
+        lights = st.get("lights", [])
+        check(st.get("revision") == 102 and [l["id"] for l in lights] == ["anim"] and
+              abs(lights[0]["position"][0] - (0.1 + 0.003 * 99)) < 1e-6, "state after kill -9: %r" % st)
+        # SIGTERM: clients get 1001, the process exits 0.
+        p.send_signal(signal.SIGTERM)
+        try:
+            await asyncio.wait_for(ws.recv(), 10)
+        except websockets.exceptions.ConnectionClosed as c:
+            check(c.code == 1001, "close code on SIGTERM: %r" % c.code)
+        check(p.wait(timeout=20) == 0, "exit code on SIGTERM")
+    finally:
+        if p.poll() is None:
+            p.kill()
+
+    # Delta frames: applied onto the previous image they equal the next keyframe (within the
+    # delta threshold), and they are smaller than a keyframe.
+    p, port = start(state_dir + "-delta", "--delta-threshold", "0.3", "--tile", "16")
+    try:
+        ws, welcome = await hello(port)
+        await ws.send(json.dumps({"type": "light.set", "light": {
+            "id": "d", "type": "point", "position": [0.5, 0.05, 0.05], "intensity": 0.05}}))
+        await recv_json(ws, "ok")
+        await ws.send(json.dumps({"type": "subscribe", "stream": "lightmap", "encoding": "f32"}))
+        img, key_bytes, deltas, W = None, 0, [], 0
+
+        def apply(f, raw):
+            nonlocal img, key_bytes, W
+            W, H, S = f["width"], f["height"], f["tile"]
+            if f["flags"] == 1:
+                img = list(struct.unpack_from("<%df" % (W * H * 3), raw, 64))
+                key_bytes = len(raw)
+                return
+            tiles = struct.unpack_from("<%dI" % f["tiles"], raw, 64)
+            vals = struct.unpack_from("<%df" % (f["payload"] // 4), raw, 64 + 4 * f["tiles"])
+            k, tw = 0, (W + S - 1) // S
+            for t in tiles:
+                x0, y0 = (t % tw) * S, (t // tw) * S
+                for y in range(y0, min(y0 + S, H)):
+                    for x in range(x0, min(x0 + S, W)):
+                        img[3 * (y * W + x):3 * (y * W + x) + 3] = vals[k:k + 3]
+                        k += 3
+            deltas.append((f["tiles"], len(raw)))
+
+        f, raw = await recv_frame(ws)
+        check(f["flags"] == 1, "the first frame after subscribe is a keyframe")
+        apply(f, raw)
+        while f["revision"] < 1:
+            f, raw = await recv_frame(ws)
+            apply(f, raw)
+        await ws.send(json.dumps({"type": "light.set", "light": {
+            "id": "d", "type": "point", "position": [0.5, 0.05, 0.08], "intensity": 0.05}}))
+        await recv_json(ws, "ok")
+        while f["revision"] < 2:
+            f, raw = await recv_frame(ws)
+            check(f["crc_ok"] and f["length_ok"], "frame integrity")
+            apply(f, raw)
+        check(deltas and all(b < key_bytes for _, b in deltas), "deltas smaller than keyframes: %r vs %d" %
+              (deltas, key_bytes))
+        if deltas:
+            print("delta frames (tiles, bytes): %r; keyframe %d bytes" % (deltas, key_bytes))
+        await ws.send(json.dumps({"type": "snapshot"}))
+        f2, raw2 = await recv_frame(ws, 2)
+        check(f2["flags"] == 1 and f2["sequence"] == f["sequence"] + 1, "snapshot gives a keyframe next in sequence")
+        key = struct.unpack_from("<%df" % (len(img)), raw2, 64)
+        peak = max(key) or 1
+        worst = max(abs(a - b) / max(abs(a), abs(b), 1e-3 * peak) for a, b in zip(img, key))
+        check(worst <= 0.3 + 1e-6, "delta-applied image vs keyframe: worst relative difference %.4f" % worst)
+        await ws.close()
+    finally:
+        p.terminate()
+        p.wait(timeout=20)
+
+    # Roles by token.
+    cfg = os.path.join(state_dir, "lucentd.json")
+    with open(cfg, "w") as fh:
+        json.dump({"controller-tokens": ["ctl"], "viewer-tokens": ["view"]}, fh)
+    p, port = start(state_dir, "--config", cfg)
+    try:
+        ws, welcome = await hello(port, token="view")
+        check(welcome.get("role") == "viewer", "viewer role")
+        await ws.send(json.dumps({"type": "light.remove", "light_id": "x"}))
+        e = await recv_json(ws, "error")
+        check(e.get("code") == "forbidden", "viewer cannot change: %r" % e)
+        await ws.close()
+        ws, welcome = await hello(port, token="wrong")
+        check(welcome.get("code") == "unauthorized", "unknown token: %r" % welcome)
+        try:
+            await asyncio.wait_for(ws.recv(), 5)
+        except websockets.exceptions.ConnectionClosed as c:
+            check(c.code == 1008, "close after unauthorized: %r" % c.code)
+        # hello required first
+        ws = await websockets.connect("ws://127.0.0.1:%d/" % port, subprotocols=["lucent.v1"])
+        await ws.send(json.dumps({"type": "state.get"}))
+        e = await recv_json(ws, "error")
+        check(e.get("code") == "hello_required", "hello first: %r" % e)
+    finally:
+        p.terminate()
+        p.wait(timeout=20)
+
+
+def main():
+    if not os.path.exists(LUCENTD) or not os.path.exists(BAKE):
+        print("SKIP: lucentd or the Cornell bake is not built")
+        return 77
+    with tempfile.TemporaryDirectory() as d:
+        asyncio.run(scenario(os.path.join(d, "state")))
+    print("%d failure(s)" % len(FAILS) if FAILS else "all checks passed")
+    return 1 if FAILS else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,179 @@
+/* Daemon state and journal: validated atomic changes (batch all-or-nothing, errors with
+ * codes and pointers), and durability: every appended change survives a reopen, a torn last
+ * line is dropped, compaction keeps the state, replay skips what the snapshot holds. */
+#include <fcntl.h>
+#include <unistd.h>
+
+#include "../engine/engine_fixture.h"
+#include "check.h"
+#include "journal.h"
+#include "state.h"
+
+static lc_proto_op light_op(const char *id, float intensity) {
+    lc_proto_op op;
+    memset(&op, 0, sizeof op);
+    op.type = LC_REQ_LIGHT_SET;
+    snprintf(op.light.id, sizeof op.light.id, "%s", id);
+    op.light.type = LC_PLIGHT_POINT;
+    op.light.color[0] = op.light.color[1] = op.light.color[2] = 1;
+    op.light.intensity = intensity;
+    op.light.position[1] = 0.5f;
+    return op;
+}
+
+static int same_state(const lc_state *a, const lc_state *b) {
+    if (a->revision != b->revision || a->n_lights != b->n_lights || a->n_objects != b->n_objects) return 0;
+    for (uint32_t i = 0; i < a->n_lights; i++)
+        if (strcmp(a->lights[i].id, b->lights[i].id) || a->lights[i].intensity != b->lights[i].intensity) return 0;
+    for (uint32_t i = 0; i < a->n_objects; i++)
+        if (strcmp(a->objects[i].id, b->objects[i].id) || a->objects[i].translation[0] != b->objects[i].translation[0])
+            return 0;
+    for (uint32_t m = 0; m < a->scene->n_materials; m++)
+        if (memcmp(a->emission[m], b->emission[m], sizeof a->emission[m])) return 0;
+    return a->settings.bounces == b->settings.bounces && a->environment.kind == b->environment.kind;
+}
+
+int main(void) {
+    char obj_path[256];
+    check_source_path("scenes/cornell-box/cornell-box.obj", obj_path, sizeof obj_path);
+    /* A bake with one asset ("cube"). */
+    const char *obj = "usemtl white\nv 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 4 3 2\n"
+                      "usemtl lamp\nv 0 1 0\nv 1 1 0\nv 1 1 1\nv 0 1 1\nf 5 6 7 8\n";
+    const char *mtl = "newmtl white\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 2 2 2\n";
+    char asset_flag[300];
+    snprintf(asset_flag, sizeof asset_flag, "cube=%s", obj_path);
+    const char *flags[] = {"--quality", "draft", "--surfels", "256", "--links", "16", "--asset", asset_flag, NULL};
+    fixture f;
+    if (fixture_bake(&f, obj, mtl, flags) != 0) {
+        CHECK(0, "bake failed");
+        CHECK_DONE();
+    }
+    lc_state_limits lim = {.max_lights = 3, .max_objects = 2};
+    lc_state s;
+    CHECK(lc_state_init(&s, f.bake, &lim) == 0, "init");
+    lc_proto_error e;
+
+    lc_proto_op a = light_op("a", 1), b = light_op("b", 2);
+    CHECK(lc_state_apply(&s, &a, 1, 0, &e) == 0 && s.revision == 1 && s.n_lights == 1, "light.set");
+    CHECK(lc_state_apply(&s, &b, 1, 0, &e) == 0 && s.revision == 2 && s.n_lights == 2, "second light");
+    a.light.intensity = 5;
+    CHECK(lc_state_apply(&s, &a, 1, 0, &e) == 0 && s.n_lights == 2 && s.lights[0].intensity == 5, "upsert");
+
+    /* A batch whose third op fails changes nothing, and the pointer names that op. */
+    lc_proto_op batch[3] = {light_op("c", 1), light_op("a", 9), {0}};
+    batch[2].type = LC_REQ_OBJECT_SET;
+    snprintf(batch[2].object.id, sizeof batch[2].object.id, "o1");
+    snprintf(batch[2].object.asset, sizeof batch[2].object.asset, "no-such-asset");
+    uint64_t rev = s.revision;
+    CHECK(lc_state_apply(&s, batch, 3, 1, &e) == -1 && !strcmp(e.code, "unknown_asset") &&
+              !strcmp(e.pointer, "/ops/2/object/asset"),
+          "batch error: %s %s", e.code, e.pointer);
+    CHECK(s.revision == rev && s.n_lights == 2 && s.lights[0].intensity == 5, "failed batch applied nothing");
+    snprintf(batch[2].object.asset, sizeof batch[2].object.asset, "cube");
+    batch[2].object.rotation[3] = 1;
+    batch[2].object.scale[0] = batch[2].object.scale[1] = batch[2].object.scale[2] = 1;
+    batch[2].object.visible = 1;
+    CHECK(lc_state_apply(&s, batch, 3, 1, &e) == 0 && s.revision == rev + 1 && s.n_lights == 3 && s.n_objects == 1,
+          "batch applies once: %s", e.message);
+
+    lc_proto_op d = light_op("d", 1);
+    CHECK(lc_state_apply(&s, &d, 1, 0, &e) == -1 && !strcmp(e.code, "limit_exceeded") && !strcmp(e.pointer, "/light/id"),
+          "light limit: %s %s", e.code, e.pointer);
+    lc_proto_op rm = {0};
+    rm.type = LC_REQ_LIGHT_REMOVE;
+    snprintf(rm.target, sizeof rm.target, "zz");
+    CHECK(lc_state_apply(&s, &rm, 1, 0, &e) == -1 && !strcmp(e.code, "unknown_id"), "remove unknown: %s", e.code);
+    snprintf(rm.target, sizeof rm.target, "b");
+    CHECK(lc_state_apply(&s, &rm, 1, 0, &e) == 0 && s.n_lights == 2, "remove");
+    lc_proto_op mat = {0};
+    mat.type = LC_REQ_MATERIAL_SET;
+    snprintf(mat.target, sizeof mat.target, "lamp");
+    mat.emission[0] = 7;
+    CHECK(lc_state_apply(&s, &mat, 1, 0, &e) == 0, "material.set");
+    snprintf(mat.target, sizeof mat.target, "nope");
+    CHECK(lc_state_apply(&s, &mat, 1, 0, &e) == -1 && !strcmp(e.code, "unknown_material"), "unknown material");
+
+    /* Engine conversion. */
+    lc_engine_state es;
+    lc_engine_light *el;
+    lc_engine_object *eo;
+    float *em;
+    CHECK(lc_state_to_engine(&s, &es, &el, &eo, &em) == 0 && es.n_lights == 2 && es.n_objects == 1 &&
+              es.objects[0].asset == 0 && es.revision == s.revision,
+          "to_engine");
+    const lc_engine_frame *fr;
+    char err[256];
+    CHECK(lc_engine_relight(f.engine, &es, &fr, err, sizeof err) == 0, "engine accepts the state: %s", err);
+    free(el);
+    free(eo);
+    free(em);
+
+    /* Journal: everything appended survives a reopen. */
+    char dir[] = "/tmp/lc_journal_XXXXXX";
+    CHECK(mkdtemp(dir) != NULL, "mkdtemp");
+    lc_state s1;
+    lc_state_init(&s1, f.bake, &lim);
+    lc_journal *j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s1, err, sizeof err);
+    CHECK(j && s1.revision == 0, "open empty journal: %s", err);
+    lc_proto_op ops1[2] = {light_op("x", 3), light_op("y", 4)};
+    CHECK(lc_state_apply(&s1, ops1, 2, 1, &e) == 0 && lc_journal_append(j, ops1, 2, s1.revision, err, sizeof err) == 0,
+          "append batch: %s", err);
+    CHECK(lc_state_apply(&s1, &mat, 1, 0, &e) == -1, "bad op not journaled");
+    snprintf(mat.target, sizeof mat.target, "lamp");
+    CHECK(lc_state_apply(&s1, &mat, 1, 0, &e) == 0 && lc_journal_append(j, &mat, 1, s1.revision, err, sizeof err) == 0,
+          "append material");
+    lc_journal_close(j);
+
+    lc_state s2;
+    lc_state_init(&s2, f.bake, &lim);
+    j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s2, err, sizeof err);
+    CHECK(j && same_state(&s1, &s2), "reopen restores state and revision (%llu vs %llu): %s",
+          (unsigned long long)s2.revision, (unsigned long long)s1.revision, err);
+    lc_journal_close(j);
+
+    /* A torn last line (crash mid-write) is dropped; the state is the last complete one. */
+    char path[256];
+    snprintf(path, sizeof path, "%s/journal.log", dir);
+    int fd = open(path, O_WRONLY | O_APPEND);
+    CHECK(fd >= 0 && write(fd, "{\"type\":\"batch\",\"revision\":9,\"ops\":[{\"ty", 41) == 41, "tear");
+    close(fd);
+    lc_state s3;
+    lc_state_init(&s3, f.bake, &lim);
+    j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s3, err, sizeof err);
+    CHECK(j && same_state(&s1, &s3), "torn line dropped: %s", err);
+
+    /* Compaction keeps the state; journal lines the snapshot holds are skipped. */
+    CHECK(lc_journal_compact(j, &s3, err, sizeof err) == 0 && lc_journal_bytes(j) == 0, "compact: %s", err);
+    lc_proto_op z = light_op("z", 8);
+    CHECK(lc_state_apply(&s3, &z, 1, 0, &e) == 0 && lc_journal_append(j, &z, 1, s3.revision, err, sizeof err) == 0,
+          "append after compaction");
+    lc_journal_close(j);
+    lc_state s4;
+    lc_state_init(&s4, f.bake, &lim);
+    j = lc_journal_open(dir, LC_FSYNC_EVERYSEC, &s4, err, sizeof err);
+    CHECK(j && same_state(&s3, &s4), "snapshot + journal restore: %s", err);
+    lc_journal_close(j);
+
+    /* A corrupt complete line refuses to start, naming the line. */
+    fd = open(path, O_WRONLY | O_APPEND);
+    CHECK(fd >= 0 && write(fd, "garbage\n", 8) == 8, "corrupt");
+    close(fd);
+    lc_state s5;
+    lc_state_init(&s5, f.bake, &lim);
+    j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s5, err, sizeof err);
+    CHECK(!j && strstr(err, "journal.log line 2"), "corrupt journal refused: %s", err);
+
+    snprintf(path, sizeof path, "%s/journal.log", dir);
+    unlink(path);
+    snprintf(path, sizeof path, "%s/snapshot.json", dir);
+    unlink(path);
+    rmdir(dir);
+    lc_state_release(&s);
+    lc_state_release(&s1);
+    lc_state_release(&s2);
+    lc_state_release(&s3);
+    lc_state_release(&s4);
+    lc_state_release(&s5);
+    fixture_release(&f);
+    CHECK_DONE();
+}

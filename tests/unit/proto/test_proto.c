@@ -1,0 +1,941 @@
+/* liblucent-proto: request parsing (valid forms, defaults, every error code with its
+ * pointer), builders, state round trip, binary frames, RGB9E5 and tiles. */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cjson/cJSON.h>
+
+#include "check.h"
+#include "lucent_proto.h"
+#include "util/crc32.h"
+
+static int parse(const char *s, lc_proto_request *r, lc_proto_error *e) {
+    return lc_proto_parse_request(s, strlen(s), NULL, r, e);
+}
+
+/* Parses a valid message; the caller releases r. */
+#define PARSE_OK(json, r)                                                                            \
+    do {                                                                                             \
+        lc_proto_error e_;                                                                           \
+        int rc_ = parse(json, r, &e_);                                                               \
+        CHECK(rc_ == 0, "%s: %s %s %s", json, e_.code, e_.pointer, e_.message);                      \
+    } while (0)
+
+static void expect_err_len(int line, const char *json, size_t len, const char *code, const char *ptr) {
+    lc_proto_request r;
+    lc_proto_error e;
+    int rc = lc_proto_parse_request(json, len, NULL, &r, &e);
+    CHECK(rc == -1, "line %d: %.80s: parsed but should fail", line, json);
+    CHECK(!strcmp(e.code, code), "line %d: %.80s: code %s, expected %s (%s)", line, json, e.code, code, e.message);
+    CHECK(!strcmp(e.pointer, ptr), "line %d: %.80s: pointer '%s', expected '%s'", line, json, e.pointer, ptr);
+    CHECK(r.ops == NULL && r.n_ops == 0, "line %d: ops left after failure", line);
+    lc_proto_request_release(&r);
+}
+#define EXPECT_ERR(json, code, ptr) expect_err_len(__LINE__, json, strlen(json), code, ptr)
+
+static int n_invalid_cases = 0;
+#define INVALID(json, code, ptr) (n_invalid_cases++, EXPECT_ERR(json, code, ptr))
+
+#define LIGHT_PT "\"position\":[0,1,0]"
+
+static void test_valid(void) {
+    lc_proto_request r;
+
+    PARSE_OK("{\"type\":\"hello\",\"id\":1,\"client\":\"my-viewer/2.0\",\"token\":\"tok\",\"encodings\":[\"rgb9e5\",\"f32\",\"future\"]}", &r);
+    CHECK(r.type == LC_REQ_HELLO && r.id.kind == 2 && r.id.num == 1, "hello id");
+    CHECK(!strcmp(r.client, "my-viewer/2.0") && !strcmp(r.token, "tok"), "hello strings");
+    CHECK(r.encodings == ((1u << LC_ENC_RGB9E5) | (1u << LC_ENC_F32)), "encodings %x", r.encodings);
+    CHECK(!lc_proto_is_change(r.type), "hello is not a change");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"hello\",\"client\":\"c\"}", &r);
+    CHECK(r.token[0] == 0 && r.encodings == 0 && r.id.kind == 0, "hello defaults");
+    lc_proto_request_release(&r);
+
+    PARSE_OK("{\"type\":\"subscribe\",\"id\":\"s1\",\"stream\":\"lightmap\"}", &r);
+    CHECK(r.type == LC_REQ_SUBSCRIBE && r.stream == LC_STREAM_LIGHTMAP && r.encoding == LC_ENC_RGB9E5, "sub lm");
+    CHECK(r.max_rate == 0 && r.id.kind == 1 && !strcmp(r.id.str, "s1"), "sub defaults");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"subscribe\",\"stream\":\"shgrid\"}", &r);
+    CHECK(r.stream == LC_STREAM_SHGRID && r.encoding == LC_ENC_F32, "shgrid default f32");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"subscribe\",\"stream\":\"objects\",\"encoding\":\"rgba16f\",\"max_rate\":30.5}", &r);
+    CHECK(r.stream == LC_STREAM_OBJECTS && r.encoding == LC_ENC_RGBA16F && r.max_rate == 30.5, "objects");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"unsubscribe\",\"stream\":\"objects\"}", &r);
+    CHECK(r.type == LC_REQ_UNSUBSCRIBE && r.stream == LC_STREAM_OBJECTS, "unsub");
+    lc_proto_request_release(&r);
+
+    /* point light: defaults */
+    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"l1\",\"type\":\"point\",\"position\":[1,2,3]}}", &r);
+    CHECK(r.type == LC_REQ_LIGHT_SET && r.n_ops == 1 && r.ops[0].type == LC_REQ_LIGHT_SET, "light.set");
+    if (r.n_ops == 1) {
+        const lc_proto_light *L = &r.ops[0].light;
+        CHECK(!strcmp(L->id, "l1") && !strcmp(r.ops[0].target, "l1") && L->type == LC_PLIGHT_POINT, "ids");
+        CHECK(L->color[0] == 1 && L->color[1] == 1 && L->color[2] == 1, "default colour");
+        CHECK(L->intensity == 1 && L->range == 0, "default intensity/range");
+        CHECK(L->position[0] == 1 && L->position[1] == 2 && L->position[2] == 3, "position");
+        CHECK_NEAR(L->inner_cone, 0, 1e-7);
+        CHECK_NEAR(L->outer_cone, M_PI / 4, 1e-7);
+        CHECK(L->shape == 0 && L->size[0] == 1 && L->size[1] == 1, "default shape/size");
+        CHECK(L->tangent[0] == 0 && L->tangent[1] == 0 && L->tangent[2] == 0, "tangent zero");
+    }
+    CHECK(lc_proto_is_change(r.type), "light.set is a change");
+    lc_proto_request_release(&r);
+
+    /* spot: direction normalised, cones */
+    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[0,-2,0],"
+             "\"color\":[1,0.5,0.25],\"intensity\":800,\"range\":20,\"innerConeAngle\":0.2,\"outerConeAngle\":0.5,\"extra\":{\"x\":1}}}", &r);
+    if (r.n_ops == 1) {
+        const lc_proto_light *L = &r.ops[0].light;
+        CHECK(L->type == LC_PLIGHT_SPOT && L->direction[1] == -1 && L->direction[0] == 0, "spot dir");
+        CHECK(L->color[1] == 0.5f && L->intensity == 800 && L->range == 20, "spot values");
+        CHECK(L->inner_cone == 0.2f && L->outer_cone == 0.5f, "cones");
+    }
+    lc_proto_request_release(&r);
+    /* inner wider than the default outer: outer follows */
+    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[1,1,0],\"innerConeAngle\":1.2}}", &r);
+    if (r.n_ops == 1) {
+        CHECK(r.ops[0].light.outer_cone == 1.2f, "outer = inner");
+        CHECK_NEAR(r.ops[0].light.direction[0], sqrt(0.5), 1e-6);
+    }
+    lc_proto_request_release(&r);
+    /* outer exactly π/2 as a float prints a bit above π/2: still accepted */
+    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[1,0,0],\"outerConeAngle\":1.57079637}}", &r);
+    lc_proto_request_release(&r);
+
+    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"sun\",\"type\":\"directional\",\"direction\":[0,0,-1e-300],\"intensity\":1e5}}", &r);
+    if (r.n_ops == 1) CHECK(r.ops[0].light.direction[2] == -1 && r.ops[0].light.intensity == 1e5f, "tiny direction normalised");
+    lc_proto_request_release(&r);
+
+    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\",\"position\":[0,2,0],\"direction\":[0,-1,0],"
+             "\"size\":[0.5,2],\"tangent\":[3,0,0]}}", &r);
+    if (r.n_ops == 1) {
+        const lc_proto_light *L = &r.ops[0].light;
+        CHECK(L->shape == 0 && L->size[0] == 0.5f && L->size[1] == 2 && L->tangent[0] == 1, "area quad");
+    }
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"d\",\"type\":\"area\",\"shape\":\"disc\",\"position\":[0,2,0],\"direction\":[0,-1,0],\"size\":[0.3]}}", &r);
+    if (r.n_ops == 1) CHECK(r.ops[0].light.shape == 1 && r.ops[0].light.size[0] == 0.3f, "disc");
+    lc_proto_request_release(&r);
+
+    PARSE_OK("{\"type\":\"light.remove\",\"id\":7,\"light_id\":\"l1\"}", &r);
+    CHECK(r.type == LC_REQ_LIGHT_REMOVE && r.n_ops == 1 && !strcmp(r.ops[0].target, "l1"), "light.remove");
+    lc_proto_request_release(&r);
+
+    PARSE_OK("{\"type\":\"object.set\",\"object\":{\"id\":\"chair-1\",\"asset\":\"chair\"}}", &r);
+    if (r.n_ops == 1) {
+        const lc_proto_object *O = &r.ops[0].object;
+        CHECK(!strcmp(O->id, "chair-1") && !strcmp(O->asset, "chair") && O->visible == 1, "object");
+        CHECK(O->rotation[3] == 1 && O->rotation[0] == 0 && O->scale[0] == 1 && O->scale[2] == 1, "defaults");
+        CHECK(O->translation[0] == 0 && O->translation[1] == 0, "translation default");
+    }
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"translation\":[1,2,3],\"rotation\":[0,0,2,0],"
+             "\"scale\":[-1,2,0.5],\"visible\":false}}", &r);
+    if (r.n_ops == 1) {
+        const lc_proto_object *O = &r.ops[0].object;
+        CHECK(O->rotation[2] == 1 && O->rotation[3] == 0 && O->scale[0] == -1 && O->visible == 0, "object values");
+        CHECK(O->translation[2] == 3, "translation");
+    }
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"object.remove\",\"object_id\":\"o\"}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].type == LC_REQ_OBJECT_REMOVE && !strcmp(r.ops[0].target, "o"), "object.remove");
+    lc_proto_request_release(&r);
+
+    PARSE_OK("{\"type\":\"material.set\",\"material\":\"light\",\"emission\":[10,20,30]}", &r);
+    CHECK(r.n_ops == 1 && !strcmp(r.ops[0].target, "light") && r.ops[0].emission[2] == 30, "material.set");
+    lc_proto_request_release(&r);
+
+    PARSE_OK("{\"type\":\"environment.set\",\"environment\":{\"type\":\"constant\",\"color\":[0.1,0.2,0.3],\"intensity\":2}}", &r);
+    if (r.n_ops == 1) {
+        const lc_proto_environment *E = &r.ops[0].environment;
+        CHECK(E->kind == 1 && E->color[2] == 0.3f && E->intensity == 2, "env constant");
+    }
+    lc_proto_request_release(&r);
+    {
+        char buf[512] = "{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\",\"sh\":[";
+        for (int i = 0; i < 27; i++) snprintf(buf + strlen(buf), sizeof buf - strlen(buf), "%s%d", i ? "," : "", i - 5);
+        strcat(buf, "]}}");
+        PARSE_OK(buf, &r);
+        if (r.n_ops == 1) {
+            const lc_proto_environment *E = &r.ops[0].environment;
+            CHECK(E->kind == 2 && E->sh[0] == -5 && E->sh[26] == 21 && E->intensity == 1 && E->color[0] == 1, "env sh");
+        }
+        lc_proto_request_release(&r);
+    }
+    PARSE_OK("{\"type\":\"environment.set\",\"environment\":{\"type\":\"none\"}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].environment.kind == 0, "env none");
+    lc_proto_request_release(&r);
+
+    PARSE_OK("{\"type\":\"settings.set\",\"settings\":{\"bounces\":3,\"bands\":4,\"progressive\":true,\"chroma_compression\":false,\"chroma_bands\":2}}", &r);
+    if (r.n_ops == 1) {
+        const lc_proto_settings *S = &r.ops[0].settings;
+        CHECK(S->present == 0x1F && S->bounces == 3 && S->bands == 4 && S->progressive == 1 && S->chroma_compression == 0 &&
+                  S->chroma_bands == 2, "settings");
+    }
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"settings.set\",\"settings\":{\"bounces\":2.0}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].settings.present == 1u << LC_SET_BOUNCES && r.ops[0].settings.bounces == 2, "subset");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"settings.set\",\"settings\":{}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].settings.present == 0, "empty settings");
+    lc_proto_request_release(&r);
+
+    PARSE_OK("{\"type\":\"batch\",\"id\":\"b\",\"ops\":[{\"type\":\"light.set\",\"light\":{\"id\":\"x\",\"type\":\"point\"," LIGHT_PT "}},"
+             "{\"type\":\"object.remove\",\"object_id\":\"o\"},{\"type\":\"settings.set\",\"settings\":{\"bounces\":1}}]}", &r);
+    CHECK(r.type == LC_REQ_BATCH && r.n_ops == 3 && r.ops && r.ops[1].type == LC_REQ_OBJECT_REMOVE &&
+              r.ops[2].settings.bounces == 1 && !strcmp(r.ops[0].light.id, "x"), "batch");
+    lc_proto_request_release(&r);
+    {   /* exactly max_batch ops */
+        static char buf[8192];
+        strcpy(buf, "{\"type\":\"batch\",\"ops\":[");
+        for (int i = 0; i < 64; i++) strcat(buf, i ? ",{\"type\":\"light.remove\",\"light_id\":\"a\"}" : "{\"type\":\"light.remove\",\"light_id\":\"a\"}");
+        strcat(buf, "]}");
+        PARSE_OK(buf, &r);
+        CHECK(r.n_ops == 64, "64 ops");
+        lc_proto_request_release(&r);
+    }
+
+    PARSE_OK("{\"type\":\"state.get\",\"id\":9007199254740991}", &r);
+    CHECK(r.type == LC_REQ_STATE_GET && r.id.kind == 2 && r.id.num == 9007199254740991LL, "state.get id max");
+    lc_proto_request_release(&r);
+    PARSE_OK(" {\"type\":\"snapshot\"}\r\n", &r);
+    CHECK(r.type == LC_REQ_SNAPSHOT && r.n_ops == 0, "snapshot");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"ping\",\"t\":-12.5e3}", &r);
+    CHECK(r.type == LC_REQ_PING && r.ping_t == -12500, "ping");
+    lc_proto_request_release(&r);
+    /* UTF-8 and escapes in strings */
+    PARSE_OK("{\"type\":\"light.remove\",\"light_id\":\"l\\u00e9\xc3\xa9\xf0\x9f\x92\xa1\\ud83d\\udca1\"}", &r);
+    CHECK(r.n_ops == 1 && !strcmp(r.ops[0].target, "l\xc3\xa9\xc3\xa9\xf0\x9f\x92\xa1\xf0\x9f\x92\xa1"), "utf-8 id");
+    lc_proto_request_release(&r);
+    /* 64-byte id is fine */
+    PARSE_OK("{\"type\":\"light.remove\",\"light_id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\"}", &r);
+    CHECK(r.n_ops == 1 && strlen(r.ops[0].target) == 64, "64-byte id");
+    lc_proto_request_release(&r);
+
+    /* names */
+    CHECK(!strcmp(lc_proto_type_name(LC_REQ_ENVIRONMENT_SET), "environment.set"), "type name");
+    CHECK(!strcmp(lc_proto_stream_name(LC_STREAM_SHGRID), "shgrid"), "stream name");
+    CHECK(!strcmp(lc_proto_encoding_name(LC_ENC_RGBA16F), "rgba16f"), "encoding name");
+    for (int t = 0; t < LC_REQ_COUNT; t++)
+        CHECK(lc_proto_is_change((lc_req_type)t) == (t >= LC_REQ_LIGHT_SET && t <= LC_REQ_BATCH), "is_change %d", t);
+}
+
+static void test_limits(void) {
+    /* depth: 16 levels parse, 17 do not */
+    char buf[256];
+    strcpy(buf, "{\"type\":\"ping\",\"t\":1,\"x\":");
+    for (int i = 0; i < 15; i++) strcat(buf, "[");
+    for (int i = 0; i < 15; i++) strcat(buf, "]");
+    strcat(buf, "}");
+    lc_proto_request r;
+    PARSE_OK(buf, &r);
+    lc_proto_request_release(&r);
+    strcpy(buf, "{\"type\":\"ping\",\"t\":1,\"x\":");
+    for (int i = 0; i < 16; i++) strcat(buf, "[");
+    for (int i = 0; i < 16; i++) strcat(buf, "]");
+    strcat(buf, "}");
+    INVALID(buf, "too_deep", "");
+    /* brackets inside strings do not count */
+    PARSE_OK("{\"type\":\"ping\",\"t\":1,\"x\":\"[[[[[[[[[[[[[[[[[[[[{{{{{{{{{{{{{{{{{{\\\"[[[[[[[[[[[[[\"}", &r);
+    lc_proto_request_release(&r);
+    /* 17 levels of objects, unbalanced garbage after: depth is reported first */
+    INVALID("{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":", "too_deep", "");
+
+    /* size: 65536 parses, 65537 does not */
+    size_t n = 65536;
+    char *big = malloc(n + 2);
+    strcpy(big, "{\"type\":\"ping\",\"t\":1,\"pad\":\"");
+    size_t k = strlen(big);
+    memset(big + k, 'x', n - k - 2);
+    memcpy(big + n - 2, "\"}", 3);
+    CHECK(strlen(big) == n, "big size");
+    PARSE_OK(big, &r);
+    lc_proto_request_release(&r);
+    memmove(big + k + 1, big + k, n - k + 1);
+    big[k] = 'x';
+    n_invalid_cases++;
+    expect_err_len(__LINE__, big, n + 1, "too_large", "");
+    free(big);
+
+    /* configurable limits */
+    lc_proto_limits lim;
+    lc_proto_default_limits(&lim);
+    CHECK(lim.max_message == 65536 && lim.max_depth == 16 && lim.max_batch == 64, "defaults");
+    lim.max_batch = 2;
+    const char *b3 = "{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"light.remove\",\"light_id\":\"a\"},"
+                     "{\"type\":\"light.remove\",\"light_id\":\"a\"}]}";
+    lc_proto_error e;
+    CHECK(lc_proto_parse_request(b3, strlen(b3), &lim, &r, &e) == -1 && !strcmp(e.code, "limit_exceeded"), "max_batch 2");
+    lc_proto_request_release(&r);
+    /* not NUL-terminated: only len bytes are read */
+    const char *pfx = "{\"type\":\"snapshot\"}GARBAGE";
+    CHECK(lc_proto_parse_request(pfx, 19, NULL, &r, &e) == 0 && r.type == LC_REQ_SNAPSHOT, "length respected");
+    lc_proto_request_release(&r);
+}
+
+static void test_invalid(void) {
+    INVALID("", "bad_json", "");
+    INVALID("not json", "bad_json", "");
+    INVALID("[1,2]", "bad_json", "");
+    INVALID("\"ping\"", "bad_json", "");
+    INVALID("null", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":1} x", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":1}{}", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":1,}", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":NaN}", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":Infinity}", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":-Infinity}", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":01}", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":.5}", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":0x10}", "bad_json", "");
+    INVALID("{'type':'ping'}", "bad_json", "");
+    INVALID("{\"type\":\"ping\",\"t\":1,\"s\":\"a\tb\"}", "bad_json", "");          /* raw control character */
+    INVALID("{\"type\":\"ping\",\"t\":1,\"s\":\"\\ud800\"}", "bad_json", "");      /* lone surrogate */
+    INVALID("{\"type\":\"ping\",\"t\":1,\"s\":\"\\x\"}", "bad_json", "");          /* bad escape */
+    INVALID("\xef\xbb\xbf{\"type\":\"snapshot\"}", "bad_json", "");               /* BOM */
+    INVALID("{\"type\":\"ping\",\"t\":1e400}", "out_of_range", "/t");
+    INVALID("{\"type\":\"ping\",\"t\":-1e400}", "out_of_range", "/t");
+    INVALID("{\"type\":\"ping\",\"t\":\"NaN\"}", "invalid", "/t");
+    INVALID("{\"type\":\"ping\"}", "invalid", "/t");
+    INVALID("{\"t\":1}", "unknown_type", "/type");
+    INVALID("{\"type\":\"fly\"}", "unknown_type", "/type");
+    INVALID("{\"type\":5}", "unknown_type", "/type");
+    INVALID("{\"type\":\"Ping\",\"t\":1}", "unknown_type", "/type");
+
+    INVALID("{\"type\":\"hello\",\"token\":\"x\"}", "invalid", "/client");
+    INVALID("{\"type\":\"hello\",\"client\":\"\"}", "invalid", "/client");
+    INVALID("{\"type\":\"hello\",\"client\":\"xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx\"}", "invalid", "/client");
+    INVALID("{\"type\":\"hello\",\"client\":\"c\",\"token\":7}", "invalid", "/token");
+    INVALID("{\"type\":\"hello\",\"client\":\"c\",\"encodings\":\"rgb9e5\"}", "invalid", "/encodings");
+    INVALID("{\"type\":\"hello\",\"client\":\"c\",\"encodings\":[\"f32\",1]}", "invalid", "/encodings/1");
+    INVALID("{\"type\":\"hello\",\"client\":\"\xc0\xaf\"}", "invalid", "/client");     /* overlong UTF-8 */
+
+    INVALID("{\"type\":\"subscribe\"}", "invalid", "/stream");
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"video\"}", "invalid", "/stream");
+    INVALID("{\"type\":\"subscribe\",\"stream\":[\"lightmap\"]}", "invalid", "/stream");
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"shgrid\",\"encoding\":\"rgb9e5\"}", "invalid", "/encoding");
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"encoding\":\"png\"}", "invalid", "/encoding");
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"max_rate\":0}", "out_of_range", "/max_rate");
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"max_rate\":121}", "out_of_range", "/max_rate");
+    INVALID("{\"type\":\"unsubscribe\",\"stream\":null}", "invalid", "/stream");
+
+    INVALID("{\"type\":\"light.set\"}", "invalid", "/light");
+    INVALID("{\"type\":\"light.set\",\"light\":[]}", "invalid", "/light");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"type\":\"point\"," LIGHT_PT "}}", "invalid", "/light/id");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\",\"type\":\"point\"," LIGHT_PT "}}", "invalid", "/light/id");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\xff\",\"type\":\"point\"," LIGHT_PT "}}", "invalid", "/light/id");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\xed\xa0\x80\",\"type\":\"point\"," LIGHT_PT "}}", "invalid", "/light/id"); /* UTF-8 surrogate */
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"laser\"," LIGHT_PT "}}", "invalid", "/light/type");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\"," LIGHT_PT "}}", "invalid", "/light/type");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":-1}}", "out_of_range", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":\"1\"}}", "invalid", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":\"NaN\"}}", "invalid", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":1e400}}", "out_of_range", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":1.5e9}}", "out_of_range", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"range\":-0.5}}", "out_of_range", "/light/range");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"}}", "invalid", "/light/position");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,0]}}", "invalid", "/light/position");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,\"x\",0]}}", "invalid", "/light/position/1");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,2e6,0]}}", "out_of_range", "/light/position/1");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,0,0],\"color\":[1,1,-1]}}", "out_of_range", "/light/color/2");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\"," LIGHT_PT "}}", "invalid", "/light/direction");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"directional\",\"direction\":[0,0,0]}}", "out_of_range", "/light/direction");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\"," LIGHT_PT ",\"direction\":[0,-1,0],\"innerConeAngle\":2}}", "out_of_range", "/light/innerConeAngle");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\"," LIGHT_PT ",\"direction\":[0,-1,0],\"innerConeAngle\":0.5,\"outerConeAngle\":0.4}}", "out_of_range", "/light/outerConeAngle");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0]}}", "invalid", "/light/size");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0],\"shape\":\"disc\",\"size\":[1,2]}}", "invalid", "/light/size");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0],\"size\":[0,1]}}", "out_of_range", "/light/size/0");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0],\"size\":[1,2e4]}}", "out_of_range", "/light/size/1");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0],\"size\":[1,1],\"shape\":\"triangle\"}}", "invalid", "/light/shape");
+
+    INVALID("{\"type\":\"light.remove\"}", "invalid", "/light_id");
+    INVALID("{\"type\":\"light.remove\",\"light_id\":7}", "invalid", "/light_id");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\"}}", "invalid", "/object/asset");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"rotation\":[0,0,0,0]}}", "out_of_range", "/object/rotation");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"rotation\":[0,0,1]}}", "invalid", "/object/rotation");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"scale\":[1,0,1]}}", "out_of_range", "/object/scale/1");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"scale\":[1,1,-2e4]}}", "out_of_range", "/object/scale/2");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"visible\":\"yes\"}}", "invalid", "/object/visible");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"translation\":[1,2,3e7]}}", "out_of_range", "/object/translation/2");
+    INVALID("{\"type\":\"object.remove\",\"object_id\":\"\"}", "invalid", "/object_id");
+    INVALID("{\"type\":\"material.set\",\"material\":\"m\"}", "invalid", "/emission");
+    INVALID("{\"type\":\"material.set\",\"emission\":[1,1,1]}", "invalid", "/material");
+    INVALID("{\"type\":\"material.set\",\"material\":\"m\",\"emission\":[0,0,2e7]}", "out_of_range", "/emission/2");
+    INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"hdr\"}}", "invalid", "/environment/type");
+    INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\"}}", "invalid", "/environment/sh");
+    INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\",\"sh\":[1,2,3]}}", "invalid", "/environment/sh");
+    INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"none\",\"intensity\":-1}}", "out_of_range", "/environment/intensity");
+    INVALID("{\"type\":\"environment.set\",\"environment\":\"none\"}", "invalid", "/environment");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"bounces\":17}}", "out_of_range", "/settings/bounces");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"bands\":1.5}}", "invalid", "/settings/bands");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"bands\":0}}", "out_of_range", "/settings/bands");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"bands\":2,\"chroma_bands\":3}}", "out_of_range", "/settings/chroma_bands");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"progressive\":1}}", "invalid", "/settings/progressive");
+
+    INVALID("{\"type\":\"batch\"}", "invalid", "/ops");
+    INVALID("{\"type\":\"batch\",\"ops\":[]}", "invalid", "/ops");
+    INVALID("{\"type\":\"batch\",\"ops\":{}}", "invalid", "/ops");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"object.remove\",\"object_id\":\"b\"},"
+            "{\"type\":\"light.set\",\"light\":{\"id\":\"x\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":-3}}]}",
+            "out_of_range", "/ops/2/light/intensity");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"light.remove\",\"light_id\":\"a\"},"
+            "{\"type\":\"light.set\",\"light\":{\"id\":\"x\",\"type\":\"point\",\"position\":[0,1,\"z\"]}}]}",
+            "invalid", "/ops/2/light/position/2");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"}]}]}",
+            "invalid", "/ops/1/type");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"ping\",\"t\":1}]}", "invalid", "/ops/0/type");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"hello\",\"client\":\"c\"}]}", "invalid", "/ops/0/type");
+    INVALID("{\"type\":\"batch\",\"ops\":[1]}", "invalid", "/ops/0");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"teleport\"}]}", "unknown_type", "/ops/0/type");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"light_id\":\"a\"}]}", "unknown_type", "/ops/0/type");
+    {
+        static char buf[8192];
+        strcpy(buf, "{\"type\":\"batch\",\"ops\":[");
+        for (int i = 0; i < 65; i++) strcat(buf, i ? ",{\"type\":\"light.remove\",\"light_id\":\"a\"}" : "{\"type\":\"light.remove\",\"light_id\":\"a\"}");
+        strcat(buf, "]}");
+        INVALID(buf, "limit_exceeded", "/ops");
+    }
+
+    INVALID("{\"type\":\"snapshot\",\"id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\"}", "invalid", "/id");
+    INVALID("{\"type\":\"snapshot\",\"id\":\"\"}", "invalid", "/id");
+    INVALID("{\"type\":\"snapshot\",\"id\":-1}", "out_of_range", "/id");
+    INVALID("{\"type\":\"snapshot\",\"id\":1.5}", "invalid", "/id");
+    INVALID("{\"type\":\"snapshot\",\"id\":9007199254740992}", "out_of_range", "/id");
+    INVALID("{\"type\":\"snapshot\",\"id\":true}", "invalid", "/id");
+    INVALID("{\"type\":\"snapshot\",\"id\":{}}", "invalid", "/id");
+    INVALID("{\"type\":\"snapshot\",\"x\":\"\xe2\x82\"}", "invalid", "");               /* truncated UTF-8 elsewhere */
+    INVALID("{\"type\":\"snapshot\",\"\xff\":1}", "invalid", "");                       /* in a key */
+    INVALID("{\"type\":\"light.remove\",\"light_id\":\"a\\u0000b\"}", "invalid", "");
+
+    /* the error echoes the request id when it was readable */
+    lc_proto_request r;
+    lc_proto_error e;
+    CHECK(parse("{\"id\":\"abc\",\"type\":\"light.set\",\"light\":{}}", &r, &e) == -1 && r.id.kind == 1 &&
+              !strcmp(r.id.str, "abc") && !strcmp(e.pointer, "/light/id"), "id echoed");
+    lc_proto_request_release(&r);
+    CHECK(parse("{\"type\":\"nope\",\"id\":42}", &r, &e) == -1 && r.id.kind == 2 && r.id.num == 42, "id echoed, unknown type");
+    lc_proto_request_release(&r);
+    CHECK(e.message[0] != 0, "message filled");
+    /* NULL err is allowed */
+    CHECK(lc_proto_parse_request("{}", 2, NULL, &r, NULL) == -1, "NULL err");
+    lc_proto_request_release(&r);
+    fprintf(stderr, "%d invalid forms checked\n", n_invalid_cases);
+    CHECK(n_invalid_cases >= 40, "at least 40 invalid forms");
+}
+
+/* --- builders ---------------------------------------------------------------------------- */
+
+static cJSON *reparse(char *s) {
+    CHECK(s != NULL, "builder returned NULL");
+    if (!s) return NULL;
+    cJSON *j = cJSON_Parse(s);
+    CHECK(j != NULL, "builder output is not JSON: %s", s);
+    free(s);
+    return j;
+}
+
+static double num(const cJSON *o, const char *k) {
+    const cJSON *it = cJSON_GetObjectItemCaseSensitive(o, k);
+    return cJSON_IsNumber(it) ? it->valuedouble : NAN;
+}
+
+static const char *str(const cJSON *o, const char *k) {
+    const cJSON *it = cJSON_GetObjectItemCaseSensitive(o, k);
+    return cJSON_IsString(it) ? it->valuestring : "";
+}
+
+static void test_builders(void) {
+    lc_proto_id sid = {1, "req-1", 0}, nid = {2, "", 9007199254740991LL}, none = {0, "", 0};
+    cJSON *j = reparse(lc_proto_build_ok(&sid, 42));
+    CHECK(j && !strcmp(str(j, "type"), "ok") && !strcmp(str(j, "id"), "req-1") && num(j, "revision") == 42, "ok");
+    CHECK(cJSON_GetArraySize(j) == 3, "ok has 3 keys");
+    cJSON_Delete(j);
+    char *s = lc_proto_build_ok(&nid, 18446744073709551615ULL);
+    CHECK(s && strstr(s, "\"id\":9007199254740991") && strstr(s, "\"revision\":18446744073709551615"), "exact integers: %s", s);
+    free(s);
+    j = reparse(lc_proto_build_ok(&none, 0));
+    CHECK(j && !cJSON_GetObjectItem(j, "id") && num(j, "revision") == 0, "ok without id");
+    cJSON_Delete(j);
+    j = reparse(lc_proto_build_ok(NULL, 1));
+    CHECK(j && !cJSON_GetObjectItem(j, "id"), "ok NULL id");
+    cJSON_Delete(j);
+
+    lc_proto_error e = {"out_of_range", "/light/intensity", "intensity \"must\" be\n in range"};
+    j = reparse(lc_proto_build_error(&sid, &e));
+    CHECK(j && !strcmp(str(j, "type"), "error") && !strcmp(str(j, "code"), "out_of_range") &&
+              !strcmp(str(j, "pointer"), "/light/intensity") && !strcmp(str(j, "message"), e.message) &&
+              !strcmp(str(j, "id"), "req-1"), "error");
+    cJSON_Delete(j);
+    lc_proto_error e2 = {"bad_json", "", "x"};
+    j = reparse(lc_proto_build_error(NULL, &e2));
+    CHECK(j && cJSON_IsString(cJSON_GetObjectItem(j, "pointer")) && !strcmp(str(j, "pointer"), ""), "error empty pointer");
+    cJSON_Delete(j);
+
+    j = reparse(lc_proto_build_pong(&nid, 1234.5678901234567, 1700000000123456ULL));
+    CHECK(j && !strcmp(str(j, "type"), "pong") && num(j, "t") == 1234.5678901234567 && num(j, "server_time_us") == 1700000000123456.0,
+          "pong");
+    cJSON_Delete(j);
+
+    const char *assets[] = {"chair", "table"}, *mats[] = {"white", "light", "red \"q\""};
+    lc_proto_welcome w = {0};
+    w.server = "lucentd/0.1.0";
+    w.role = "controller";
+    w.revision = 42;
+    w.lightmap_width = 128;
+    w.lightmap_height = 64;
+    w.tile = 32;
+    w.grid_origin[0] = -1.5f;
+    w.grid_cell = 0.5f;
+    w.grid_dims[0] = 24, w.grid_dims[1] = 8, w.grid_dims[2] = 12;
+    w.bands = 3;
+    w.assets = assets;
+    w.n_assets = 2;
+    w.materials = mats;
+    w.n_materials = 3;
+    lc_proto_default_limits(&w.limits);
+    w.max_lights = w.max_objects = 4096;
+    w.rate = 100;
+    j = reparse(lc_proto_build_welcome(&nid, &w));
+    if (j) {
+        const cJSON *sc = cJSON_GetObjectItem(j, "scene"), *lm = cJSON_GetObjectItem(sc, "lightmap"),
+                    *gr = cJSON_GetObjectItem(sc, "grid"), *li = cJSON_GetObjectItem(j, "limits");
+        CHECK(!strcmp(str(j, "type"), "welcome") && !strcmp(str(j, "protocol"), "lucent/1") &&
+                  !strcmp(str(j, "server"), "lucentd/0.1.0") && !strcmp(str(j, "role"), "controller") && num(j, "revision") == 42,
+              "welcome top");
+        CHECK(num(lm, "width") == 128 && num(lm, "height") == 64 && num(lm, "tile") == 32 && !strcmp(str(lm, "quantity"), "irradiance"),
+              "welcome lightmap");
+        CHECK(num(gr, "cell") == 0.5 && cJSON_GetArrayItem(cJSON_GetObjectItem(gr, "origin"), 0)->valuedouble == -1.5 &&
+                  cJSON_GetArrayItem(cJSON_GetObjectItem(gr, "dims"), 2)->valuedouble == 12 && num(gr, "coefficients") == 9 &&
+                  !strcmp(str(gr, "quantity"), "irradiance_sh"),
+              "welcome grid");
+        CHECK(num(sc, "bands") == 3 && cJSON_GetArraySize(cJSON_GetObjectItem(sc, "assets")) == 2 &&
+                  !strcmp(cJSON_GetArrayItem(cJSON_GetObjectItem(sc, "materials"), 2)->valuestring, "red \"q\""),
+              "welcome names");
+        CHECK(num(li, "max_message") == 65536 && num(li, "max_lights") == 4096 && num(li, "max_objects") == 4096 &&
+                  num(li, "max_batch") == 64 && num(li, "rate") == 100, "welcome limits");
+    }
+    cJSON_Delete(j);
+
+    lc_proto_op ops[4];
+    memset(ops, 0, sizeof ops);
+    ops[0].type = LC_REQ_LIGHT_SET;
+    strcpy(ops[0].light.id, "key");
+    ops[1].type = LC_REQ_OBJECT_REMOVE;
+    strcpy(ops[1].target, "chair-1");
+    ops[2].type = LC_REQ_ENVIRONMENT_SET;
+    ops[3].type = LC_REQ_MATERIAL_SET;
+    strcpy(ops[3].target, "white");
+    j = reparse(lc_proto_build_changed(43, "my-viewer/2.0", ops, 4));
+    if (j) {
+        const cJSON *o = cJSON_GetObjectItem(j, "ops"), *ids = cJSON_GetObjectItem(j, "ids");
+        CHECK(!strcmp(str(j, "type"), "changed") && num(j, "revision") == 43 && !strcmp(str(j, "by"), "my-viewer/2.0"), "changed");
+        CHECK(cJSON_GetArraySize(o) == 4 && !strcmp(cJSON_GetArrayItem(o, 0)->valuestring, "light.set") &&
+                  !strcmp(cJSON_GetArrayItem(o, 2)->valuestring, "environment.set"), "changed ops");
+        CHECK(cJSON_GetArraySize(ids) == 4 && !strcmp(cJSON_GetArrayItem(ids, 0)->valuestring, "key") &&
+                  !strcmp(cJSON_GetArrayItem(ids, 1)->valuestring, "chair-1") &&
+                  !strcmp(cJSON_GetArrayItem(ids, 3)->valuestring, "white"), "changed ids");
+    }
+    cJSON_Delete(j);
+
+    /* floats are written in their shortest round-trip form */
+    memset(ops, 0, sizeof ops);
+    ops[0].type = LC_REQ_MATERIAL_SET;
+    strcpy(ops[0].target, "m");
+    ops[0].emission[0] = 0.1f;
+    ops[0].emission[1] = 1e7f;
+    ops[0].emission[2] = 3.14159274f;
+    s = lc_proto_build_op(&ops[0]);
+    CHECK(s && strstr(s, "[0.1,1e+07,3.1415927]"), "short floats: %s", s);
+    free(s);
+}
+
+/* Journal: build_op -> parse_request gives the op back, for every op type. */
+static void test_op_roundtrip(void) {
+    const char *msgs[] = {
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0.1,3,-7.25],\"direction\":[0.3,-2,0.1],"
+        "\"color\":[1,0.3,0.1],\"intensity\":812.7,\"range\":20,\"innerConeAngle\":0.2,\"outerConeAngle\":1.5707963267948966}}",
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\",\"position\":[0,2,0],\"direction\":[0,-1,0],\"size\":[0.5,2],\"tangent\":[1,0,1]}}",
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"d\",\"type\":\"area\",\"shape\":\"disc\",\"position\":[0,2,0],\"direction\":[0,-1,0],\"size\":[0.3]}}",
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"sun\",\"type\":\"directional\",\"direction\":[1,-3,0.5],\"intensity\":1e5}}",
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"p\",\"type\":\"point\",\"position\":[1e6,-1e6,0.333]}}",
+        "{\"type\":\"light.remove\",\"light_id\":\"l1\"}",
+        "{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"translation\":[1,2,3],\"rotation\":[0.1,0.2,0.3,0.9],\"scale\":[-1,2,0.5],\"visible\":false}}",
+        "{\"type\":\"object.remove\",\"object_id\":\"o\"}",
+        "{\"type\":\"material.set\",\"material\":\"light\",\"emission\":[10,20,30]}",
+        "{\"type\":\"environment.set\",\"environment\":{\"type\":\"constant\",\"color\":[0.1,0.2,0.3],\"intensity\":2}}",
+        "{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\",\"sh\":[1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17,18,19,20,21,22,23,24,25,26,-27.5]}}",
+        "{\"type\":\"settings.set\",\"settings\":{\"bounces\":3,\"chroma_bands\":2}}",
+    };
+    for (size_t i = 0; i < sizeof msgs / sizeof msgs[0]; i++) {
+        lc_proto_request a, b;
+        PARSE_OK(msgs[i], &a);
+        if (a.n_ops != 1) continue;
+        char *s = lc_proto_build_op(&a.ops[0]);
+        CHECK(s != NULL, "build_op %zu", i);
+        if (s) {
+            PARSE_OK(s, &b);
+            CHECK(b.n_ops == 1 && !memcmp(&a.ops[0], &b.ops[0], sizeof a.ops[0]), "op round trip %zu: %s", i, s);
+            lc_proto_request_release(&b);
+            free(s);
+        }
+        lc_proto_request_release(&a);
+    }
+    lc_proto_op bad = {0};
+    bad.type = LC_REQ_PING;
+    CHECK(lc_proto_build_op(&bad) == NULL, "build_op refuses non-change");
+}
+
+static void test_state_roundtrip(void) {
+    lc_proto_light lights[3];
+    lc_proto_object objects[2];
+    memset(lights, 0, sizeof lights);
+    memset(objects, 0, sizeof objects);
+    const char *lj[] = {
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"zeta\",\"type\":\"spot\",\"position\":[0.1,3,-7.25],\"direction\":[0.3,-2,0.1],\"color\":[1,0.3,0.1],\"intensity\":812.7,\"innerConeAngle\":0.2,\"outerConeAngle\":0.7}}",
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"alpha\",\"type\":\"area\",\"shape\":\"disc\",\"position\":[0,2,0],\"direction\":[0,-1,0],\"size\":[0.3],\"range\":5}}",
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"mid\",\"type\":\"directional\",\"direction\":[1,-3,0.5],\"intensity\":1e5}}",
+    };
+    for (int i = 0; i < 3; i++) {
+        lc_proto_request r;
+        PARSE_OK(lj[i], &r);
+        if (r.n_ops == 1) lights[i] = r.ops[0].light;
+        lc_proto_request_release(&r);
+    }
+    const char *oj[] = {
+        "{\"type\":\"object.set\",\"object\":{\"id\":\"o2\",\"asset\":\"chair\",\"translation\":[1,2,3],\"rotation\":[0.1,0.2,0.3,0.9],\"scale\":[-1,2,0.5],\"visible\":false}}",
+        "{\"type\":\"object.set\",\"object\":{\"id\":\"o1\",\"asset\":\"table\"}}",
+    };
+    for (int i = 0; i < 2; i++) {
+        lc_proto_request r;
+        PARSE_OK(oj[i], &r);
+        if (r.n_ops == 1) objects[i] = r.ops[0].object;
+        lc_proto_request_release(&r);
+    }
+    lc_proto_material_state mats[2] = {{"white", {0, 0, 0}}, {"light", {17, 12, 4.5f}}};
+    lc_proto_state st = {0};
+    st.revision = 123456789;
+    st.lights = lights;
+    st.n_lights = 3;
+    st.objects = objects;
+    st.n_objects = 2;
+    st.materials = mats;
+    st.n_materials = 2;
+    st.environment.kind = 2;
+    for (int i = 0; i < 27; i++) st.environment.sh[i] = 0.01f * (float)(i - 13);
+    st.environment.color[0] = st.environment.color[1] = st.environment.color[2] = 1;
+    st.environment.intensity = 0.7f;
+    st.settings.present = 0x1F;
+    st.settings.bounces = 2;
+    st.settings.bands = 3;
+    st.settings.progressive = 1;
+    st.settings.chroma_compression = 1;
+    st.settings.chroma_bands = 2;
+    lc_proto_id id = {2, "", 5};
+    char *s = lc_proto_build_state(&id, &st);
+    CHECK(s != NULL, "build_state");
+    if (!s) return;
+    lc_proto_parsed_state p;
+    lc_proto_error e;
+    int rc = lc_proto_parse_state(s, strlen(s), &p, &e);
+    CHECK(rc == 0, "parse_state: %s %s %s", e.code, e.pointer, e.message);
+    if (rc == 0) {
+        CHECK(p.revision == 123456789 && p.n_lights == 3 && p.n_objects == 2 && p.n_materials == 2, "counts");
+        /* sorted by id */
+        CHECK(p.n_lights == 3 && !memcmp(&p.lights[0], &lights[1], sizeof lights[0]) &&
+                  !memcmp(&p.lights[1], &lights[2], sizeof lights[0]) && !memcmp(&p.lights[2], &lights[0], sizeof lights[0]),
+              "lights round trip, sorted");
+        CHECK(p.n_objects == 2 && !memcmp(&p.objects[0], &objects[1], sizeof objects[0]) &&
+                  !memcmp(&p.objects[1], &objects[0], sizeof objects[0]), "objects round trip, sorted");
+        CHECK(p.n_materials == 2 && !strcmp(p.material_names[1], "light") && p.material_emission[1][2] == 4.5f, "materials");
+        CHECK(!memcmp(&p.environment, &st.environment, sizeof st.environment), "environment");
+        CHECK(!memcmp(&p.settings, &st.settings, sizeof st.settings), "settings");
+        /* fixed point: building the parsed state gives the same text */
+        lc_proto_state st2 = st;
+        lc_proto_material_state m2[2] = {{p.material_names[0], {0}}, {p.material_names[1], {0}}};
+        memcpy(m2[0].emission, p.material_emission[0], 12);
+        memcpy(m2[1].emission, p.material_emission[1], 12);
+        st2.lights = p.lights;
+        st2.objects = p.objects;
+        st2.materials = m2;
+        st2.environment = p.environment;
+        st2.settings = p.settings;
+        char *s2 = lc_proto_build_state(&id, &st2);
+        CHECK(s2 && !strcmp(s, s2), "state text is a fixed point");
+        free(s2);
+    }
+    lc_proto_parsed_state_free(&p);
+
+    /* empty state */
+    lc_proto_state empty = {0};
+    char *s3 = lc_proto_build_state(NULL, &empty);
+    CHECK(s3 && lc_proto_parse_state(s3, strlen(s3), &p, &e) == 0 && p.n_lights == 0 && p.lights == NULL, "empty state: %s", s3);
+    lc_proto_parsed_state_free(&p);
+    free(s3);
+
+    /* corrupt snapshots are refused with a pointer */
+    const char *bad[][2] = {
+        {"{\"type\":\"ok\",\"revision\":1}", "/type"},
+        {"{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[],\"materials\":[],\"environment\":{\"type\":\"none\"}}", "/settings"},
+        {"{\"type\":\"state\",\"revision\":-1,\"lights\":[],\"objects\":[],\"materials\":[],\"environment\":{\"type\":\"none\"},\"settings\":{}}", "/revision"},
+        {"{\"type\":\"state\",\"revision\":1,\"lights\":[{\"id\":\"b\",\"type\":\"directional\",\"direction\":[0,1,0]},{\"id\":\"a\",\"type\":\"directional\",\"direction\":[0,1,0]}],"
+         "\"objects\":[],\"materials\":[],\"environment\":{\"type\":\"none\"},\"settings\":{}}", "/lights/1/id"},
+        {"{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[{\"id\":\"o\"}],\"materials\":[],\"environment\":{\"type\":\"none\"},\"settings\":{}}", "/objects/0/asset"},
+        {"{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[],\"materials\":[{\"name\":\"m\",\"emission\":[1,1]}],\"environment\":{\"type\":\"none\"},\"settings\":{}}", "/materials/0/emission"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        rc = lc_proto_parse_state(bad[i][0], strlen(bad[i][0]), &p, &e);
+        CHECK(rc == -1 && !strcmp(e.pointer, bad[i][1]), "bad state %zu: rc %d pointer %s (%s)", i, rc, e.pointer, e.message);
+        CHECK(p.lights == NULL && p.n_lights == 0, "freed after failure");
+        lc_proto_parsed_state_free(&p);
+    }
+    free(s);
+}
+
+/* --- frames -------------------------------------------------------------------------------- */
+
+static uint8_t frame_buf[1 << 16];
+
+static size_t make_frame(lc_frame_header *h, int stream, int enc, int flags, uint32_t w, uint32_t hh, uint32_t d,
+                         uint32_t s, const uint32_t *tiles, uint32_t ntiles, uint32_t payload_len) {
+    static uint8_t payload[1 << 15];
+    for (uint32_t i = 0; i < payload_len; i++) payload[i] = (uint8_t)(i * 7 + 3);
+    memset(h, 0, sizeof *h);
+    h->version = 1;
+    h->stream = (uint8_t)stream;
+    h->encoding = (uint8_t)enc;
+    h->flags = (uint16_t)flags;
+    h->tile_count = ntiles;
+    h->revision = 0x0102030405060708ULL;
+    h->sequence = 77;
+    h->timestamp_us = 1700000000000000ULL;
+    h->width = w;
+    h->height = hh;
+    h->depth = d;
+    h->tile_size = s;
+    h->payload_length = payload_len;
+    return lc_frame_write(h, tiles, payload, frame_buf, sizeof frame_buf);
+}
+
+static int frame_ok(size_t n, const lc_frame_header *want) {
+    lc_frame_header h;
+    const uint8_t *tt, *pl;
+    lc_proto_error e;
+    if (lc_frame_parse(frame_buf, n, &h, &tt, &pl, &e) != 0) {
+        fprintf(stderr, "  frame_parse: %s %s\n", e.code, e.message);
+        return 0;
+    }
+    if (want) {
+        CHECK(h.version == 1 && h.stream == want->stream && h.encoding == want->encoding && h.flags == want->flags &&
+                  h.tile_count == want->tile_count && h.revision == want->revision && h.sequence == want->sequence &&
+                  h.timestamp_us == want->timestamp_us && h.width == want->width && h.height == want->height &&
+                  h.depth == want->depth && h.tile_size == want->tile_size && h.payload_length == want->payload_length,
+              "header fields round trip");
+        CHECK(tt == frame_buf + 64 && pl == frame_buf + 64 + 4 * (size_t)h.tile_count, "pointers into data");
+        for (uint32_t i = 0; i < h.payload_length; i++)
+            if (pl[i] != (uint8_t)(i * 7 + 3)) {
+                CHECK(0, "payload byte %u", i);
+                break;
+            }
+    }
+    return 1;
+}
+
+static int frame_bad(size_t n, const char *why) {
+    lc_proto_error e;
+    lc_frame_header h;
+    int rc = lc_frame_parse(frame_buf, n, &h, NULL, NULL, &e);
+    if (rc == 0) return 0;
+    CHECK(!strcmp(e.code, "bad_frame"), "code %s", e.code);
+    if (why && !strstr(e.message, why)) fprintf(stderr, "  note: rejected for '%s', expected '%s'\n", e.message, why);
+    return 1;
+}
+
+static void test_frames(void) {
+    lc_frame_header h;
+    /* keyframe lightmap 5x3 rgb9e5 */
+    size_t n = make_frame(&h, 1, 1, LC_FRAME_KEYFRAME, 5, 3, 1, 4, NULL, 0, 5 * 3 * 4);
+    CHECK(n == 64 + 60, "keyframe size %zu", n);
+    CHECK(!memcmp(frame_buf, "LCF1", 4) && frame_buf[4] == 1 && frame_buf[5] == 0 && frame_buf[6] == 1 && frame_buf[10] == 64,
+          "little-endian header");
+    CHECK(frame_buf[16] == 8 && frame_buf[23] == 1 && frame_buf[40] == 5 && frame_buf[44] == 3 && frame_buf[56] == 60, "LE fields");
+    uint32_t crc = lc_crc32(lc_crc32(0, frame_buf, 60), frame_buf + 64, n - 64);
+    CHECK(frame_buf[60] == (crc & 0xFF) && frame_buf[63] == crc >> 24, "CRC stored LE");
+    CHECK(frame_ok(n, &h), "keyframe parses");
+
+    /* every single-byte corruption of this small frame is rejected */
+    int missed = 0;
+    for (size_t i = 0; i < n; i++)
+        for (int x = 1; x < 256; x++) {
+            frame_buf[i] ^= (uint8_t)x;
+            if (!frame_bad(n, NULL)) missed++;
+            frame_buf[i] ^= (uint8_t)x;
+        }
+    CHECK(missed == 0, "%d single-byte corruptions accepted", missed);
+    int trunc_missed = 0;
+    for (size_t k = 0; k < n; k++)
+        if (!frame_bad(k, NULL)) trunc_missed++;
+    CHECK(trunc_missed == 0, "%d truncations accepted", trunc_missed);
+    frame_buf[n] = 0;
+    CHECK(frame_bad(n + 1, "length"), "trailing byte rejected");
+    CHECK(frame_ok(n, NULL), "still fine");
+
+    /* delta: 10x7, tile 4 -> 3x2 tiles; tile 1 = 4x4 texels, tile 5 = 2x3 (clipped) */
+    CHECK(lc_tiles_count(10, 7, 4) == 6 && lc_tiles_count(8, 8, 4) == 4 && lc_tiles_count(8, 8, 0) == 0 &&
+              lc_tiles_count(1, 1, 32) == 1, "tiles_count");
+    uint32_t x0, y0, x1, y1;
+    lc_tile_rect(10, 7, 4, 5, &x0, &y0, &x1, &y1);
+    CHECK(x0 == 8 && y0 == 4 && x1 == 10 && y1 == 7, "tile 5 rect %u %u %u %u", x0, y0, x1, y1);
+    lc_tile_rect(10, 7, 4, 1, &x0, &y0, &x1, &y1);
+    CHECK(x0 == 4 && y0 == 0 && x1 == 8 && y1 == 4, "tile 1 rect");
+    lc_tile_rect(10, 7, 4, 9, &x0, &y0, &x1, &y1);
+    CHECK(x1 == x0 || y1 == y0, "tile outside: empty");
+    uint32_t tiles[2] = {1, 5};
+    n = make_frame(&h, 1, 3, LC_FRAME_DELTA, 10, 7, 1, 4, tiles, 2, (16 + 6) * 12);
+    CHECK(n == 64 + 8 + 264, "delta size");
+    CHECK(frame_ok(n, &h), "delta parses");
+    n = make_frame(&h, 1, 2, LC_FRAME_DELTA, 10, 7, 1, 4, tiles, 2, (16 + 6) * 8);
+    CHECK(frame_ok(n, &h), "delta rgba16f parses");
+    n = make_frame(&h, 1, 3, LC_FRAME_DELTA, 10, 7, 1, 4, tiles, 2, (16 + 6) * 12 - 12);
+    CHECK(frame_bad(n, "payload"), "delta payload short");
+    uint32_t bad_order[2] = {5, 1}, dup[2] = {1, 1}, out_of_range[2] = {1, 6};
+    n = make_frame(&h, 1, 3, LC_FRAME_DELTA, 10, 7, 1, 4, bad_order, 2, (16 + 6) * 12);
+    CHECK(n && frame_bad(n, "ascending"), "tiles not ascending");
+    n = make_frame(&h, 1, 3, LC_FRAME_DELTA, 10, 7, 1, 4, dup, 2, 32 * 12);
+    CHECK(n && frame_bad(n, "ascending"), "duplicate tile");
+    n = make_frame(&h, 1, 3, LC_FRAME_DELTA, 10, 7, 1, 4, out_of_range, 2, (16 + 6) * 12);
+    CHECK(n && frame_bad(n, "outside"), "tile out of range");
+    n = make_frame(&h, 1, 3, LC_FRAME_DELTA, 10, 7, 1, 0, tiles, 2, (16 + 6) * 12);
+    CHECK(n && frame_bad(n, "tile size"), "delta without tile size");
+
+    /* shgrid 2x2x2 rgba16f, objects 3 f32 */
+    n = make_frame(&h, 2, 2, LC_FRAME_KEYFRAME, 2, 2, 2, 0, NULL, 0, 8 * 27 * 2);
+    CHECK(frame_ok(n, &h), "shgrid parses");
+    n = make_frame(&h, 2, 3, LC_FRAME_KEYFRAME, 3, 1, 2, 0, NULL, 0, 6 * 27 * 4);
+    CHECK(frame_ok(n, &h), "shgrid f32 parses");
+    n = make_frame(&h, 3, 3, LC_FRAME_KEYFRAME, 3, 1, 1, 0, NULL, 0, 3 * (64 + 27 * 4));
+    CHECK(frame_ok(n, &h), "objects parse");
+    n = make_frame(&h, 3, 2, LC_FRAME_KEYFRAME, 0, 1, 1, 0, NULL, 0, 0);
+    CHECK(frame_ok(n, &h), "zero objects parse");
+
+    /* semantic rejections (CRC valid) */
+    n = make_frame(&h, 2, 1, LC_FRAME_KEYFRAME, 2, 2, 2, 0, NULL, 0, 8 * 27 * 4);
+    CHECK(frame_bad(n, "encoding"), "rgb9e5 shgrid");
+    n = make_frame(&h, 2, 3, LC_FRAME_DELTA, 2, 2, 2, 0, NULL, 0, 8 * 27 * 4);
+    CHECK(frame_bad(n, "keyframes"), "shgrid delta");
+    n = make_frame(&h, 1, 1, LC_FRAME_KEYFRAME | LC_FRAME_DELTA, 5, 3, 1, 4, NULL, 0, 60);
+    CHECK(frame_bad(n, "flags"), "both flags");
+    n = make_frame(&h, 1, 1, 0, 5, 3, 1, 4, NULL, 0, 60);
+    CHECK(frame_bad(n, "flags"), "no flags");
+    n = make_frame(&h, 1, 1, LC_FRAME_KEYFRAME | 4, 5, 3, 1, 4, NULL, 0, 60);
+    CHECK(frame_bad(n, "flags"), "unknown flag");
+    n = make_frame(&h, 1, 1, LC_FRAME_KEYFRAME, 5, 3, 1, 4, tiles, 2, 60);
+    CHECK(frame_bad(n, "tile table"), "keyframe with tiles");
+    n = make_frame(&h, 1, 1, LC_FRAME_KEYFRAME, 5, 3, 1, 4, NULL, 0, 56);
+    CHECK(frame_bad(n, "payload"), "keyframe payload short");
+    n = make_frame(&h, 4, 3, LC_FRAME_KEYFRAME, 1, 1, 1, 0, NULL, 0, 12);
+    CHECK(frame_bad(n, "stream"), "unknown stream");
+    n = make_frame(&h, 1, 4, LC_FRAME_KEYFRAME, 1, 1, 1, 0, NULL, 0, 12);
+    CHECK(frame_bad(n, "encoding"), "unknown encoding");
+    n = make_frame(&h, 1, 3, LC_FRAME_KEYFRAME, 1, 1, 2, 0, NULL, 0, 24);
+    CHECK(frame_bad(n, "dimensions"), "lightmap depth 2");
+    n = make_frame(&h, 3, 3, LC_FRAME_KEYFRAME, 3, 2, 1, 0, NULL, 0, 6 * (64 + 27 * 4));
+    CHECK(frame_bad(n, "height"), "objects height 2");
+    n = make_frame(&h, 1, 3, LC_FRAME_KEYFRAME, 0xFFFFFFFFu, 0xFFFFFFFFu, 1, 0, NULL, 0, 12);
+    CHECK(frame_bad(n, "payload"), "huge dims");
+    h.version = 2;
+    n = lc_frame_write(&h, NULL, frame_buf + 1000, frame_buf, sizeof frame_buf);
+    CHECK(frame_bad(n, "version"), "version 2");
+    /* writer refuses what does not fit */
+    make_frame(&h, 1, 1, LC_FRAME_KEYFRAME, 5, 3, 1, 4, NULL, 0, 60);
+    uint8_t small[100];
+    CHECK(lc_frame_write(&h, NULL, frame_buf, small, sizeof small) == 0, "cap respected");
+    CHECK(lc_frame_texel_bytes(LC_ENC_RGB9E5) == 4 && lc_frame_texel_bytes(LC_ENC_RGBA16F) == 8 && lc_frame_texel_bytes(LC_ENC_F32) == 12,
+          "texel bytes");
+    CHECK(lc_frame_sh_value_bytes(LC_ENC_RGB9E5) == 0 && lc_frame_sh_value_bytes(LC_ENC_RGBA16F) == 2 &&
+              lc_frame_sh_value_bytes(LC_ENC_F32) == 4, "sh bytes");
+}
+
+/* --- RGB9E5 -------------------------------------------------------------------------------- */
+
+static uint64_t rng_state = 0x9E3779B97F4A7C15ULL;
+static double rnd(void) {
+    rng_state ^= rng_state << 13;
+    rng_state ^= rng_state >> 7;
+    rng_state ^= rng_state << 17;
+    return (double)(rng_state >> 11) / 9007199254740992.0;
+}
+
+static void test_rgb9e5(void) {
+    float z[3] = {0, 0, 0}, one[3] = {1, 1, 1}, mx[3] = {65408, 65408, 65408}, big[3] = {1e9f, INFINITY, 70000};
+    float out[3];
+    CHECK(lc_rgb9e5_encode(z) == 0, "zero");
+    CHECK(lc_rgb9e5_encode(one) == 0x84020100u, "one: %08x", lc_rgb9e5_encode(one));
+    lc_rgb9e5_decode(0x84020100u, out);
+    CHECK(out[0] == 1 && out[1] == 1 && out[2] == 1, "decode one");
+    CHECK(lc_rgb9e5_encode(mx) == 0xFFFFFFFFu, "max: %08x", lc_rgb9e5_encode(mx));
+    lc_rgb9e5_decode(0xFFFFFFFFu, out);
+    CHECK(out[0] == 65408 && out[2] == 65408, "decode max");
+    CHECK(lc_rgb9e5_encode(big) == 0xFFFFFFFFu, "clamped to max");
+    float tiny[3] = {0x1p-24f, 0, 0}, tinier[3] = {0x1p-26f, 0, 0}, half_tiny[3] = {0x1p-25f, 0, 0};
+    CHECK(lc_rgb9e5_encode(tiny) == 1, "smallest: %08x", lc_rgb9e5_encode(tiny));
+    lc_rgb9e5_decode(1, out);
+    CHECK(out[0] == 0x1p-24f, "decode smallest");
+    CHECK(lc_rgb9e5_encode(tinier) == 0, "below smallest rounds to 0");
+    CHECK(lc_rgb9e5_encode(half_tiny) == 1, "half of smallest rounds up");
+    float neg[3] = {-1, NAN, -INFINITY};
+    CHECK(lc_rgb9e5_encode(neg) == 0, "negative/NaN -> 0");
+    float mixed[3] = {-5, 2, NAN};
+    lc_rgb9e5_decode(lc_rgb9e5_encode(mixed), out);
+    CHECK(out[0] == 0 && out[1] == 2 && out[2] == 0, "mixed: %g %g %g", out[0], out[1], out[2]);
+    /* rounding up to the next exponent: 511.75/512 */
+    float up[3] = {0.9995f, 0.5f, 0};
+    lc_rgb9e5_decode(lc_rgb9e5_encode(up), out);
+    CHECK(out[0] == 1 && out[1] == 0.5f, "carry into exponent: %g %g", out[0], out[1]);
+
+    int bad = 0, unstable = 0;
+    double worst = 0;
+    for (int i = 0; i < 200000; i++) {
+        float c[3];
+        double scale = ldexp(1.0, (int)(rnd() * 40) - 24);
+        for (int k = 0; k < 3; k++) c[k] = (float)(rnd() * scale);
+        if (i % 7 == 0) c[i % 3] = 0;
+        uint32_t v = lc_rgb9e5_encode(c);
+        lc_rgb9e5_decode(v, out);
+        double m = fmax(c[0], fmax(c[1], c[2]));
+        if (m > 65408) m = 65408;
+        /* half a quantum: 2^-9 of the max channel (of the decoded max when rounding carried
+         * into the next exponent), never below half the smallest step 2^-24 */
+        double mo = fmax(m, fmax(out[0], fmax(out[1], out[2])));
+        for (int k = 0; k < 3; k++) {
+            double want = fmin(c[k], 65408);
+            double errk = fabs(out[k] - want);
+            double tol = fmax(mo * 0x1p-9, 0x1p-25);
+            if (errk > tol * (1 + 1e-9)) {
+                bad++;
+                fprintf(stderr, "  rgb9e5 %a %a %a ch %d -> %a\n", c[0], c[1], c[2], k, out[k]);
+            }
+            if (m > 0x1p-15) worst = fmax(worst, errk / mo);
+        }
+        if (lc_rgb9e5_encode(out) != v) unstable++;
+    }
+    CHECK(bad == 0, "%d channels outside 2^-9 of max", bad);
+    CHECK(unstable == 0, "%d decoded colours re-encode differently", unstable);
+    fprintf(stderr, "rgb9e5: worst relative error %.3g (bound %.3g)\n", worst, 0x1p-9);
+}
+
+int main(void) {
+    test_valid();
+    test_limits();
+    test_invalid();
+    test_builders();
+    test_op_roundtrip();
+    test_state_roundtrip();
+    test_frames();
+    test_rgb9e5();
+    CHECK_DONE();
+}
