@@ -36,6 +36,9 @@ static const lc_opt config_options[] = {
      NULL},
     {"www", LC_OPT_STRING, OFF(www), 0, LC_CONFIG_PATH_MAX, NULL, NULL, "directory of static files served over HTTP",
      "DIR", NULL},
+    {"tls-cert", LC_OPT_STRING, OFF(tls_cert), 0, LC_CONFIG_PATH_MAX, NULL, NULL,
+     "TLS certificate (PEM); with --tls-key the port serves wss:// and https://", "FILE", NULL},
+    {"tls-key", LC_OPT_STRING, OFF(tls_key), 0, LC_CONFIG_PATH_MAX, NULL, NULL, "TLS private key (PEM)", "FILE", NULL},
     {"max-message", LC_OPT_INT, OFF(max_message), 1024, 16777216, "65536", NULL, "largest text message (bytes)",
      NULL, NULL},
     {"max-depth", LC_OPT_INT, OFF(max_depth), 4, 64, "16", NULL, "deepest JSON nesting", NULL, NULL},
@@ -146,7 +149,46 @@ int lc_config_has_token(const char *list, const char *token) {
     return 0;
 }
 
+void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *restart_needed, size_t len) {
+    size_t n = 0;
+    restart_needed[0] = 0;
+#define RESTART_IF(field, name)                                                                          \
+    if (memcmp(&dst->field, &src->field, sizeof dst->field) != 0 && n < len)                             \
+        n += (size_t)snprintf(restart_needed + n, len - n, "%s" name, n ? ", " : "");
+    RESTART_IF(bake, "bake")
+    RESTART_IF(listen, "listen")
+    RESTART_IF(port, "port")
+    RESTART_IF(state_dir, "state-dir")
+    RESTART_IF(fsync_mode, "fsync")
+    RESTART_IF(www, "www")
+    RESTART_IF(tls_cert, "tls-cert")
+    RESTART_IF(tls_key, "tls-key")
+    RESTART_IF(backend, "backend")
+    RESTART_IF(threads, "threads")
+    RESTART_IF(max_lights, "max-lights")
+    RESTART_IF(max_objects, "max-objects")
+    RESTART_IF(tile, "tile")
+#undef RESTART_IF
+    memcpy(dst->controller_tokens, src->controller_tokens, sizeof dst->controller_tokens);
+    memcpy(dst->viewer_tokens, src->viewer_tokens, sizeof dst->viewer_tokens);
+    memcpy(dst->origins, src->origins, sizeof dst->origins);
+    dst->max_message = src->max_message;
+    dst->max_depth = src->max_depth;
+    dst->max_batch = src->max_batch;
+    dst->max_clients = src->max_clients;
+    dst->rate = src->rate;
+    dst->hello_timeout = src->hello_timeout;
+    dst->keyframe_interval = src->keyframe_interval;
+    dst->delta_threshold = src->delta_threshold;
+    dst->compact_bytes = src->compact_bytes;
+    dst->log_level = src->log_level;
+}
+
 int lc_config_validate(const lc_config *c, char *err, size_t errlen) {
+    if (!c->tls_cert[0] != !c->tls_key[0]) {
+        lc_set_err(err, errlen, "--tls-cert and --tls-key go together (give both or neither)");
+        return -1;
+    }
     /* A token in both lists would make the role ambiguous. */
     for (const char *p = c->viewer_tokens; *p;) {
         const char *comma = strchr(p, ',');

@@ -21,6 +21,8 @@ typedef struct lc_config {
     char viewer_tokens[LC_CONFIG_TOKENS_MAX];
     char origins[LC_CONFIG_TOKENS_MAX];           /* comma-separated allow-list; empty = any */
     char www[LC_CONFIG_PATH_MAX];
+    char tls_cert[LC_CONFIG_PATH_MAX]; /* PEM; with tls_key: serve wss:// and https:// */
+    char tls_key[LC_CONFIG_PATH_MAX];
     int max_message;
     int max_depth;
     int max_batch;
@@ -42,6 +44,10 @@ typedef struct lc_config {
 const lc_opt *lc_config_options(void);
 /* Defaults, then --config FILE (found in argv), then the flags. Returns 0 or -1 with err. */
 int lc_config_load(lc_config *c, int argc, char **argv, char *err, size_t errlen);
+/* Copies the settings a running server can change on SIGHUP (tokens, origins, limits,
+ * timeouts, frame tuning, log level) from src to dst; returns a mask of the options that
+ * differ but need a restart (for the log: names in `restart_needed`). */
+void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *restart_needed, size_t len);
 /* Cross-field checks (tokens, paths). */
 int lc_config_validate(const lc_config *c, char *err, size_t errlen);
 /* 1 if token is in the comma-separated list. */

@@ -46,7 +46,7 @@ int main(int argc, char **argv) {
         lc_lcb_close(bake);
         return 0;
     }
-    int rc = lc_server_run(&cfg, bake, main_ready, NULL);
+    int rc = lc_server_run(&cfg, argc, argv, bake, main_ready, NULL);
     lc_lcb_close(bake);
     return rc;
 }

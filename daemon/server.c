@@ -53,7 +53,9 @@ typedef struct lc_session {
 } lc_session;
 
 typedef struct lc_server {
-    const lc_config *cfg;
+    lc_config *cfg; /* live copy: SIGHUP reloads its reloadable fields */
+    int argc;
+    char **argv;
     const lc_lcb *bake;
     const lc_lcb_view *v;
     lc_state state;
@@ -645,9 +647,32 @@ static const struct lws_protocols server_protocols[] = {
 
 /* --- run ------------------------------------------------------------------------------------------ */
 
-int lc_server_run(const lc_config *cfg, const lc_lcb *bake, lc_server_ready_fn ready, void *ready_arg) {
+/* SIGHUP: parse the configuration again and apply what can change while running. */
+static void server_reload(lc_server *s) {
+    static lc_config next;
+    char err[512], restart[512];
+    if (lc_config_load(&next, s->argc, s->argv, err, sizeof err) != 0) {
+        lc_error("server", "SIGHUP: configuration not reloaded: %s", err);
+        return;
+    }
+    lc_config_apply_reloadable(s->cfg, &next, restart, sizeof restart);
+    s->limits.max_message = (size_t)s->cfg->max_message;
+    s->limits.max_depth = s->cfg->max_depth;
+    s->limits.max_batch = (uint32_t)s->cfg->max_batch;
+    lc_log_set_level((lc_log_level)s->cfg->log_level);
+    lc_info("server", "SIGHUP: configuration reloaded%s%s", restart[0] ? "; needs a restart to change: " : "",
+            restart);
+}
+
+int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *bake, lc_server_ready_fn ready,
+                  void *ready_arg) {
     lc_server s;
     memset(&s, 0, sizeof s);
+    static lc_config cfg_live;
+    cfg_live = *cfg_in;
+    lc_config *cfg = &cfg_live;
+    s.argc = argc;
+    s.argv = argv;
     int rc = 1;
     char err[512];
     uint16_t probe = 1;
@@ -694,6 +719,14 @@ int lc_server_run(const lc_config *cfg, const lc_lcb *bake, lc_server_ready_fn r
     info.user = &s;
     info.options = LWS_SERVER_OPTION_VALIDATE_UTF8 | LWS_SERVER_OPTION_HTTP_HEADERS_SECURITY_BEST_PRACTICES_ENFORCE;
     info.pt_serv_buf_size = 65536;
+    if (cfg->tls_cert[0]) {
+        info.options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT;
+        info.ssl_cert_filepath = cfg->tls_cert;
+        info.ssl_private_key_filepath = cfg->tls_key;
+        /* Browsers may pick HTTP/2 and run WebSockets over it, where one large frame write
+         * breaks the stream: keep the port on HTTP/1.1. */
+        info.alpn = "http/1.1";
+    }
     s.ctx = lws_create_context(&info);
     if (!s.ctx) {
         lc_error("server", "cannot listen on %s:%d (port in use? see --listen/--port)", cfg->listen, cfg->port);
@@ -711,15 +744,15 @@ int lc_server_run(const lc_config *cfg, const lc_lcb *bake, lc_server_ready_fn r
     signal(SIGTERM, server_on_signal);
     signal(SIGHUP, server_on_signal);
     signal(SIGPIPE, SIG_IGN);
-    lc_info("server", "lucentd %s listening on ws://%s:%d (subprotocol %s, backend %s)", LUCENTD_VERSION, cfg->listen,
-            s.port, LC_PROTO_SUBPROTOCOL, lc_compute_backend(s.compute));
+    lc_info("server", "lucentd %s listening on %s://%s:%d (subprotocol %s, backend %s)", LUCENTD_VERSION,
+            cfg->tls_cert[0] ? "wss" : "ws", cfg->listen, s.port, LC_PROTO_SUBPROTOCOL, lc_compute_backend(s.compute));
     if (ready) ready(ready_arg, s.port);
     lws_sul_schedule(s.ctx, 0, &s.tick, server_tick, 250 * LWS_US_PER_MS);
     while (!server_stop_flag) {
         if (lws_service(s.ctx, 0) < 0) break;
         if (server_reload_flag) {
             server_reload_flag = 0;
-            lc_info("server", "SIGHUP: configuration reload is not supported yet; restart to apply changes");
+            server_reload(&s);
         }
     }
     lc_info("server", "shutting down: closing %u clients", s.n_sessions);

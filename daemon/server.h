@@ -11,7 +11,10 @@
 typedef void (*lc_server_ready_fn)(void *arg, int port);
 
 /* Runs until SIGTERM/SIGINT: finishes the relight in flight, closes clients with 1001,
- * writes a final snapshot. Returns the process exit code (0 clean, 1 failure). */
-int lc_server_run(const lc_config *cfg, const lc_lcb *bake, lc_server_ready_fn ready, void *ready_arg);
+ * writes a final snapshot. SIGHUP reloads the configuration (argv is parsed again, so flags
+ * still override the file) and applies what can change live. Returns the process exit code
+ * (0 clean, 1 failure). */
+int lc_server_run(const lc_config *cfg, int argc, char **argv, const lc_lcb *bake, lc_server_ready_fn ready,
+                  void *ready_arg);
 
 #endif

@@ -6,6 +6,8 @@ revision exactly as acknowledged), SIGTERM (close 1001, exit 0), /healthz and /m
 Uses Python's websockets, a different implementation from the server's."""
 import asyncio
 import json
+import ssl
+import time
 import os
 import signal
 import struct
@@ -262,6 +264,72 @@ async def scenario(state_dir):
         await ws.send(json.dumps({"type": "state.get"}))
         e = await recv_json(ws, "error")
         check(e.get("code") == "hello_required", "hello first: %r" % e)
+        # SIGHUP reloads the tokens: the new one works, the old one no longer does.
+        with open(cfg, "w") as fh:
+            json.dump({"controller-tokens": ["ctl2"], "viewer-tokens": ["view"]}, fh)
+        p.send_signal(signal.SIGHUP)
+        time.sleep(1.0)
+        ws, welcome = await hello(port, token="ctl2")
+        check(welcome.get("role") == "controller", "new token after SIGHUP: %r" % welcome)
+        await ws.close()
+        ws, welcome = await hello(port, token="ctl")
+        check(welcome.get("code") == "unauthorized", "old token after SIGHUP: %r" % welcome)
+    finally:
+        p.terminate()
+        p.wait(timeout=20)
+
+    # --check-config: a bad key is named, exit 2; a good file passes, exit 0.
+    with open(cfg, "w") as fh:
+        json.dump({"prot": 1}, fh)
+    r = subprocess.run([LUCENTD, "--bake", BAKE, "--config", cfg, "--check-config"], capture_output=True, text=True)
+    check(r.returncode == 2 and "prot" in r.stderr, "check-config bad key: %d %r" % (r.returncode, r.stderr))
+    with open(cfg, "w") as fh:
+        json.dump({"port": 7799, "rate": 50}, fh)
+    r = subprocess.run([LUCENTD, "--bake", BAKE, "--config", cfg, "--check-config"], capture_output=True, text=True)
+    check(r.returncode == 0, "check-config good: %d %r" % (r.returncode, r.stderr))
+
+    # Static files on the same port, and no path traversal out of the www folder.
+    www = os.path.join(state_dir + "-www")
+    os.makedirs(www, exist_ok=True)
+    with open(os.path.join(www, "index.html"), "w") as fh:
+        fh.write("<p>lucent viewer</p>")
+    with open(os.path.join(state_dir + "-secret.txt"), "w") as fh:
+        fh.write("secret")
+    p, port = start(state_dir + "-http", "--www", www)
+    try:
+        body = urllib.request.urlopen("http://127.0.0.1:%d/" % port, timeout=5).read().decode()
+        check("lucent viewer" in body, "static index: %r" % body)
+        name = os.path.basename(state_dir) + "-secret.txt"
+        for path in ["/../" + name, "/%2e%2e/" + name, "/..%2f" + name, "/./../" + name]:
+            try:
+                got = urllib.request.urlopen("http://127.0.0.1:%d%s" % (port, path), timeout=5).read().decode()
+                check("secret" not in got, "path traversal %s served: %r" % (path, got))
+            except urllib.error.HTTPError as e:
+                check(e.code in (400, 403, 404), "traversal %s: HTTP %d" % (path, e.code))
+            except Exception:
+                pass  # connection refused/closed is a refusal too
+        body = urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=5).read().decode()
+        check(body.startswith("ok"), "healthz beside static files: %r" % body)
+    finally:
+        p.terminate()
+        p.wait(timeout=20)
+
+    # TLS: wss:// and https:// with a self-signed certificate.
+    cert, key = os.path.join(www, "cert.pem"), os.path.join(www, "key.pem")
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", key, "-out", cert,
+                    "-days", "1", "-subj", "/CN=127.0.0.1"], check=True, capture_output=True)
+    p, port = start(state_dir + "-tls", "--tls-cert", cert, "--tls-key", key)
+    try:
+        ctx = ssl.create_default_context()
+        ctx.check_hostname = False
+        ctx.verify_mode = ssl.CERT_NONE
+        ws = await websockets.connect("wss://127.0.0.1:%d/" % port, subprotocols=["lucent.v1"], ssl=ctx)
+        await ws.send(json.dumps({"type": "hello", "client": "tls"}))
+        w = await recv_json(ws)
+        check(w.get("type") == "welcome", "welcome over wss: %r" % w)
+        await ws.close()
+        body = urllib.request.urlopen("https://127.0.0.1:%d/healthz" % port, timeout=5, context=ctx).read().decode()
+        check(body.startswith("ok"), "healthz over https: %r" % body)
     finally:
         p.terminate()
         p.wait(timeout=20)
