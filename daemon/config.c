@@ -50,6 +50,8 @@ static const lc_opt config_options[] = {
      NULL},
     {"hello-timeout", LC_OPT_INT, OFF(hello_timeout), 1, 600, "5", NULL, "seconds a client has to send hello",
      NULL, NULL},
+    {"slow-timeout", LC_OPT_INT, OFF(slow_timeout), 1, 3600, "10", NULL,
+     "seconds a client may stay behind (a frame it cannot take) before it is dropped (1008)", NULL, NULL},
     {"backend", LC_OPT_ENUM, OFF(backend), 0, 0, "auto", "auto|cpu|egl", "relight backend", NULL, NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "relight threads (0 = all cores)", NULL, NULL},
     {"tile", LC_OPT_INT, OFF(tile), 8, 256, "32", NULL, "lightmap tile size for delta frames (texels)", NULL, NULL},
@@ -178,6 +180,7 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
     dst->max_clients = src->max_clients;
     dst->rate = src->rate;
     dst->hello_timeout = src->hello_timeout;
+    dst->slow_timeout = src->slow_timeout;
     dst->keyframe_interval = src->keyframe_interval;
     dst->delta_threshold = src->delta_threshold;
     dst->compact_bytes = src->compact_bytes;

@@ -31,6 +31,7 @@ typedef struct lc_config {
     int max_clients;
     int rate;          /* requests per second per connection */
     int hello_timeout; /* seconds */
+    int slow_timeout;  /* seconds a client may leave a frame unread before it is dropped */
     int backend;       /* 0 auto, 1 cpu, 2 egl */
     int threads;
     int tile;          /* lightmap tile size for delta frames */

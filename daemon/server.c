@@ -48,6 +48,7 @@ typedef struct lc_session {
     size_t lm_sent_texels;
     lc_published *frame; /* newest result for this session (a reference) */
     uint64_t frame_seq;
+    double behind_since_ms; /* since when a frame has waited for this client (0 = none) */
     uint8_t *tx;
     size_t tx_cap;
 } lc_session;
@@ -555,6 +556,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
                 break;
             }
         }
+        if (ss->authed && !session_wants_frame(ss)) ss->behind_since_ms = 0; /* caught up */
         if (ss->outq_n > 0 || ss->closing || (ss->authed && session_wants_frame(ss))) lws_callback_on_writable(wsi);
         return 0;
     }
@@ -567,7 +569,10 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
             lc_published_release(s->compute, o->frame); /* a newer frame replaces an unsent one */
             o->frame = lc_published_ref(s->compute, p);
             o->frame_seq = s->pub_seq;
-            if (session_wants_frame(o)) lws_callback_on_writable(o->wsi);
+            if (session_wants_frame(o)) {
+                if (o->behind_since_ms == 0) o->behind_since_ms = lc_clock_ms();
+                lws_callback_on_writable(o->wsi);
+            }
         }
         lc_published_release(s->compute, p);
         return 0;
@@ -633,7 +638,20 @@ static void server_tick(lws_sorted_usec_list_t *sul) {
             session_error(s, ss, &none, "hello_required", "", "no hello within the time limit");
             session_close(ss, LWS_CLOSE_STATUS_POLICY_VIOLATION, "hello timeout");
         }
-        if (ss->authed && session_wants_frame(ss)) lws_callback_on_writable(ss->wsi);
+        if (ss->authed && session_wants_frame(ss)) {
+            /* A client that cannot take frames (its socket is full) must not hold the others
+             * back or grow memory: past the limit it is dropped, without a close handshake
+             * it could not read anyway. */
+            if (ss->behind_since_ms > 0 && now - ss->behind_since_ms > s->cfg->slow_timeout * 1000.0) {
+                lc_warn("server", "client '%s' left frames unread for %d s; dropping it (1008)", ss->client,
+                        s->cfg->slow_timeout);
+                lws_close_reason(ss->wsi, LWS_CLOSE_STATUS_POLICY_VIOLATION, (unsigned char *)"too slow", 8);
+                lws_set_timeout(ss->wsi, PENDING_TIMEOUT_USER_OK, LWS_TO_KILL_ASYNC);
+                ss->behind_since_ms = 0;
+                continue;
+            }
+            lws_callback_on_writable(ss->wsi);
+        }
     }
     lc_journal_tick(s->journal);
     lws_sul_schedule(s->ctx, 0, &s->tick, server_tick, 250 * LWS_US_PER_MS);

@@ -10,6 +10,8 @@ import ssl
 import time
 import os
 import signal
+import socket
+import base64
 import struct
 import subprocess
 import sys
@@ -335,12 +337,79 @@ async def scenario(state_dir):
         p.wait(timeout=20)
 
 
+def raw_ws_client(port, messages):
+    """A client with a tiny receive buffer that sends `messages` and then never reads."""
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall(("GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                  "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: lucent.v1\r\n\r\n"
+                  % key).encode())
+    resp = b""
+    while b"\r\n\r\n" not in resp:
+        resp += sock.recv(1)
+    assert b" 101 " in resp.split(b"\r\n")[0], resp
+    for m in messages:
+        data = json.dumps(m).encode()
+        mask = os.urandom(4)
+        hdr = bytes([0x81, 0x80 | len(data)]) if len(data) < 126 else bytes([0x81, 0xFE]) + struct.pack(">H", len(data))
+        sock.sendall(hdr + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(data)))
+    return sock
+
+
+async def slow_client_scenario(state_dir):
+    """A client that never reads is dropped; the others keep getting the latest frames."""
+    p, port = start(state_dir + "-slow", "--slow-timeout", "2")
+    try:
+        slow = raw_ws_client(port, [{"type": "hello", "client": "sloth"},
+                                    {"type": "subscribe", "stream": "lightmap", "encoding": "f32"}])
+        ws, _ = await hello(port, name="fast")
+        await ws.send(json.dumps({"type": "subscribe", "stream": "lightmap", "encoding": "rgb9e5"}))
+        last_ok = 0
+        for i in range(40):  # ~4 s of 10 updates/s
+            await ws.send(json.dumps({"type": "light.set", "light": {
+                "id": "orbit", "type": "point", "position": [0.28 + 0.1 * (i % 5) / 5, 0.4, 0.28], "intensity": 2}}))
+            await asyncio.sleep(0.1)
+        while True:
+            m = await asyncio.wait_for(ws.recv(), 15)
+            if isinstance(m, str) and json.loads(m).get("type") == "ok":
+                last_ok = json.loads(m)["revision"]
+                if last_ok == 40:
+                    break
+        f, _ = await recv_frame(ws, 40, timeout=15)
+        check(f["revision"] == 40, "the fast client reached the latest revision while a slow one was connected")
+        # The slow client was dropped: its socket reads EOF or a reset once drained.
+        slow.settimeout(5)
+        closed = False
+        try:
+            while True:
+                chunk = slow.recv(1 << 20)
+                if not chunk:
+                    closed = True
+                    break
+        except (ConnectionResetError, socket.timeout):
+            closed = True
+        check(closed, "slow client dropped")
+        rss = 0
+        with open("/proc/%d/status" % p.pid) as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    rss = int(line.split()[1]) // 1024
+        check(rss < 1024, "daemon peak RSS %d MiB stays bounded" % rss)
+        await ws.close()
+    finally:
+        p.terminate()
+        p.wait(timeout=20)
+
+
 def main():
     if not os.path.exists(LUCENTD) or not os.path.exists(BAKE):
         print("SKIP: lucentd or the Cornell bake is not built")
         return 77
     with tempfile.TemporaryDirectory() as d:
         asyncio.run(scenario(os.path.join(d, "state")))
+        asyncio.run(slow_client_scenario(os.path.join(d, "state")))
     print("%d failure(s)" % len(FAILS) if FAILS else "all checks passed")
     return 1 if FAILS else 0
 
