@@ -500,7 +500,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
             } else {
                 if (!ss->rx) ss->rx = malloc((size_t)s->cfg->max_message + 1);
                 if (!ss->rx) return -1;
-                memcpy(ss->rx + ss->rx_len, in, len);
+                if (len) memcpy(ss->rx + ss->rx_len, in, len);
                 ss->rx_len += len;
             }
         }

@@ -59,9 +59,10 @@ int lc_state_clone(lc_state *dst, const lc_state *src) {
         lc_state_release(dst);
         return -1;
     }
-    memcpy(dst->lights, src->lights, src->n_lights * sizeof *dst->lights);
-    memcpy(dst->objects, src->objects, src->n_objects * sizeof *dst->objects);
-    memcpy(dst->emission, src->emission, src->scene->n_materials * sizeof *dst->emission);
+    /* (memcpy from a NULL array is undefined even for 0 bytes) */
+    if (src->n_lights) memcpy(dst->lights, src->lights, src->n_lights * sizeof *dst->lights);
+    if (src->n_objects) memcpy(dst->objects, src->objects, src->n_objects * sizeof *dst->objects);
+    if (src->scene->n_materials) memcpy(dst->emission, src->emission, src->scene->n_materials * sizeof *dst->emission);
     return 0;
 }
 
