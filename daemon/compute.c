@@ -3,6 +3,7 @@
 #include "compute.h"
 
 #include <libwebsockets.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
@@ -31,6 +32,8 @@ struct lc_compute {
     lc_published *latest;   /* guarded by lock */
     uint64_t sequence;      /* guarded by lock: publications so far */
     uint64_t count;         /* guarded by lock */
+    uint64_t hist[LC_COMPUTE_BUCKETS]; /* guarded by lock: relights per bucket (not cumulative) */
+    double hist_sum_ms;     /* guarded by lock */
     int stop;               /* guarded by lock */
     int ready;              /* guarded by lock: 1 engine up, -1 failed */
     char start_err[512];
@@ -127,6 +130,10 @@ static void *compute_main(void *arg) {
         c->latest = p;
         c->sequence++;
         c->count++;
+        int b = 0;
+        while (b < LC_COMPUTE_BUCKETS - 1 && p->relight_ms > lc_compute_bucket_ms[b]) b++;
+        c->hist[b]++;
+        c->hist_sum_ms += p->relight_ms;
         if (old && --old->refs == 0) published_free(old);
         pthread_mutex_unlock(&c->lock);
         lws_cancel_service(c->ctx); /* the only lws call allowed off the service thread */
@@ -207,6 +214,16 @@ void lc_published_release(lc_compute *c, lc_published *p) {
     int last = --p->refs == 0;
     pthread_mutex_unlock(&c->lock);
     if (last) published_free(p);
+}
+
+const double lc_compute_bucket_ms[LC_COMPUTE_BUCKETS] = {1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, INFINITY};
+
+void lc_compute_histogram(lc_compute *c, uint64_t counts[LC_COMPUTE_BUCKETS], double *sum_ms) {
+    pthread_mutex_lock(&c->lock);
+    uint64_t acc = 0;
+    for (int b = 0; b < LC_COMPUTE_BUCKETS; b++) counts[b] = acc += c->hist[b];
+    *sum_ms = c->hist_sum_ms;
+    pthread_mutex_unlock(&c->lock);
 }
 
 lc_published *lc_published_ref(lc_compute *c, lc_published *p) {

@@ -40,8 +40,14 @@ lc_published *lc_compute_take_newer(lc_compute *c, uint64_t *seen);
 void lc_published_release(lc_compute *c, lc_published *p);
 /* Service thread: another reference to p (which the caller holds). */
 lc_published *lc_published_ref(lc_compute *c, lc_published *p);
-/* Relights finished so far, and the last relight's milliseconds (for /metrics). */
+/* Relights finished so far (for /metrics). */
 uint64_t lc_compute_count(lc_compute *c);
+
+/* Relight-time histogram for /metrics: cumulative counts per upper bound (ms), the last
+ * bound +Inf, plus the sum of milliseconds. */
+#define LC_COMPUTE_BUCKETS 11
+extern const double lc_compute_bucket_ms[LC_COMPUTE_BUCKETS];
+void lc_compute_histogram(lc_compute *c, uint64_t counts[LC_COMPUTE_BUCKETS], double *sum_ms);
 /* Finishes the relight in flight and joins the thread. NULL-safe. */
 void lc_compute_stop(lc_compute *c);
 const char *lc_compute_backend(lc_compute *c);

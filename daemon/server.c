@@ -7,6 +7,7 @@
 #include <libwebsockets.h>
 #include <math.h>
 #include <signal.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -582,6 +583,17 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
     }
 }
 
+/* Appends to a fixed buffer, never past its end (output is cut instead). */
+static void http_append(char *buf, size_t cap, int *n, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
+static void http_append(char *buf, size_t cap, int *n, const char *fmt, ...) {
+    if (*n < 0 || (size_t)*n >= cap - 1) return;
+    va_list ap;
+    va_start(ap, fmt);
+    int w = vsnprintf(buf + *n, cap - (size_t)*n, fmt, ap);
+    va_end(ap);
+    if (w > 0) *n = (size_t)(*n + w) >= cap ? (int)cap - 1 : *n + w;
+}
+
 /* HTTP on the same port: /healthz, /metrics; everything else goes to the static mount. */
 static int server_http_callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len) {
     struct lws_vhost *vh = lws_get_vhost(wsi);
@@ -599,20 +611,32 @@ static int server_http_callback(struct lws *wsi, enum lws_callback_reasons reaso
         if (!strcmp(uri, "/healthz")) {
             n = snprintf(body, sizeof body, "ok revision %llu\n", (unsigned long long)s->state.revision);
         } else if (!strcmp(uri, "/metrics")) {
-            n = snprintf(body, sizeof body,
-                         "# TYPE lucent_clients gauge\nlucent_clients %u\n"
-                         "# TYPE lucent_revision gauge\nlucent_revision %llu\n"
-                         "# TYPE lucent_frames_sent_total counter\nlucent_frames_sent_total %llu\n"
-                         "# TYPE lucent_bytes_sent_total counter\nlucent_bytes_sent_total %llu\n"
-                         "# TYPE lucent_messages_received_total counter\nlucent_messages_received_total %llu\n"
-                         "# TYPE lucent_relights_total counter\nlucent_relights_total %llu\n"
-                         "# TYPE lucent_errors_total counter\n",
-                         s->n_sessions, (unsigned long long)s->state.revision, (unsigned long long)s->frames_sent,
-                         (unsigned long long)s->bytes_sent, (unsigned long long)s->messages_in,
-                         (unsigned long long)lc_compute_count(s->compute));
-            for (int i = 0; i < 32 && s->error_codes[i][0] && n < (int)sizeof body - 128; i++)
-                n += snprintf(body + n, sizeof body - (size_t)n, "lucent_errors_total{code=\"%s\"} %llu\n",
-                              s->error_codes[i], (unsigned long long)s->errors[i]);
+            n = 0;
+            http_append(body, sizeof body, &n,
+                        "# TYPE lucent_clients gauge\nlucent_clients %u\n"
+                        "# TYPE lucent_revision gauge\nlucent_revision %llu\n"
+                        "# TYPE lucent_frames_sent_total counter\nlucent_frames_sent_total %llu\n"
+                        "# TYPE lucent_bytes_sent_total counter\nlucent_bytes_sent_total %llu\n"
+                        "# TYPE lucent_messages_received_total counter\nlucent_messages_received_total %llu\n"
+                        "# TYPE lucent_relights_total counter\nlucent_relights_total %llu\n",
+                        s->n_sessions, (unsigned long long)s->state.revision, (unsigned long long)s->frames_sent,
+                        (unsigned long long)s->bytes_sent, (unsigned long long)s->messages_in,
+                        (unsigned long long)lc_compute_count(s->compute));
+            uint64_t hist[LC_COMPUTE_BUCKETS];
+            double sum_ms;
+            lc_compute_histogram(s->compute, hist, &sum_ms);
+            http_append(body, sizeof body, &n, "# TYPE lucent_relight_ms histogram\n");
+            for (int b = 0; b < LC_COMPUTE_BUCKETS - 1; b++)
+                http_append(body, sizeof body, &n, "lucent_relight_ms_bucket{le=\"%g\"} %llu\n", lc_compute_bucket_ms[b],
+                            (unsigned long long)hist[b]);
+            http_append(body, sizeof body, &n,
+                        "lucent_relight_ms_bucket{le=\"+Inf\"} %llu\nlucent_relight_ms_sum %.3f\n"
+                        "lucent_relight_ms_count %llu\n# TYPE lucent_errors_total counter\n",
+                        (unsigned long long)hist[LC_COMPUTE_BUCKETS - 1], sum_ms,
+                        (unsigned long long)hist[LC_COMPUTE_BUCKETS - 1]);
+            for (int i = 0; i < 32 && s->error_codes[i][0]; i++)
+                http_append(body, sizeof body, &n, "lucent_errors_total{code=\"%s\"} %llu\n", s->error_codes[i],
+                            (unsigned long long)s->errors[i]);
         }
         if (n >= 0) {
             unsigned char buf[LWS_PRE + 8192 + 512], *start = buf + LWS_PRE, *p = start, *end = buf + sizeof buf;
