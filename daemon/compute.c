@@ -24,7 +24,7 @@ typedef struct compute_job {
 struct lc_compute {
     const lc_lcb *bake;
     struct lws_context *ctx;
-    int backend, threads;
+    int backend, threads, refine_passes;
     pthread_t thread;
     pthread_mutex_t lock;
     pthread_cond_t cond;
@@ -106,24 +106,36 @@ static void *compute_main(void *arg) {
     pthread_cond_broadcast(&c->cond);
     pthread_mutex_unlock(&c->lock);
     if (!e) return NULL;
+    /* The last state relit, kept for progressive refinement while no update is waiting:
+     * each extra pass adds a bounce (same revision, a newer frame). */
+    compute_job *last = NULL;
+    int refine_left = 0;
     for (;;) {
         pthread_mutex_lock(&c->lock);
-        while (!c->pending && !c->stop) pthread_cond_wait(&c->cond, &c->lock);
-        if (!c->pending) { /* stop, nothing left in flight */
+        while (!c->pending && !c->stop && !(last && refine_left > 0)) pthread_cond_wait(&c->cond, &c->lock);
+        if (c->stop && !c->pending) { /* nothing left in flight */
             pthread_mutex_unlock(&c->lock);
             break;
         }
         compute_job *job = c->pending;
         c->pending = NULL;
         pthread_mutex_unlock(&c->lock);
+        if (job) {
+            compute_job_free(last);
+            last = job;
+            refine_left = job->st.settings.progressive ? c->refine_passes : 0;
+        } else {
+            refine_left--;
+        }
 
         const lc_engine_frame *fr;
         lc_published *p = NULL;
-        if (lc_engine_relight(e, &job->st, &fr, err, sizeof err) != 0)
-            lc_error("compute", "relight of revision %llu failed: %s", (unsigned long long)job->st.revision, err);
-        else
-            p = compute_publish(fr, job);
-        compute_job_free(job);
+        if (lc_engine_relight(e, &last->st, &fr, err, sizeof err) != 0) {
+            lc_error("compute", "relight of revision %llu failed: %s", (unsigned long long)last->st.revision, err);
+            refine_left = 0;
+        } else {
+            p = compute_publish(fr, last);
+        }
         if (!p) continue;
         pthread_mutex_lock(&c->lock);
         lc_published *old = c->latest;
@@ -138,12 +150,13 @@ static void *compute_main(void *arg) {
         pthread_mutex_unlock(&c->lock);
         lws_cancel_service(c->ctx); /* the only lws call allowed off the service thread */
     }
+    compute_job_free(last);
     lc_engine_release(e);
     return NULL;
 }
 
-lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, struct lws_context *ctx, char *err,
-                             size_t errlen) {
+lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, struct lws_context *ctx,
+                             char *err, size_t errlen) {
     lc_compute *c = calloc(1, sizeof *c);
     if (!c) {
         lc_set_err(err, errlen, "out of memory");
@@ -153,6 +166,7 @@ lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, struc
     c->ctx = ctx;
     c->backend = backend;
     c->threads = threads;
+    c->refine_passes = refine_passes;
     pthread_mutex_init(&c->lock, NULL);
     pthread_cond_init(&c->cond, NULL);
     if (pthread_create(&c->thread, NULL, compute_main, c) != 0) {

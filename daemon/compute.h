@@ -29,9 +29,11 @@ typedef struct lc_published {
 typedef struct lc_compute lc_compute;
 
 /* Starts the thread and creates the engine on it (the EGL context belongs to that thread).
+ * With progressive settings, up to refine_passes extra relights of the same state run
+ * while no update waits, each adding a bounce (frames of the same revision).
  * Returns NULL with err when the engine cannot start. */
-lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, struct lws_context *ctx, char *err,
-                             size_t errlen);
+lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, struct lws_context *ctx,
+                             char *err, size_t errlen);
 /* Service thread: submit the state to relight (copied). */
 int lc_compute_submit(lc_compute *c, const lc_state *state);
 /* Service thread: a new reference to the newest result (NULL before the first), or NULL if

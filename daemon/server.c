@@ -731,6 +731,7 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     s.limits.max_batch = (uint32_t)cfg->max_batch;
     lc_state_limits sl = {(uint32_t)cfg->max_lights, (uint32_t)cfg->max_objects};
     if (lc_state_init(&s.state, bake, &sl) != 0) return 1;
+    s.state.settings.bounces = (uint32_t)cfg->bounces; /* a restored snapshot's settings replace this */
     s.journal = lc_journal_open(cfg->state_dir, (lc_fsync_mode)cfg->fsync_mode, &s.state, err, sizeof err);
     if (!s.journal) {
         lc_error("server", "%s", err);
@@ -776,7 +777,7 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     }
     struct lws_vhost *vh = lws_get_vhost_by_name(s.ctx, "default");
     s.port = vh ? lws_get_vhost_listen_port(vh) : cfg->port;
-    s.compute = lc_compute_start(bake, cfg->backend, cfg->threads, s.ctx, err, sizeof err);
+    s.compute = lc_compute_start(bake, cfg->backend, cfg->threads, cfg->refine_passes, s.ctx, err, sizeof err);
     if (!s.compute) {
         lc_error("server", "%s", err);
         goto done;

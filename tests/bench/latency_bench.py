@@ -54,11 +54,11 @@ TARGETS = [
 
 def default_lucentd():
     env = os.environ.get("LUCENT_BINARY_DIR")
-    for d in ([env] if env else []) + [os.path.join(REPO, "build-dep"), os.path.join(REPO, "build")]:
+    for d in ([env] if env else []) + [os.path.join(REPO, "build")]:
         p = os.path.join(d, "bin", "lucentd")
         if os.path.exists(p):
             return p
-    return os.path.join(REPO, "build-dep", "bin", "lucentd")
+    return os.path.join(REPO, "build", "bin", "lucentd")
 
 
 def percentile(sorted_vals, q):
