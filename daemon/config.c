@@ -61,7 +61,7 @@ static const lc_opt config_options[] = {
     {"tile", LC_OPT_INT, OFF(tile), 8, 256, "32", NULL, "lightmap tile size for delta frames (texels)", NULL, NULL},
     {"keyframe-interval", LC_OPT_INT, OFF(keyframe_interval), 1, 100000, "30", NULL,
      "frames between lightmap keyframes", NULL, NULL},
-    {"delta-threshold", LC_OPT_FLOAT, OFF(delta_threshold), 0, 1, "0.001", NULL,
+    {"delta-threshold", LC_OPT_FLOAT, OFF(delta_threshold), 0, 1, "0.01", NULL,
      "relative texel change that puts a tile in a delta frame", NULL, NULL},
     {"compact-bytes", LC_OPT_INT, OFF(compact_bytes), 4096, 1073741824, "1048576", NULL,
      "journal size that triggers a snapshot", NULL, NULL},
