@@ -286,6 +286,15 @@ static size_t session_encode(lc_server *s, lc_session *ss, int stream, int force
 
 /* --- requests ------------------------------------------------------------------------------------ */
 
+/* A session that joined after the last publication has no frame yet: give it the newest
+ * result so subscribe/snapshot can send a keyframe on an idle server (PROTOCOL.md §4.1). */
+static void session_take_latest(lc_server *s, lc_session *ss) {
+    if (ss->frame) return;
+    uint64_t seq = 0;
+    ss->frame = lc_compute_take_newer(s->compute, &seq);
+    ss->frame_seq = seq;
+}
+
 static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) {
     lc_proto_welcome w;
     memset(&w, 0, sizeof w);
@@ -397,6 +406,7 @@ static void server_request(lc_server *s, lc_session *ss, const char *text, size_
             session_error(s, ss, &req.id, "invalid", "/encoding", "this encoding is not available for the stream");
             break;
         }
+        session_take_latest(s, ss);
         ss->stream[req.stream].on = 1;
         ss->stream[req.stream].force = 1;
         ss->stream[req.stream].enc = req.encoding;
@@ -409,6 +419,7 @@ static void server_request(lc_server *s, lc_session *ss, const char *text, size_
         session_send(ss, lc_proto_build_ok(&req.id, s->state.revision));
         break;
     case LC_REQ_SNAPSHOT:
+        session_take_latest(s, ss);
         for (int k = 1; k < STREAMS; k++)
             if (ss->stream[k].on) ss->stream[k].force = 1;
         session_send(ss, lc_proto_build_ok(&req.id, s->state.revision));

@@ -1,0 +1,269 @@
+"""Binary data frames: §4.1, §4.2, §4.12, §6.
+(The Client in conftest.py checks every frame's header, lengths, CRC, tile table, sequence
+and revision order on arrival; these cases make the server produce frames of every kind.)"""
+import asyncio
+
+import pytest
+
+from conftest import (RecvTimeout, STREAMS, ENCODINGS, aio, controller, open_client, nudge, subscribe_keyframe,
+                      decode_lightmap, decode_sh, apply_delta)
+
+section = pytest.mark.section
+
+
+async def settle(clients, quiet=1.0, limit=20.0):
+    """Receive on all clients until none got a frame for `quiet` s (relights finished)."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + limit
+    while loop.time() < end:
+        got = await asyncio.gather(*[c.pump(quiet) for c in clients])
+        if not any(got):
+            return
+    raise AssertionError("frames kept coming for %.0f s without a change" % limit)
+
+
+async def add_light(c, lid, pos, intensity=0.5):
+    return await c.expect_ok({"type": "light.set", "light": {
+        "id": lid, "type": "point", "position": pos, "intensity": intensity}})
+
+
+async def remove_lights(c, prefix):
+    st = await c.request({"type": "state.get"})
+    ops = [{"type": "light.remove", "light_id": x["id"]} for x in st["lights"] if x["id"].startswith(prefix)]
+    if ops:
+        await c.request({"type": "batch", "ops": ops})
+
+
+@section("4.1")
+@aio
+async def test_subscribe_keyframe_idle(cfg):
+    """subscribe on an idle server (no change since the client connected) -> ok, then a keyframe of
+    the current state, without any change being needed."""
+    a = await controller(cfg)
+    await nudge(cfg, a)
+    await settle([a], quiet=1.0)
+    await a.close()
+    await asyncio.sleep(0.5)
+    c = await open_client(cfg)
+    try:
+        rev = c.welcome["revision"]
+        for stream in ("lightmap", "shgrid", "objects"):
+            await c.expect_ok({"type": "subscribe", "stream": stream})
+            try:
+                f = await c.recv_frame(stream)
+            except RecvTimeout:
+                raise AssertionError("no %s keyframe within %.0f s after subscribe -> ok on an idle server "
+                                     "(revision %d)" % (stream, cfg.timeout, rev))
+            assert f.keyframe and f.revision == rev, "%s: %r (current revision %d)" % (stream, f, rev)
+    finally:
+        await c.close()
+
+
+@pytest.mark.parametrize("stream,encoding", [
+    pytest.param(s, e, id="%s-%s" % (s, e), marks=section("6.%d" % (STREAMS[s] + 1)))
+    for s in STREAMS for e in ENCODINGS if not (s != "lightmap" and e == "rgb9e5")])
+@aio
+async def test_keyframe_layout(cfg, stream, encoding):
+    """Each stream x encoding: a keyframe of that stream and encoding, header and payload size
+    consistent (§6.1), values finite, rgba16f alpha = 1, lightmap irradiance >= 0."""
+    c = await controller(cfg)
+    try:
+        f = await subscribe_keyframe(c, stream, encoding)
+        assert f.stream == STREAMS[stream] and f.encoding == ENCODINGS[encoding], f
+        if stream == "lightmap":
+            v = decode_lightmap(f)
+            if encoding == "rgba16f":
+                v, alpha = v
+                assert all(a == 1.0 for a in alpha), "§6.2 rgba16f alpha must be 1"
+            assert all(x == x and abs(x) != float("inf") for x in v), "non-finite texel"
+            assert min(v) >= 0, "negative irradiance %g" % min(v)
+            assert max(v) > 0, "an all-black lightmap (is the scene lit?)"
+        else:
+            ids, v = decode_sh(f)
+            assert all(x == x and abs(x) != float("inf") for x in v), "non-finite SH value"
+            if stream == "objects":
+                st = await c.request({"type": "state.get"})
+                if f.revision == st["revision"]:
+                    assert ids == sorted(o["id"] for o in st["objects"]), "§6.4 objects sorted by id: %r" % ids
+    finally:
+        await c.close()
+
+
+@section("6.5")
+@aio
+async def test_frames_follow_changes(cfg):
+    """A sequence of changes: frames on every stream stay consistent (§6.1), revisions never
+    decrease, sequences +1; the last frame reflects the last acknowledged revision."""
+    c = await controller(cfg)
+    prefix = cfg.uid("ff")
+    try:
+        await subscribe_keyframe(c, "lightmap", "rgb9e5")
+        await c.expect_ok({"type": "subscribe", "stream": "shgrid", "encoding": "rgba16f"})
+        await c.expect_ok({"type": "subscribe", "stream": "objects"})
+        last = None
+        for i in range(8):
+            last = await add_light(c, prefix, [0.1 + 0.05 * i, 0.4, 0.25], 0.3)
+            await asyncio.sleep(0.15)
+        for stream in ("lightmap", "shgrid", "objects"):
+            f = await c.recv_frame(stream, min_revision=last["revision"], timeout=max(cfg.timeout, 20))
+            assert f.revision == last["revision"], f
+        assert c.frames_seen >= 6
+    finally:
+        await remove_lights(c, prefix)
+        await c.close()
+
+
+@section("4.12")
+@aio
+async def test_snapshot(cfg):
+    """snapshot -> ok, then a keyframe of every subscribed stream (even unchanged), next in sequence,
+    of the current revision."""
+    c = await controller(cfg)
+    try:
+        await subscribe_keyframe(c, "lightmap", "f32")
+        await c.expect_ok({"type": "subscribe", "stream": "shgrid"})
+        await settle([c])
+        seq = dict(c.seq)
+        ok = await c.expect_ok({"type": "snapshot"})
+        got = {}
+        while len(got) < 2:
+            f = await c.recv_frame()
+            got[f.stream] = f
+        for s, f in got.items():
+            assert f.keyframe, "§4.12 snapshot must send keyframes: %r" % f
+            assert f.sequence == seq.get(s, 0) + 1, f
+            assert f.revision == ok["revision"], "snapshot frame revision %d, current %d" % (f.revision, ok["revision"])
+    finally:
+        await c.close()
+
+
+@section("4.2")
+@aio
+async def test_unsubscribe_stops_frames(cfg):
+    """After unsubscribe -> ok, no more frames of that stream (the other stream keeps coming)."""
+    c = await controller(cfg)
+    prefix = cfg.uid("un")
+    try:
+        await subscribe_keyframe(c, "lightmap")
+        await c.expect_ok({"type": "subscribe", "stream": "shgrid"})
+        await c.expect_ok({"type": "unsubscribe", "stream": "lightmap"})
+        c.frame_q.clear()
+        ok = await add_light(c, prefix, [0.3, 0.3, 0.3], 1.0)
+        await c.recv_frame("shgrid", min_revision=ok["revision"], timeout=max(cfg.timeout, 20))
+        await c.pump(1.0)
+        lm = [f for f in c.frame_q if f.stream == 1]
+        assert not lm, "lightmap frames after unsubscribe: %r" % lm
+        got = await c.pump(1.0)
+        assert not [f for f in got if f.stream == 1], "lightmap frames after unsubscribe"
+    finally:
+        await remove_lights(c, prefix)
+        await c.close()
+
+
+@section("4.1")
+@aio
+async def test_resubscribe_replaces(cfg):
+    """Subscribing again replaces the settings: the next lightmap frame is a keyframe in the new
+    encoding, and the stream's sequence goes on (1, 2, 3 … per stream per connection, §6.1)."""
+    c = await controller(cfg)
+    try:
+        f1 = await subscribe_keyframe(c, "lightmap", "rgb9e5")
+        await settle([c])
+        s = c.seq[1]
+        await c.expect_ok({"type": "subscribe", "stream": "lightmap", "encoding": "f32"})
+        f2 = await c.recv_frame("lightmap")
+        assert f2.keyframe and f2.encoding == 3, f2
+        assert f2.sequence == s + 1
+    finally:
+        await c.close()
+
+
+def _max_rel_err(ref, got, rel, floor):
+    worst = 0.0
+    for i in range(0, len(ref), 3):
+        m = max(ref[i:i + 3])
+        for k in range(3):
+            err = abs(ref[i + k] - got[i + k])
+            tol = rel * max(m, 0) + floor
+            if err > tol:
+                worst = max(worst, err / max(m, 1e-30))
+    return worst
+
+
+@section("6.2")
+@aio
+async def test_encodings_agree(cfg):
+    """The same frame in rgb9e5, rgba16f and f32 (three connections, snapshot after the relight
+    settled, same revision): rgb9e5 within 2^-8 of the texel's max channel, half within 2^-10
+    relative (§6.2); shgrid rgba16f vs f32 within 2^-10 relative (§6.3)."""
+    cs = [await controller(cfg, name="enc-%d" % i) for i in range(3)]
+    try:
+        for c, e in zip(cs, ("rgb9e5", "rgba16f", "f32")):
+            await subscribe_keyframe(c, "lightmap", e)
+        await cs[1].expect_ok({"type": "subscribe", "stream": "shgrid", "encoding": "rgba16f"})
+        await cs[2].expect_ok({"type": "subscribe", "stream": "shgrid", "encoding": "f32"})
+        await settle(cs)
+        frames = []
+        for c in cs:
+            rev = (await c.expect_ok({"type": "snapshot"}))["revision"]
+            frames.append(await c.recv_frame("lightmap", keyframe=True, min_revision=rev))
+        revs = {f.revision for f in frames}
+        assert len(revs) == 1, "keyframes of different revisions %r (server busy?)" % revs
+        f32 = decode_lightmap(frames[2])
+        e9 = decode_lightmap(frames[0])
+        h16 = decode_lightmap(frames[1])[0]
+        w = _max_rel_err(f32, e9, 2 ** -8, 2 ** -24)
+        assert w == 0, "rgb9e5 differs from f32 by up to %.3g of the texel max (allowed 2^-8)" % w
+        worst = max((abs(a - b) - 2 ** -24) / max(abs(a), 1e-30) for a, b in zip(f32, h16))
+        assert worst <= 2 ** -10, "rgba16f differs from f32 by %.3g relative (allowed 2^-10)" % worst
+        g = [await c.recv_frame("shgrid", keyframe=True, min_revision=frames[0].revision) for c in cs[1:]]
+        if g[0].revision == g[1].revision:
+            a, b = decode_sh(g[1])[1], decode_sh(g[0])[1]
+            worst = max((abs(x - y) - 2 ** -24) / max(abs(x), 1e-30) for x, y in zip(a, b))
+            assert worst <= 2 ** -10, "shgrid rgba16f vs f32: %.3g relative" % worst
+    finally:
+        for c in cs:
+            await c.close()
+
+
+@section("6.2")
+@aio
+async def test_deltas_rebuild_keyframe(cfg):
+    """Deltas applied on the keyframe equal the next keyframe (snapshot) within the threshold.
+    The threshold is not published: 0.3 relative (floor 1e-3 of the peak) is allowed; the
+    snapshot keyframe must be next in sequence."""
+    c = await controller(cfg)
+    prefix = cfg.uid("dl")
+    try:
+        f = await subscribe_keyframe(c, "lightmap", "f32")
+        img = decode_lightmap(f)
+        last = f
+        n_delta = 0
+        for i, pos in enumerate(([0.15, 0.1, 0.15], [0.4, 0.1, 0.15], [0.4, 0.1, 0.4])):
+            await add_light(c, prefix, pos, 0.2)
+            await asyncio.sleep(0.3)
+        loop = asyncio.get_running_loop()
+        quiet_until = loop.time() + 1.5
+        while loop.time() < quiet_until + 20:
+            try:
+                fr = await c.recv_frame("lightmap", timeout=max(0.05, quiet_until - loop.time()))
+            except RecvTimeout:
+                break
+            if fr.keyframe:
+                img = decode_lightmap(fr)
+            else:
+                apply_delta(img, fr)
+                n_delta += 1
+            last = fr
+            quiet_until = loop.time() + 1.5
+        await c.expect_ok({"type": "snapshot"})
+        k = await c.recv_frame("lightmap")
+        assert k.keyframe and k.sequence == last.sequence + 1, k
+        ref = decode_lightmap(k)
+        peak = max(ref) or 1.0
+        worst = max(abs(a - b) / max(abs(a), abs(b), 1e-3 * peak) for a, b in zip(img, ref))
+        assert worst <= 0.3, "delta-applied image vs keyframe: worst relative difference %.3f (%d deltas)" % (
+            worst, n_delta)
+    finally:
+        await remove_lights(c, prefix)
+        await c.close()
