@@ -29,24 +29,8 @@ trap cleanup EXIT INT TERM
 # Serve the Cornell box with one dynamic-object asset, so object.set/object.remove are
 # testable (the embedded bake has no assets).
 if [ -x "$BIN/bin/lucent-bake" ]; then
-  cat > "$TMP/cube.obj" <<'OBJ'
-v -0.05 0 -0.05
-v 0.05 0 -0.05
-v 0.05 0.1 -0.05
-v -0.05 0.1 -0.05
-v -0.05 0 0.05
-v 0.05 0 0.05
-v 0.05 0.1 0.05
-v -0.05 0.1 0.05
-f 1 4 3 2
-f 5 6 7 8
-f 1 2 6 5
-f 4 8 7 3
-f 1 5 8 4
-f 2 3 7 6
-OBJ
   if "$BIN/bin/lucent-bake" bake "$HERE/../../scenes/cornell-box/cornell-box.obj" -o "$TMP/scene.lcb" \
-       --quality draft --asset cube="$TMP/cube.obj" --quiet --no-write-glb; then
+       --quality draft --asset cube="$HERE/../data/cube.obj" --quiet --no-write-glb; then
     BAKE="$TMP/scene.lcb"
   fi
 fi

@@ -1,25 +1,8 @@
 # Bakes the embedded Cornell box (draft preset + an asset) and checks what the file holds.
 . "$(dirname "$0")/lib.sh"
 
-# A small dynamic-object asset: a unit cube, as OBJ.
-cat > "$TMP/cube.obj" <<'OBJ'
-v -0.05 0 -0.05
-v 0.05 0 -0.05
-v 0.05 0.1 -0.05
-v -0.05 0.1 -0.05
-v -0.05 0 0.05
-v 0.05 0 0.05
-v 0.05 0.1 0.05
-v -0.05 0.1 0.05
-f 1 4 3 2
-f 5 6 7 8
-f 1 2 6 5
-f 4 8 7 3
-f 1 5 8 4
-f 2 3 7 6
-OBJ
 expect_exit 0 "" "$BAKE" bake "$CORNELL" -o "$TMP/cornell.lcb" --glb "$TMP/cornell.glb" --quality draft \
-  --asset cube="$TMP/cube.obj" --stats-json "$TMP/stats.json"
+  --asset cube="$SRC/tests/data/cube.obj" --stats-json "$TMP/stats.json"
 [ -s "$TMP/cornell.glb" ] || fail "no glb written"
 expect_exit 0 "" "$BAKE" verify "$TMP/cornell.lcb"
 "$BAKE" info "$TMP/cornell.lcb" --json > "$TMP/info.json" || fail "info --json failed"
