@@ -30,7 +30,7 @@ trap cleanup EXIT INT TERM
 # testable (the embedded bake has no assets).
 if [ -x "$BIN/bin/lucent-bake" ]; then
   if "$BIN/bin/lucent-bake" bake "$HERE/../../scenes/cornell-box/cornell-box.obj" -o "$TMP/scene.lcb" \
-       --quality draft --asset cube="$HERE/../data/cube.obj" --quiet --no-write-glb; then
+       --quality draft --asset cube="$HERE/../../scenes/cornell-box/cube.obj" --quiet --no-write-glb; then
     BAKE="$TMP/scene.lcb"
   fi
 fi

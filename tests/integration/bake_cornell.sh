@@ -2,7 +2,7 @@
 . "$(dirname "$0")/lib.sh"
 
 expect_exit 0 "" "$BAKE" bake "$CORNELL" -o "$TMP/cornell.lcb" --glb "$TMP/cornell.glb" --quality draft \
-  --asset cube="$SRC/tests/data/cube.obj" --stats-json "$TMP/stats.json"
+  --asset cube="$SRC/scenes/cornell-box/cube.obj" --stats-json "$TMP/stats.json"
 [ -s "$TMP/cornell.glb" ] || fail "no glb written"
 expect_exit 0 "" "$BAKE" verify "$TMP/cornell.lcb"
 "$BAKE" info "$TMP/cornell.lcb" --json > "$TMP/info.json" || fail "info --json failed"

@@ -1,0 +1,59 @@
+# liblucent-client against real lucentd instances: basic requests and streams, a refused
+# token, wss:// with a self-signed certificate, reconnect after a daemon restart.
+. "$(dirname "$0")/lib.sh"
+BIN="${LUCENT_BINARY_DIR:?run through ctest}/bin"
+LIVE="${LUCENT_BINARY_DIR}/tests/client_live"
+if [ ! -x "$BIN/lucentd" ] || [ ! -x "$LIVE" ]; then echo "lucentd/client_live not built: skip"; exit 77; fi
+PIDS=""
+trap 'for p in $PIDS; do kill "$p" 2>/dev/null; wait "$p" 2>/dev/null; done; rm -rf "$TMP"' EXIT
+
+# start_daemon NAME ARGS...: starts lucentd, sets DPID and PORT.
+start_daemon() {
+  local name="$1"; shift
+  "$BIN/lucentd" --state-dir "$TMP/state-$name" --backend cpu --log-level warn "$@" \
+    >"$TMP/$name.out" 2>"$TMP/$name.err" &
+  DPID=$!
+  PIDS="$PIDS $DPID"
+  PORT=""
+  for _ in $(seq 1 300); do
+    PORT="$(sed -n 's/^lucentd listening port=\([0-9]*\).*/\1/p' "$TMP/$name.out" 2>/dev/null)"
+    [ -n "$PORT" ] && return 0
+    kill -0 "$DPID" 2>/dev/null || break
+    sleep 0.05
+  done
+  fail "lucentd ($name) did not start: $(head -c 400 "$TMP/$name.err")"
+  finish
+}
+
+start_daemon plain --port 0
+timeout 120 "$LIVE" basic "ws://127.0.0.1:$PORT/" || fail "basic"
+kill "$DPID"; wait "$DPID" 2>/dev/null
+
+printf '{"controller-tokens": ["good"]}\n' >"$TMP/tokens.json"
+start_daemon tokens --port 0 --config "$TMP/tokens.json"
+timeout 60 "$LIVE" refused "ws://127.0.0.1:$PORT/" wrong || fail "refused"
+kill "$DPID"; wait "$DPID" 2>/dev/null
+
+if command -v openssl >/dev/null; then
+  openssl req -x509 -newkey rsa:2048 -nodes -keyout "$TMP/key.pem" -out "$TMP/cert.pem" -days 1 \
+    -subj /CN=127.0.0.1 >/dev/null 2>&1 || fail "openssl req"
+  start_daemon tls --port 0 --tls-cert "$TMP/cert.pem" --tls-key "$TMP/key.pem"
+  timeout 60 "$LIVE" tls "wss://127.0.0.1:$PORT/" || fail "tls"
+  kill "$DPID"; wait "$DPID" 2>/dev/null
+else
+  echo "openssl missing: wss part skipped"
+fi
+
+# reconnect: the same port after a kill -9 and restart (state kept)
+start_daemon r1 --port 0
+RPORT="$PORT"
+timeout 120 "$LIVE" reconnect "ws://127.0.0.1:$RPORT/" >"$TMP/live.out" 2>"$TMP/live.err" &
+LPID=$!
+for _ in $(seq 1 400); do grep -q READY "$TMP/live.out" && break; sleep 0.05; done
+grep -q READY "$TMP/live.out" || fail "reconnect client never got ready: $(head -c 400 "$TMP/live.err")"
+kill -9 "$DPID"; wait "$DPID" 2>/dev/null
+sleep 0.5   # the client retries against a closed port meanwhile
+cp -r "$TMP/state-r1" "$TMP/state-r2"
+start_daemon r2 --port "$RPORT"
+wait "$LPID" || fail "reconnect: $(tail -c 600 "$TMP/live.err")"
+finish
