@@ -14,6 +14,7 @@
 #include "util/log.h"
 
 typedef struct compute_job {
+    uint64_t id;
     lc_engine_state st;
     lc_engine_light *lights;
     lc_engine_object *objects;
@@ -35,6 +36,9 @@ struct lc_compute {
     uint64_t hist[LC_COMPUTE_BUCKETS]; /* guarded by lock: relights per bucket (not cumulative) */
     double hist_sum_ms;     /* guarded by lock */
     int stop;               /* guarded by lock */
+    uint64_t submitted;     /* guarded by lock: last job id handed out */
+    uint64_t discarded[LC_COMPUTE_DISCARDS]; /* guarded by lock: ring of job ids never to publish */
+    unsigned discard_next;  /* guarded by lock */
     int ready;              /* guarded by lock: 1 engine up, -1 failed */
     char start_err[512];
     char backend_name[16];
@@ -58,6 +62,13 @@ static void published_free(lc_published *p) {
     free(p);
 }
 
+/* Any thread, under c->lock. */
+static int compute_is_discarded(const lc_compute *c, uint64_t job) {
+    for (int i = 0; i < LC_COMPUTE_DISCARDS; i++)
+        if (c->discarded[i] == job) return 1;
+    return 0;
+}
+
 /* Compute thread. */
 static lc_published *compute_publish(const lc_engine_frame *fr, compute_job *job) {
     lc_published *p = calloc(1, sizeof *p);
@@ -79,6 +90,7 @@ static lc_published *compute_publish(const lc_engine_frame *fr, compute_job *job
         memcpy(p->object_ids, job->object_ids, (size_t)fr->n_objects * sizeof *p->object_ids);
     }
     p->refs = 1;
+    p->job = job->id;
     p->revision = fr->revision;
     struct timespec ts;
     clock_gettime(CLOCK_REALTIME, &ts);
@@ -138,6 +150,12 @@ static void *compute_main(void *arg) {
         }
         if (!p) continue;
         pthread_mutex_lock(&c->lock);
+        if (compute_is_discarded(c, p->job)) {
+            pthread_mutex_unlock(&c->lock);
+            published_free(p);
+            refine_left = 0;
+            continue;
+        }
         lc_published *old = c->latest;
         c->latest = p;
         c->sequence++;
@@ -187,7 +205,7 @@ lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int r
     return c;
 }
 
-int lc_compute_submit(lc_compute *c, const lc_state *state) {
+int lc_compute_submit(lc_compute *c, const lc_state *state, uint64_t *job) {
     compute_job *j = calloc(1, sizeof *j);
     if (!j) return -1;
     if (lc_state_to_engine(state, &j->st, &j->lights, &j->objects, &j->emission) != 0) {
@@ -202,12 +220,26 @@ int lc_compute_submit(lc_compute *c, const lc_state *state) {
     for (uint32_t i = 0; i < state->n_objects; i++)
         memcpy(j->object_ids[i], state->objects[i].id, sizeof j->object_ids[i]);
     pthread_mutex_lock(&c->lock);
+    j->id = ++c->submitted;
+    if (job) *job = j->id;
     compute_job *old = c->pending; /* latest wins */
     c->pending = j;
     pthread_cond_signal(&c->cond);
     pthread_mutex_unlock(&c->lock);
     compute_job_free(old);
     return 0;
+}
+
+void lc_compute_discard(lc_compute *c, uint64_t job) {
+    compute_job *drop = NULL;
+    pthread_mutex_lock(&c->lock);
+    c->discarded[c->discard_next++ % LC_COMPUTE_DISCARDS] = job;
+    if (c->pending && c->pending->id == job) {
+        drop = c->pending;
+        c->pending = NULL;
+    }
+    pthread_mutex_unlock(&c->lock);
+    compute_job_free(drop);
 }
 
 lc_published *lc_compute_take_newer(lc_compute *c, uint64_t *seen) {

@@ -14,6 +14,7 @@ struct lws_context;
 /* One relight's outputs. Immutable once published; free with lc_published_release. */
 typedef struct lc_published {
     int refs; /* guarded by compute.lock */
+    uint64_t job;      /* the submission it came from (lc_compute_submit) */
     uint64_t revision;
     uint64_t timestamp_us; /* when the relight finished (µs since the epoch) */
     double relight_ms;
@@ -34,8 +35,16 @@ typedef struct lc_compute lc_compute;
  * Returns NULL with err when the engine cannot start. */
 lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, struct lws_context *ctx,
                              char *err, size_t errlen);
-/* Service thread: submit the state to relight (copied). */
-int lc_compute_submit(lc_compute *c, const lc_state *state);
+/* Service thread: submit the state to relight (copied). *job (may be NULL) receives the
+ * submission's id, increasing from 1. The server submits before its journal fsync so the
+ * relight overlaps the disk write; frames still go out only after the fsync, because the
+ * service thread sends them. */
+int lc_compute_submit(lc_compute *c, const lc_state *state, uint64_t *job);
+/* Service thread: the submission `job` must never be published (its change could not be
+ * stored): dropped if pending, its results discarded if in flight. Remembers the last
+ * LC_COMPUTE_DISCARDS ids. */
+#define LC_COMPUTE_DISCARDS 8
+void lc_compute_discard(lc_compute *c, uint64_t job);
 /* Service thread: a new reference to the newest result (NULL before the first), or NULL if
  * its revision/sequence is not newer than *seen (then *seen is unchanged). */
 lc_published *lc_compute_take_newer(lc_compute *c, uint64_t *seen);

@@ -333,11 +333,17 @@ static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *
         return;
     }
     char jerr[256];
-    /* Durable before acknowledged: a failed append undoes the change. */
+    /* Relight while the journal fsyncs (~4 ms on a plain disk): the frames of this change
+     * can only be sent after this function returns, i.e. after the change is durable. */
+    uint64_t job = 0;
+    if (lc_compute_submit(s->compute, &s->state, &job) != 0) lc_error("server", "out of memory submitting a relight");
+    /* Durable before acknowledged: a failed append undoes the change and its relight. */
     if (lc_journal_append(s->journal, req->ops, req->n_ops, s->state.revision, jerr, sizeof jerr) != 0) {
         lc_error("server", "journal: %s; change refused", jerr);
+        if (job) lc_compute_discard(s->compute, job);
         lc_state_release(&s->state);
         s->state = before;
+        lc_compute_submit(s->compute, &s->state, NULL);
         session_error(s, ss, &req->id, "internal", "", "the change could not be stored; try again");
         return;
     }
@@ -345,7 +351,6 @@ static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *
     session_send(ss, lc_proto_build_ok(&req->id, s->state.revision));
     for (lc_session *o = s->sessions; o; o = o->next)
         if (o != ss && o->authed) session_send(o, lc_proto_build_changed(s->state.revision, ss->client, req->ops, req->n_ops));
-    if (lc_compute_submit(s->compute, &s->state) != 0) lc_error("server", "out of memory submitting a relight");
     if (lc_journal_bytes(s->journal) > (uint64_t)s->cfg->compact_bytes &&
         lc_journal_compact(s->journal, &s->state, jerr, sizeof jerr) != 0)
         lc_error("server", "journal compaction failed: %s (will retry)", jerr);
@@ -793,7 +798,7 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
         lc_error("server", "%s", err);
         goto done;
     }
-    lc_compute_submit(s.compute, &s.state); /* the first frame: the restored state */
+    lc_compute_submit(s.compute, &s.state, NULL); /* the first frame: the restored state */
     signal(SIGINT, server_on_signal);
     signal(SIGTERM, server_on_signal);
     signal(SIGHUP, server_on_signal);

@@ -1,0 +1,75 @@
+/* The compute thread: every submission gets an increasing job id and its result carries it;
+ * latest wins; a discarded submission (its journal write failed) is never published, while
+ * the next one is. */
+#include <libwebsockets.h>
+#include <time.h>
+
+#include "../engine/engine_fixture.h"
+#include "check.h"
+#include "compute.h"
+#include "state.h"
+
+/* Waits up to ms for a publication newer than *seen. */
+static lc_published *wait_pub(lc_compute *c, uint64_t *seen, int ms) {
+    for (int i = 0; i < ms; i += 5) {
+        lc_published *p = lc_compute_take_newer(c, seen);
+        if (p) return p;
+        struct timespec ts = {0, 5 * 1000 * 1000};
+        nanosleep(&ts, NULL);
+    }
+    return NULL;
+}
+
+int main(void) {
+    const char *obj = "usemtl white\nv 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 4 3 2\n"
+                      "usemtl lamp\nv 0 1 0\nv 1 1 0\nv 1 1 1\nv 0 1 1\nf 5 6 7 8\n";
+    const char *mtl = "newmtl white\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 2 2 2\n";
+    const char *flags[] = {"--quality", "draft", "--surfels", "256", "--links", "16", NULL};
+    fixture f;
+    if (fixture_bake(&f, obj, mtl, flags) != 0) {
+        CHECK(0, "bake failed");
+        CHECK_DONE();
+    }
+    struct lws_context_creation_info info;
+    memset(&info, 0, sizeof info);
+    info.port = CONTEXT_PORT_NO_LISTEN;
+    lws_set_log_level(0, NULL);
+    struct lws_context *ctx = lws_create_context(&info);
+    CHECK(ctx != NULL, "lws context");
+    char err[256];
+    lc_compute *c = lc_compute_start(f.bake, LC_BACKEND_CPU, 1, 0, ctx, err, sizeof err);
+    CHECK(c != NULL, "compute start: %s", err);
+    if (!c || !ctx) CHECK_DONE();
+    lc_state_limits lim = {.max_lights = 8, .max_objects = 2};
+    lc_state s;
+    CHECK(lc_state_init(&s, f.bake, &lim) == 0, "state");
+
+    uint64_t seen = 0, job1 = 0, job2 = 0, job3 = 0;
+    CHECK(lc_compute_submit(c, &s, &job1) == 0 && job1 == 1, "first job id %llu", (unsigned long long)job1);
+    lc_published *p = wait_pub(c, &seen, 5000);
+    CHECK(p && p->job == job1 && p->revision == s.revision, "published job 1");
+    lc_published_release(c, p);
+
+    /* a discarded submission never shows up, whether it was pending or already running */
+    for (int round = 0; round < 20; round++) {
+        s.revision++;
+        CHECK(lc_compute_submit(c, &s, &job2) == 0 && job2 > job1, "job id grows");
+        lc_compute_discard(c, job2);
+        s.revision--;
+        CHECK(lc_compute_submit(c, &s, &job3) == 0 && job3 == job2 + 1, "resubmit");
+        lc_published *q;
+        int got3 = 0;
+        while ((q = wait_pub(c, &seen, got3 ? 100 : 5000))) {
+            CHECK(q->job != job2, "discarded job %llu was published", (unsigned long long)job2);
+            if (q->job == job3) got3 = 1;
+            lc_published_release(c, q);
+        }
+        CHECK(got3, "the resubmission was published (round %d)", round);
+        job1 = job3;
+    }
+    lc_compute_stop(c);
+    lc_state_release(&s);
+    lws_context_destroy(ctx);
+    fixture_release(&f);
+    CHECK_DONE();
+}
