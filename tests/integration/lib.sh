@@ -21,3 +21,30 @@ expect_exit() {
 }
 finish() { if [ "$FAILS" -ne 0 ]; then echo "$FAILS failure(s)" >&2; exit 1; fi; echo "all checks passed"; exit 0; }
 CORNELL="$SRC/scenes/cornell-box/cornell-box.obj"
+# start_lucentd DIR [ARGS...]: starts "$LUCENT_BINARY_DIR/bin/lucentd" on a free port with its
+# state in DIR (logs DIR.out, DIR.err); sets LUCENTD_PID and LUCENTD_PORT. Returns 1 (and
+# says why) when it does not come up within 10 s. The caller kills LUCENTD_PID.
+start_lucentd() {
+  local dir="$1"; shift
+  "${LUCENT_BINARY_DIR:?run through ctest}/bin/lucentd" --port 0 --state-dir "$dir" --backend cpu --log-level warn \
+    "$@" >"$dir.out" 2>"$dir.err" &
+  LUCENTD_PID=$!
+  LUCENTD_PORT=""
+  for _ in $(seq 1 200); do
+    LUCENTD_PORT="$(sed -n 's/^lucentd listening port=\([0-9]*\).*/\1/p' "$dir.out")"
+    [ -n "$LUCENTD_PORT" ] && return 0
+    kill -0 "$LUCENTD_PID" 2>/dev/null || break
+    sleep 0.05
+  done
+  echo "FAIL: lucentd did not start: $(head -c 400 "$dir.err")" >&2
+  return 1
+}
+# json_check FILE PYTHON_EXPR: evaluates the expression with `j` = the JSON in FILE (fails on
+# False or an exception). E.g. json_check "$TMP/out" 'j["revision"] > 3'.
+json_check() {
+  if ! "$PY" -c 'import json, sys
+j = json.load(open(sys.argv[1]))
+sys.exit(0 if eval(sys.argv[2]) else 1)' "$1" "$2" 2>"$TMP/json_check.err"; then
+    fail "JSON check failed: $2 on $(head -c 600 "$1") $(head -c 300 "$TMP/json_check.err")"
+  fi
+}

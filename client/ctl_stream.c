@@ -1,0 +1,646 @@
+/* lucentctl watch / snapshot / latency: the commands that subscribe to data streams.
+ *
+ * Files written per frame (PREFIX = the stream name, plus "-SEQUENCE" for watch):
+ *   lightmap: PREFIX.exr (OpenEXR, half float RGB irradiance, W/m^2, row 0 = top),
+ *             PREFIX.png (tone-mapped preview: fixed exposure, sRGB), and with --raw
+ *             PREFIX.f32 (W*H*3 little-endian float32: bit-exact for the f32 encoding);
+ *   shgrid:   PREFIX.json (dims, origin, cell, layout and the values) and PREFIX.bin
+ *             (samples x 27 float32, x fastest, RGB interleaved per coefficient);
+ *   objects:  PREFIX.json (id and 27 SH values per object) and PREFIX.bin (as shgrid).
+ * watch also appends one JSON line per frame to DIR/frames.jsonl. */
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <math.h>
+#include <signal.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+
+#include "ctl.h"
+#include "ctl_image.h"
+
+static volatile sig_atomic_t stream_stop = 0;
+
+static void stream_on_signal(int sig) {
+    (void)sig;
+    stream_stop = 1;
+}
+
+static void stream_install_signals(void) {
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = stream_on_signal;
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+}
+
+static int stream_parse_name(const char *s) {
+    if (!strcmp(s, "lightmap")) return LC_CLIENT_LIGHTMAP;
+    if (!strcmp(s, "shgrid")) return LC_CLIENT_SHGRID;
+    if (!strcmp(s, "objects")) return LC_CLIENT_OBJECTS;
+    return 0;
+}
+
+static const char *stream_name(int s) {
+    return s == LC_CLIENT_LIGHTMAP ? "lightmap" : s == LC_CLIENT_SHGRID ? "shgrid" : "objects";
+}
+
+static int encoding_parse_name(const char *s) {
+    if (!strcmp(s, "rgb9e5")) return LC_CLIENT_RGB9E5;
+    if (!strcmp(s, "rgba16f")) return LC_CLIENT_RGBA16F;
+    if (!strcmp(s, "f32")) return LC_CLIENT_F32;
+    return 0;
+}
+
+static const char *encoding_name(int e) {
+    return e == LC_CLIENT_RGB9E5 ? "rgb9e5" : e == LC_CLIENT_RGBA16F ? "rgba16f" : "f32";
+}
+
+static int parse_positive(const char *s, double *out) {
+    char *e;
+    errno = 0;
+    double v = strtod(s, &e);
+    if (e == s || *e || errno || !isfinite(v) || v <= 0) return -1;
+    *out = v;
+    return 0;
+}
+
+static int mkdir_p(const char *dir) {
+    char buf[1024];
+    if (snprintf(buf, sizeof buf, "%s", dir) >= (int)sizeof buf) return -1;
+    for (char *p = buf + 1; *p; p++)
+        if (*p == '/') {
+            *p = 0;
+            if (mkdir(buf, 0777) != 0 && errno != EEXIST) return -1;
+            *p = '/';
+        }
+    return mkdir(buf, 0777) != 0 && errno != EEXIST ? -1 : 0;
+}
+
+static int write_file(const char *path, const void *data, size_t len, char *err, size_t errlen) {
+    FILE *f = fopen(path, "wb");
+    if (!f || fwrite(data, 1, len, f) != len || fclose(f) != 0) {
+        snprintf(err, errlen, "cannot write %s: %s", path, strerror(errno));
+        return -1;
+    }
+    return 0;
+}
+
+static int write_json(const char *path, cJSON *o, char *err, size_t errlen) {
+    char *t = cJSON_PrintUnformatted(o);
+    int r = t ? write_file(path, t, strlen(t), err, errlen) : -1;
+    if (!t) snprintf(err, errlen, "out of memory");
+    free(t);
+    return r;
+}
+
+static double srgb_encode(double v) {
+    if (!(v > 0)) return 0; /* also NaN */
+    if (v > 1) v = 1;
+    return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1 / 2.4) - 0.055;
+}
+
+static int cmp_float(const void *a, const void *b) {
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* Exposure that maps the 99th percentile of non-zero luminance to 0.8 (before sRGB). */
+static double auto_exposure(const float *rgb, size_t texels) {
+    float *lum = malloc((texels ? texels : 1) * sizeof *lum);
+    if (!lum) return 1;
+    size_t n = 0;
+    for (size_t i = 0; i < texels; i++) {
+        float l = 0.2126f * rgb[3 * i] + 0.7152f * rgb[3 * i + 1] + 0.0722f * rgb[3 * i + 2];
+        if (l > 0 && isfinite(l)) lum[n++] = l;
+    }
+    double exposure = 1;
+    if (n) {
+        qsort(lum, n, sizeof *lum, cmp_float);
+        float p99 = lum[(size_t)(0.99 * (double)(n - 1))];
+        if (p99 > 0) exposure = 0.8 / p99;
+    }
+    free(lum);
+    return exposure;
+}
+
+typedef struct stream_out {
+    const char *dir;
+    int raw;
+    double exposure; /* 0 = pick from the first lightmap */
+    cJSON *welcome;  /* parsed welcome (grid description) */
+} stream_out;
+
+static int write_lightmap(stream_out *so, const char *prefix, const lc_client_frame *f, char *err, size_t errlen) {
+    char path[1200];
+    size_t texels = (size_t)f->width * f->height;
+    snprintf(path, sizeof path, "%s/%s.exr", so->dir, prefix);
+    if (ctl_image_write_exr_half(path, f->width, f->height, f->values, err, errlen) != 0) return -1;
+    if (so->exposure <= 0) so->exposure = auto_exposure(f->values, texels);
+    uint8_t *png = malloc(texels * 3);
+    if (!png) {
+        snprintf(err, errlen, "out of memory");
+        return -1;
+    }
+    for (size_t i = 0; i < texels * 3; i++) png[i] = (uint8_t)lrint(255.0 * srgb_encode(f->values[i] * so->exposure));
+    snprintf(path, sizeof path, "%s/%s.png", so->dir, prefix);
+    int r = ctl_image_write_png(path, f->width, f->height, png, err, errlen);
+    free(png);
+    if (r != 0) return -1;
+    if (so->raw) {
+        snprintf(path, sizeof path, "%s/%s.f32", so->dir, prefix);
+        if (write_file(path, f->values, texels * 3 * sizeof(float), err, errlen) != 0) return -1;
+    }
+    return 0;
+}
+
+static cJSON *float_array(const float *v, size_t n) {
+    cJSON *a = cJSON_CreateArray();
+    for (size_t i = 0; i < n && a; i++) cJSON_AddItemToArray(a, cJSON_CreateNumber((double)v[i]));
+    return a;
+}
+
+static int write_sh(stream_out *so, const char *prefix, const lc_client_frame *f, char *err, size_t errlen) {
+    char path[1200];
+    snprintf(path, sizeof path, "%s/%s.bin", so->dir, prefix);
+    if (write_file(path, f->values, f->value_count * sizeof(float), err, errlen) != 0) return -1;
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "stream", stream_name(f->stream));
+    cJSON_AddNumberToObject(o, "revision", (double)f->revision);
+    cJSON_AddNumberToObject(o, "sequence", (double)f->sequence);
+    cJSON_AddStringToObject(o, "quantity", "irradiance_sh");
+    cJSON_AddStringToObject(o, "layout", "9 coefficients x RGB interleaved (c0.r c0.g c0.b c1.r ...), "
+                                         "real orthonormal SH, i = l*l + l + m, E(n) = sum c_i y_i(n)");
+    if (f->stream == LC_CLIENT_SHGRID) {
+        const cJSON *grid = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(so->welcome, "scene"), "grid");
+        const uint32_t dims[3] = {f->width, f->height, f->depth};
+        cJSON *d = cJSON_CreateArray();
+        for (int k = 0; k < 3; k++) cJSON_AddItemToArray(d, cJSON_CreateNumber(dims[k]));
+        cJSON_AddItemToObject(o, "dims", d);
+        if (grid) {
+            cJSON_AddItemToObject(o, "origin", cJSON_Duplicate(cJSON_GetObjectItemCaseSensitive(grid, "origin"), 1));
+            cJSON_AddItemToObject(o, "cell", cJSON_Duplicate(cJSON_GetObjectItemCaseSensitive(grid, "cell"), 1));
+        }
+        cJSON_AddStringToObject(o, "order", "x fastest, then y, then z; sample (i,j,k) at origin + (i,j,k)*cell");
+        cJSON_AddItemToObject(o, "values", float_array(f->values, f->value_count));
+    } else {
+        cJSON *objs = cJSON_AddArrayToObject(o, "objects");
+        for (uint32_t i = 0; i < f->width; i++) {
+            cJSON *e = cJSON_CreateObject();
+            cJSON_AddStringToObject(e, "id", f->object_ids[i]);
+            cJSON_AddItemToObject(e, "sh", float_array(f->values + 27 * (size_t)i, 27));
+            cJSON_AddItemToArray(objs, e);
+        }
+    }
+    snprintf(path, sizeof path, "%s/%s.json", so->dir, prefix);
+    int r = write_json(path, o, err, errlen);
+    cJSON_Delete(o);
+    return r;
+}
+
+static int write_frame(stream_out *so, const char *prefix, const lc_client_frame *f, char *err, size_t errlen) {
+    return f->stream == LC_CLIENT_LIGHTMAP ? write_lightmap(so, prefix, f, err, errlen)
+                                           : write_sh(so, prefix, f, err, errlen);
+}
+
+/* How old the frame is: from the server finishing the relight to the frame being complete here. */
+static double frame_age_ms(const lc_client_frame *f) {
+    return ((double)f->client_time_us - (double)f->server_time_us) / 1000.0;
+}
+
+/* --- watch ----------------------------------------------------------------------------- */
+
+static void usage_watch(FILE *o) {
+    fprintf(o,
+            "usage: lucentctl watch --stream lightmap|shgrid|objects --out DIR [options]\n"
+            "Subscribes and writes every frame as it arrives (see lucentctl snapshot for the files):\n"
+            "  lightmap-SEQ.exr (half float) + lightmap-SEQ.png (tone-mapped) [+ .f32 with --raw],\n"
+            "  shgrid-SEQ.json + .bin, objects-SEQ.json + .bin; one JSON line per frame in DIR/frames.jsonl.\n"
+            "options:\n"
+            "  --encoding rgb9e5|rgba16f|f32  wire encoding (default: the stream's)\n"
+            "  --max-rate HZ        ask the server for at most HZ frames per second\n"
+            "  --count N            stop after N frames\n"
+            "  --duration SECONDS   stop after this long (default: until Ctrl-C)\n"
+            "  --raw                also write the lightmap as raw float32 (.f32)\n"
+            "  --exposure X         PNG exposure multiplier (default: from the first frame)\n"
+            "  --no-reconnect       exit 3 when the connection drops (default: reconnect with back-off)\n");
+}
+
+typedef struct watch_ctx {
+    stream_out so;
+    FILE *index;
+    unsigned long written, limit; /* limit: --count, 0 = none */
+    int failed;
+    char err[512];
+} watch_ctx;
+
+static void watch_on_frame(lc_client *c, const lc_client_frame *f, void *user) {
+    (void)c;
+    watch_ctx *w = user;
+    if (w->failed || (w->limit && w->written >= w->limit)) return; /* --count reached within one poll */
+    char prefix[64];
+    snprintf(prefix, sizeof prefix, "%s-%06llu", stream_name(f->stream), (unsigned long long)f->sequence);
+    if (write_frame(&w->so, prefix, f, w->err, sizeof w->err) != 0) {
+        w->failed = 1;
+        return;
+    }
+    w->written++;
+    double age = frame_age_ms(f);
+    fprintf(w->index,
+            "{\"file\":\"%s\",\"stream\":\"%s\",\"encoding\":\"%s\",\"revision\":%llu,\"sequence\":%llu,"
+            "\"keyframe\":%s,\"tiles\":%u,\"bytes\":%zu,\"server_time_us\":%llu,\"client_time_us\":%llu,"
+            "\"age_ms\":%.3f}\n",
+            prefix, stream_name(f->stream), encoding_name(f->encoding), (unsigned long long)f->revision,
+            (unsigned long long)f->sequence, f->keyframe ? "true" : "false", f->tile_count, f->raw_len,
+            (unsigned long long)f->server_time_us, (unsigned long long)f->client_time_us, age);
+    fflush(w->index);
+    if (ctl_json)
+        printf("{\"type\":\"frame\",\"file\":\"%s\",\"revision\":%llu,\"sequence\":%llu,\"keyframe\":%s,\"bytes\":%zu}\n",
+               prefix, (unsigned long long)f->revision, (unsigned long long)f->sequence,
+               f->keyframe ? "true" : "false", f->raw_len);
+    else
+        printf("%s revision %llu %s %zu B (%u tiles) -> %s/%s.*\n", stream_name(f->stream),
+               (unsigned long long)f->revision, f->keyframe ? "keyframe" : "delta", f->raw_len, f->tile_count,
+               w->so.dir, prefix);
+    fflush(stdout);
+}
+
+static void watch_on_connection(lc_client *c, int event, const char *reason, void *user) {
+    (void)c;
+    (void)user;
+    if (event == LC_CLIENT_RECONNECTING) fprintf(stderr, "lucentctl: connection lost (%s); reconnecting\n", reason);
+    else if (event == LC_CLIENT_CONNECTED) fprintf(stderr, "lucentctl: reconnected, subscriptions renewed\n");
+    else fprintf(stderr, "lucentctl: disconnected: %s\n", reason);
+}
+
+int ctl_cmd_watch(int argc, char **argv) {
+    if (ctl_wants_help(argc, argv)) {
+        usage_watch(stdout);
+        return CTL_EXIT_OK;
+    }
+    int stream = 0, encoding = 0, raw = 0, reconnect = 1;
+    double max_rate = 0, duration = 0, exposure = 0, count = 0;
+    const char *dir = NULL;
+    for (int i = 1; i < argc; i++) {
+        const char *k = argv[i];
+        if (!strcmp(k, "--raw")) {
+            raw = 1;
+            continue;
+        }
+        if (!strcmp(k, "--no-reconnect")) {
+            reconnect = 0;
+            continue;
+        }
+        if (i + 1 >= argc) return ctl_usage_error("watch: %s needs a value", k);
+        const char *v = argv[++i];
+        if (!strcmp(k, "--stream")) {
+            if (!(stream = stream_parse_name(v)))
+                return ctl_usage_error("watch: --stream '%s' is not lightmap, shgrid or objects", v);
+        } else if (!strcmp(k, "--encoding")) {
+            if (!(encoding = encoding_parse_name(v)))
+                return ctl_usage_error("watch: --encoding '%s' is not rgb9e5, rgba16f or f32", v);
+        } else if (!strcmp(k, "--out")) dir = v;
+        else if (!strcmp(k, "--max-rate") || !strcmp(k, "--duration") || !strcmp(k, "--exposure") ||
+                 !strcmp(k, "--count")) {
+            double x;
+            if (parse_positive(v, &x) != 0) return ctl_usage_error("watch: %s '%s' is not a positive number", k, v);
+            if (!strcmp(k, "--count") && x != floor(x)) return ctl_usage_error("watch: --count '%s' is not a whole number", v);
+            *(!strcmp(k, "--max-rate") ? &max_rate : !strcmp(k, "--duration") ? &duration
+                                                     : !strcmp(k, "--exposure") ? &exposure : &count) = x;
+        } else
+            return ctl_usage_error("watch: unknown option '%s'", k);
+    }
+    if (!stream) return ctl_usage_error("watch: --stream is required");
+    if (!dir) return ctl_usage_error("watch: --out DIR is required");
+    if (encoding == LC_CLIENT_RGB9E5 && stream != LC_CLIENT_LIGHTMAP)
+        return ctl_usage_error("watch: rgb9e5 is for the lightmap only (SH streams: rgba16f or f32)");
+    if (mkdir_p(dir) != 0) {
+        fprintf(stderr, "lucentctl: cannot create %s: %s\n", dir, strerror(errno));
+        return CTL_EXIT_USAGE;
+    }
+
+    int rc = CTL_EXIT_OK;
+    watch_ctx w;
+    memset(&w, 0, sizeof w);
+    w.so.dir = dir;
+    w.so.raw = raw;
+    w.so.exposure = exposure;
+    w.limit = (unsigned long)count;
+    char path[1100];
+    snprintf(path, sizeof path, "%s/frames.jsonl", dir);
+    w.index = fopen(path, "a");
+    if (!w.index) {
+        fprintf(stderr, "lucentctl: cannot open %s: %s\n", path, strerror(errno));
+        return CTL_EXIT_USAGE;
+    }
+    lc_client_options opts;
+    lc_client_options_init(&opts);
+    opts.reconnect = reconnect;
+    lc_client *c = ctl_connect(&opts, &rc);
+    if (!c) goto out;
+    w.so.welcome = cJSON_Parse(lc_client_welcome(c));
+    lc_client_callbacks cb = {watch_on_frame, NULL, watch_on_connection, &w};
+    lc_client_set_callbacks(c, &cb);
+    char err[512];
+    int r = lc_client_subscribe(c, stream, encoding, max_rate, err, sizeof err);
+    if (r != 0) {
+        fprintf(stderr, "lucentctl: subscribe failed: %s\n", err);
+        rc = r == 1 ? CTL_EXIT_REFUSED : CTL_EXIT_CONN;
+        goto out;
+    }
+    stream_install_signals();
+    struct timespec t0, t;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    while (!stream_stop && !w.failed && (count <= 0 || w.written < (unsigned long)count)) {
+        if (lc_client_poll(c, 50) != 0) {
+            rc = CTL_EXIT_CONN;
+            break;
+        }
+        clock_gettime(CLOCK_MONOTONIC, &t);
+        if (duration > 0 && (double)(t.tv_sec - t0.tv_sec) + (t.tv_nsec - t0.tv_nsec) * 1e-9 >= duration) break;
+    }
+    if (w.failed) {
+        fprintf(stderr, "lucentctl: %s\n", w.err);
+        rc = CTL_EXIT_USAGE;
+    }
+    lc_client_stats st;
+    lc_client_get_stats(c, &st);
+    if (!ctl_json)
+        fprintf(stderr, "lucentctl: %lu frames written (%lu keyframes, %lu deltas, %lu resyncs, %lu reconnects)\n",
+                w.written, st.keyframes, st.deltas, st.resyncs, st.reconnects);
+out:
+    cJSON_Delete(w.so.welcome);
+    lc_client_close(c);
+    fclose(w.index);
+    return rc;
+}
+
+/* --- snapshot -------------------------------------------------------------------------- */
+
+static void usage_snapshot(FILE *o) {
+    fprintf(o,
+            "usage: lucentctl snapshot --out DIR [--stream lightmap,shgrid,objects] [--encoding E] [--raw]\n"
+            "Writes the current frame of each stream once (default: all three):\n"
+            "  lightmap.exr (half float RGB irradiance, W/m^2, row 0 = top), lightmap.png (tone-mapped),\n"
+            "  lightmap.f32 with --raw (W*H*3 float32 LE; bit-exact with --encoding f32),\n"
+            "  shgrid.json + shgrid.bin, objects.json + objects.bin (27 float32 per sample: L2\n"
+            "  irradiance SH, RGB interleaved), and snapshot.json (revision, sizes, files).\n"
+            "  --encoding rgb9e5|rgba16f|f32 applies to the lightmap (SH streams use f32 unless rgba16f).\n");
+}
+
+int ctl_cmd_snapshot(int argc, char **argv) {
+    if (ctl_wants_help(argc, argv)) {
+        usage_snapshot(stdout);
+        return CTL_EXIT_OK;
+    }
+    const char *dir = NULL;
+    int want[4] = {0, 1, 1, 1}, encoding = 0, raw = 0;
+    for (int i = 1; i < argc; i++) {
+        const char *k = argv[i];
+        if (!strcmp(k, "--raw")) {
+            raw = 1;
+            continue;
+        }
+        if (i + 1 >= argc) return ctl_usage_error("snapshot: %s needs a value", k);
+        const char *v = argv[++i];
+        if (!strcmp(k, "--out")) dir = v;
+        else if (!strcmp(k, "--encoding")) {
+            if (!(encoding = encoding_parse_name(v)))
+                return ctl_usage_error("snapshot: --encoding '%s' is not rgb9e5, rgba16f or f32", v);
+        } else if (!strcmp(k, "--stream")) {
+            want[1] = want[2] = want[3] = 0;
+            char list[128];
+            snprintf(list, sizeof list, "%s", v);
+            for (char *save = NULL, *tok = strtok_r(list, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
+                int s = stream_parse_name(tok);
+                if (!s) return ctl_usage_error("snapshot: --stream '%s' is not lightmap, shgrid or objects", tok);
+                want[s] = 1;
+            }
+        } else
+            return ctl_usage_error("snapshot: unknown option '%s'", k);
+    }
+    if (!dir) return ctl_usage_error("snapshot: --out DIR is required");
+    if (mkdir_p(dir) != 0) {
+        fprintf(stderr, "lucentctl: cannot create %s: %s\n", dir, strerror(errno));
+        return CTL_EXIT_USAGE;
+    }
+    int rc = CTL_EXIT_OK;
+    stream_out so = {dir, raw, 0, NULL};
+    cJSON *index = cJSON_CreateObject();
+    lc_client *c = ctl_connect(NULL, &rc);
+    if (!c) goto out;
+    so.welcome = cJSON_Parse(lc_client_welcome(c));
+    /* frames that include every change acknowledged before we connected */
+    const cJSON *wrev = cJSON_GetObjectItemCaseSensitive(so.welcome, "revision");
+    uint64_t min_rev = cJSON_IsNumber(wrev) ? (uint64_t)wrev->valuedouble : 0;
+    char err[512];
+    for (int s = 1; s <= 3 && rc == CTL_EXIT_OK; s++) {
+        if (!want[s]) continue;
+        int enc = s == LC_CLIENT_LIGHTMAP ? encoding : (encoding == LC_CLIENT_RGBA16F ? encoding : LC_CLIENT_F32);
+        int r = lc_client_subscribe(c, s, enc, 0, err, sizeof err);
+        lc_client_frame f;
+        if (r == 0) r = lc_client_wait_frame(c, s, min_rev, 0, CTL_TIMEOUT_MS * 2, &f, err, sizeof err);
+        if (r != 0) {
+            fprintf(stderr, "lucentctl: %s: %s\n", stream_name(s), err);
+            rc = r == 1 ? CTL_EXIT_REFUSED : CTL_EXIT_CONN;
+            break;
+        }
+        if (write_frame(&so, stream_name(s), &f, err, sizeof err) != 0) {
+            fprintf(stderr, "lucentctl: %s\n", err);
+            rc = CTL_EXIT_USAGE;
+            break;
+        }
+        cJSON *e = cJSON_AddObjectToObject(index, stream_name(s));
+        cJSON_AddNumberToObject(e, "revision", (double)f.revision);
+        cJSON_AddStringToObject(e, "encoding", encoding_name(f.encoding));
+        cJSON_AddNumberToObject(e, "width", f.width);
+        cJSON_AddNumberToObject(e, "height", f.height);
+        cJSON_AddNumberToObject(e, "depth", f.depth);
+        cJSON_AddNumberToObject(e, "bytes", (double)f.raw_len);
+        if (!ctl_json)
+            printf("%s: revision %llu, %ux%ux%u, %zu B -> %s/%s.%s\n", stream_name(s), (unsigned long long)f.revision,
+                   f.width, f.height, f.depth, f.raw_len, dir, stream_name(s),
+                   s == LC_CLIENT_LIGHTMAP ? "{exr,png}" : "{json,bin}");
+    }
+    if (rc == CTL_EXIT_OK) {
+        char path[1100];
+        snprintf(path, sizeof path, "%s/snapshot.json", dir);
+        if (write_json(path, index, err, sizeof err) != 0) {
+            fprintf(stderr, "lucentctl: %s\n", err);
+            rc = CTL_EXIT_USAGE;
+        } else if (ctl_json) {
+            char *t = cJSON_PrintUnformatted(index);
+            printf("%s\n", t ? t : "{}");
+            free(t);
+        }
+    }
+out:
+    cJSON_Delete(so.welcome);
+    cJSON_Delete(index);
+    lc_client_close(c);
+    return rc;
+}
+
+/* --- latency --------------------------------------------------------------------------- */
+
+static void usage_latency(FILE *o) {
+    fprintf(o,
+            "usage: lucentctl latency [--count N] [--interval SECONDS] [--light ID]\n"
+            "Measures ping round trips, then update->frame latency: subscribes to the lightmap,\n"
+            "sends N light.set updates for a dim probe point light (ID, default lucentctl-probe;\n"
+            "removed afterwards) and times each from sending to the first frame whose revision\n"
+            "includes it. Prints min/p50/p90/p99/max. Needs a controller token.\n"
+            "  --count N (default 20)   --interval SECONDS between updates (default 0.1)\n");
+}
+
+static int cmp_double(const void *a, const void *b) {
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static double percentile(const double *sorted, int n, double p) {
+    if (n <= 0) return NAN;
+    double r = p * (n - 1);
+    int i = (int)r;
+    return i + 1 < n ? sorted[i] + (r - i) * (sorted[i + 1] - sorted[i]) : sorted[n - 1];
+}
+
+static double mono_ms(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec * 1000.0 + (double)t.tv_nsec / 1e6;
+}
+
+static void latency_report(const char *name, double *v, int n, cJSON *json) {
+    qsort(v, (size_t)n, sizeof *v, cmp_double);
+    double st[5] = {n ? v[0] : NAN, percentile(v, n, 0.5), percentile(v, n, 0.9), percentile(v, n, 0.99),
+                    n ? v[n - 1] : NAN};
+    if (json) {
+        cJSON *o = cJSON_AddObjectToObject(json, name);
+        cJSON_AddNumberToObject(o, "n", n);
+        const char *k[5] = {"min_ms", "p50_ms", "p90_ms", "p99_ms", "max_ms"};
+        for (int i = 0; i < 5; i++) cJSON_AddNumberToObject(o, k[i], n ? st[i] : 0);
+    } else
+        printf("%-16s %5d %9.2f %9.2f %9.2f %9.2f %9.2f\n", name, n, st[0], st[1], st[2], st[3], st[4]);
+}
+
+int ctl_cmd_latency(int argc, char **argv) {
+    if (ctl_wants_help(argc, argv)) {
+        usage_latency(stdout);
+        return CTL_EXIT_OK;
+    }
+    double count = 20, interval = 0.1;
+    const char *light = "lucentctl-probe";
+    for (int i = 1; i < argc; i++) {
+        const char *k = argv[i];
+        if (i + 1 >= argc) return ctl_usage_error("latency: %s needs a value", k);
+        const char *v = argv[++i];
+        if (!strcmp(k, "--count")) {
+            if (parse_positive(v, &count) != 0 || count != floor(count) || count > 100000)
+                return ctl_usage_error("latency: --count '%s' is not a whole number in 1..100000", v);
+        } else if (!strcmp(k, "--interval")) {
+            if (parse_positive(v, &interval) != 0 || interval > 60)
+                return ctl_usage_error("latency: --interval '%s' is not in (0, 60] seconds", v);
+        } else if (!strcmp(k, "--light")) {
+            if (!*v || strlen(v) > 64) return ctl_usage_error("latency: --light '%s' must be 1..64 bytes", v);
+            light = v;
+        } else
+            return ctl_usage_error("latency: unknown option '%s'", k);
+    }
+    int n = (int)count, rc = CTL_EXIT_OK;
+    double *ping = calloc((size_t)n, sizeof *ping), *ack = calloc((size_t)n, sizeof *ack),
+           *frame = calloc((size_t)n, sizeof *frame);
+    int n_ping = 0, n_ack = 0, n_frame = 0;
+    char err[512], req[512];
+    lc_client *c = NULL;
+    if (!ping || !ack || !frame) {
+        fprintf(stderr, "lucentctl: out of memory\n");
+        rc = CTL_EXIT_CONN;
+        goto out;
+    }
+    c = ctl_connect(NULL, &rc);
+    if (!c) goto out;
+    for (int i = 0; i < n && i < 20; i++) {
+        double t0 = mono_ms();
+        if (lc_client_request(c, "{\"type\":\"ping\",\"t\":0}", NULL, 0, err, sizeof err) != 0) {
+            fprintf(stderr, "lucentctl: ping: %s\n", err);
+            rc = CTL_EXIT_CONN;
+            goto out;
+        }
+        ping[n_ping++] = mono_ms() - t0;
+    }
+    int r = lc_client_subscribe(c, LC_CLIENT_LIGHTMAP, 0, 0, err, sizeof err);
+    lc_client_frame f;
+    if (r == 0) r = lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, 0, 0, CTL_TIMEOUT_MS * 2, &f, err, sizeof err);
+    if (r != 0) {
+        fprintf(stderr, "lucentctl: subscribe: %s\n", err);
+        rc = r == 1 ? CTL_EXIT_REFUSED : CTL_EXIT_CONN;
+        goto out;
+    }
+    const cJSON *pos = NULL;
+    cJSON *wel = cJSON_Parse(lc_client_welcome(c));
+    const cJSON *grid = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(wel, "scene"), "grid");
+    double centre[3] = {0, 1, 0};
+    if ((pos = cJSON_GetObjectItemCaseSensitive(grid, "origin")) && cJSON_GetArraySize(pos) == 3) {
+        /* the middle of the grid is inside the scene's bounds: a safe place for the probe */
+        const cJSON *cell = cJSON_GetObjectItemCaseSensitive(grid, "cell"), *dims = cJSON_GetObjectItemCaseSensitive(grid, "dims");
+        for (int k = 0; k < 3; k++)
+            centre[k] = cJSON_GetArrayItem(pos, k)->valuedouble +
+                        0.5 * (cJSON_IsNumber(cell) ? cell->valuedouble : 0) *
+                            (cJSON_GetArraySize(dims) == 3 ? cJSON_GetArrayItem(dims, k)->valuedouble - 1 : 0);
+    }
+    cJSON_Delete(wel);
+    double next = mono_ms();
+    for (int i = 0; i < n && !stream_stop; i++) {
+        while (mono_ms() < next) lc_client_poll(c, (int)fmax(1, next - mono_ms()));
+        next += interval * 1000.0;
+        /* alternate the intensity so every update changes the lightmap */
+        snprintf(req, sizeof req,
+                 "{\"type\":\"light.set\",\"light\":{\"id\":\"%s\",\"type\":\"point\",\"position\":[%.6g,%.6g,%.6g],"
+                 "\"color\":[1,1,1],\"intensity\":%g}}",
+                 light, centre[0], centre[1], centre[2], (i % 2) ? 0.5 : 1.0);
+        double t0 = mono_ms();
+        char *reply = NULL;
+        r = lc_client_request(c, req, &reply, 0, err, sizeof err);
+        double t_ok = mono_ms();
+        if (r != 0) {
+            if (r == 1) ctl_print_server_error(reply);
+            else fprintf(stderr, "lucentctl: %s\n", err);
+            free(reply);
+            rc = r == 1 ? CTL_EXIT_REFUSED : CTL_EXIT_CONN;
+            goto out;
+        }
+        cJSON *o = cJSON_Parse(reply);
+        free(reply);
+        const cJSON *rev = cJSON_GetObjectItemCaseSensitive(o, "revision");
+        uint64_t want = cJSON_IsNumber(rev) ? (uint64_t)rev->valuedouble : 0;
+        cJSON_Delete(o);
+        ack[n_ack++] = t_ok - t0;
+        if (lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, want, 0, CTL_TIMEOUT_MS, &f, err, sizeof err) == 0)
+            frame[n_frame++] = mono_ms() - t0;
+        else
+            fprintf(stderr, "lucentctl: no frame for revision %llu: %s\n", (unsigned long long)want, err);
+    }
+    snprintf(req, sizeof req, "{\"type\":\"light.remove\",\"light_id\":\"%s\"}", light);
+    lc_client_request(c, req, NULL, 0, err, sizeof err);
+    cJSON *json = ctl_json ? cJSON_CreateObject() : NULL;
+    if (!json) printf("%-16s %5s %9s %9s %9s %9s %9s\n", "ms", "n", "min", "p50", "p90", "p99", "max");
+    latency_report("ping", ping, n_ping, json);
+    latency_report("update_to_ok", ack, n_ack, json);
+    latency_report("update_to_frame", frame, n_frame, json);
+    if (json) {
+        char *t = cJSON_PrintUnformatted(json);
+        printf("%s\n", t ? t : "{}");
+        free(t);
+        cJSON_Delete(json);
+    }
+    if (n_frame < n_ack) rc = CTL_EXIT_CONN;
+out:
+    lc_client_close(c);
+    free(ping);
+    free(ack);
+    free(frame);
+    return rc;
+}

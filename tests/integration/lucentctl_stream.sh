@@ -1,0 +1,115 @@
+# lucentctl watch / snapshot / latency against a live lucentd: files written, values
+# bit-exact with what the server sends (f32, compared with an independent Python client),
+# frames.jsonl, usage errors, connection loss.
+. "$(dirname "$0")/lib.sh"
+BIN="${LUCENT_BINARY_DIR:?run through ctest}/bin"
+CTL="$BIN/lucentctl"
+if [ ! -x "$BIN/lucentd" ] || [ ! -x "$CTL" ]; then echo "lucentd/lucentctl not built: skip"; exit 77; fi
+start_lucentd "$TMP/d" || exit 1
+trap 'kill "$LUCENTD_PID" 2>/dev/null; wait "$LUCENTD_PID" 2>/dev/null; rm -rf "$TMP"' EXIT
+export LUCENT_URL="ws://127.0.0.1:$LUCENTD_PORT/"
+
+expect_exit 0 "" timeout 20 "$CTL" light set key --type point --position 0.28,0.4,0.28 --intensity 0.5
+expect_exit 0 "" timeout 20 "$CTL" object set box --asset cube --position 0.3,0,0.3
+
+# An independent client (Python) waits until idle refinement settles, then takes the f32
+# lightmap and shgrid payloads of a snapshot.
+cat >"$TMP/grab.py" <<'PY'
+import asyncio, json, struct, sys
+import websockets
+async def main(url, out):
+    async with websockets.connect(url, subprotocols=["lucent.v1"], max_size=None) as ws:
+        await ws.send(json.dumps({"type": "hello", "client": "grab"}))
+        json.loads(await ws.recv())
+        for s in ("lightmap", "shgrid"):
+            await ws.send(json.dumps({"type": "subscribe", "stream": s, "encoding": "f32"}))
+        while True:  # quiet for 1.5 s: refinement is over
+            try:
+                await asyncio.wait_for(ws.recv(), 1.5)
+            except asyncio.TimeoutError:
+                break
+        await ws.send(json.dumps({"type": "snapshot"}))
+        got = {}
+        while len(got) < 2:
+            m = await asyncio.wait_for(ws.recv(), 10)
+            if isinstance(m, bytes):
+                stream, tiles, plen = m[6], struct.unpack_from("<I", m, 12)[0], struct.unpack_from("<I", m, 56)[0]
+                rev = struct.unpack_from("<Q", m, 16)[0]
+                got[stream] = (rev, m[64 + 4 * tiles:64 + 4 * tiles + plen])
+        open(out + ".lightmap", "wb").write(got[1][1])
+        open(out + ".shgrid", "wb").write(got[2][1])
+        print(got[1][0])
+asyncio.run(main(sys.argv[1], sys.argv[2]))
+PY
+REV="$(timeout 30 "$PY" "$TMP/grab.py" "$LUCENT_URL" "$TMP/py")" || fail "python client"
+
+expect_exit 0 "" timeout 30 "$CTL" snapshot --out "$TMP/snap" --encoding f32 --raw
+for f in lightmap.exr lightmap.png lightmap.f32 shgrid.json shgrid.bin objects.json objects.bin snapshot.json; do
+  [ -s "$TMP/snap/$f" ] || fail "snapshot did not write $f"
+done
+cmp -s "$TMP/snap/lightmap.f32" "$TMP/py.lightmap" || fail "lightmap.f32 differs from the server's f32 payload"
+cmp -s "$TMP/snap/shgrid.bin" "$TMP/py.shgrid" || fail "shgrid.bin differs from the server's f32 payload"
+json_check "$TMP/snap/snapshot.json" "j['lightmap']['revision'] == $REV and j['lightmap']['encoding'] == 'f32'"
+json_check "$TMP/snap/shgrid.json" "len(j['values']) == j['dims'][0] * j['dims'][1] * j['dims'][2] * 27 and len(j['origin']) == 3"
+json_check "$TMP/snap/objects.json" "[o['id'] for o in j['objects']] == ['box'] and len(j['objects'][0]['sh']) == 27"
+head -c 4 "$TMP/snap/lightmap.exr" | od -An -tx1 | grep -q "76 2f 31 01" || fail "lightmap.exr lacks the OpenEXR magic"
+head -c 8 "$TMP/snap/lightmap.png" | od -An -c | grep -q "P   N   G" || fail "lightmap.png lacks the PNG signature"
+# the half EXR read back (OpenImageIO's oiiotool, when installed) matches the f32 values within half precision
+if command -v oiiotool >/dev/null; then
+  oiiotool "$TMP/snap/lightmap.exr" -d float -o "$TMP/snap/back.tif" >/dev/null 2>&1 || fail "oiiotool cannot read lightmap.exr"
+fi
+# default encoding (rgb9e5) snapshot of one stream
+expect_exit 0 "" timeout 30 "$CTL" --json snapshot --out "$TMP/snap2" --stream lightmap
+json_check "$TMP/out" "j['lightmap']['encoding'] == 'rgb9e5' and 'shgrid' not in j"
+
+# watch: frames while a light moves
+timeout 30 "$CTL" --json watch --stream lightmap --encoding rgba16f --out "$TMP/watch" --count 3 \
+  >"$TMP/watch.out" 2>"$TMP/watch.err" &
+WPID=$!
+sleep 1
+for x in 0.2 0.25 0.3 0.35; do timeout 20 "$CTL" light set key --type point --position $x,0.4,0.28 --intensity 0.5 >/dev/null; sleep 0.3; done
+wait "$WPID" || fail "watch exited $?: $(head -c 400 "$TMP/watch.err")"
+[ "$(ls "$TMP/watch"/lightmap-*.exr 2>/dev/null | wc -l)" = 3 ] || fail "watch wrote $(ls "$TMP/watch" | tr '\n' ' ')"
+[ "$(ls "$TMP/watch"/lightmap-*.png 2>/dev/null | wc -l)" = 3 ] || fail "watch PNGs"
+[ "$(wc -l <"$TMP/watch/frames.jsonl")" = 3 ] || fail "frames.jsonl: $(cat "$TMP/watch/frames.jsonl")"
+"$PY" - "$TMP/watch/frames.jsonl" <<'PY' || fail "frames.jsonl content"
+import json, sys
+rows = [json.loads(l) for l in open(sys.argv[1])]
+assert rows[0]["keyframe"] and rows[0]["sequence"] == 1, rows[0]
+assert all(r["encoding"] == "rgba16f" for r in rows)
+assert [r["sequence"] for r in rows] == [1, 2, 3], rows
+assert all(rows[i]["revision"] <= rows[i + 1]["revision"] for i in range(2))
+PY
+[ "$(grep -c '"type":"frame"' "$TMP/watch.out")" = 3 ] || fail "watch --json lines: $(head -c 300 "$TMP/watch.out")"
+expect_exit 0 "" timeout 30 "$CTL" watch --stream objects --out "$TMP/wobj" --count 1
+json_check "$TMP/wobj/objects-000001.json" "j['objects'][0]['id'] == 'box'"
+expect_exit 0 "" timeout 30 "$CTL" watch --stream shgrid --out "$TMP/wgrid" --duration 1
+ls "$TMP/wgrid"/shgrid-000001.bin >/dev/null 2>&1 || fail "watch --duration wrote no shgrid frame"
+
+# latency
+expect_exit 0 "" timeout 60 "$CTL" --json latency --count 5 --interval 0.05
+json_check "$TMP/out" "j['update_to_frame']['n'] == 5 and 0 < j['update_to_frame']['p50_ms'] < 5000 and j['ping']['n'] >= 5"
+expect_exit 0 "" timeout 60 "$CTL" latency --count 3 --interval 0.05
+grep -q "update_to_frame" "$TMP/out" || fail "latency table: $(head -c 300 "$TMP/out")"
+expect_exit 0 "" timeout 20 "$CTL" --json state
+json_check "$TMP/out" "'lucentctl-probe' not in [l['id'] for l in j['lights']]"
+
+# usage errors and help
+for c in watch snapshot latency; do expect_exit 0 "" timeout 10 "$CTL" $c --help; done
+expect_exit 2 "stream is required" timeout 10 "$CTL" watch --out "$TMP/x"
+expect_exit 2 "out DIR is required" timeout 10 "$CTL" watch --stream lightmap
+expect_exit 2 "not lightmap" timeout 10 "$CTL" watch --stream nope --out "$TMP/x"
+expect_exit 2 "rgb9e5 is for the lightmap" timeout 10 "$CTL" watch --stream shgrid --encoding rgb9e5 --out "$TMP/x"
+expect_exit 2 "out DIR is required" timeout 10 "$CTL" snapshot
+expect_exit 2 "count" timeout 10 "$CTL" latency --count 0
+expect_exit 2 "unknown option" timeout 10 "$CTL" latency --frob 1
+
+# connection: none there (3); lost while watching without reconnect (3)
+expect_exit 3 "" timeout 20 "$CTL" --url ws://127.0.0.1:1/ snapshot --out "$TMP/none"
+timeout 30 "$CTL" watch --stream lightmap --out "$TMP/lost" --no-reconnect >/dev/null 2>"$TMP/lost.err" &
+WPID=$!
+sleep 1
+kill -9 "$LUCENTD_PID"; wait "$LUCENTD_PID" 2>/dev/null
+RC=0; wait "$WPID" || RC=$?
+[ "$RC" = 3 ] || fail "watch after the server died exited $RC, expected 3: $(head -c 300 "$TMP/lost.err")"
+finish
