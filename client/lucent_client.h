@@ -116,7 +116,8 @@ int lc_client_request(lc_client *c, const char *json_request, char **reply_json,
 int lc_client_subscribe(lc_client *c, int stream, int encoding, double max_rate, char *err, size_t errlen);
 int lc_client_unsubscribe(lc_client *c, int stream, char *err, size_t errlen);
 
-/* Services the connection for up to timeout_ms (0 = only what is ready), running callbacks.
+/* Services the connection for up to timeout_ms (0 = one pass of the event loop, which may
+ * wait up to its 20 ms tick), running callbacks.
  * Returns 0, or -1 when the connection is closed for good (no reconnect, or retries spent). */
 int lc_client_poll(lc_client *c, int timeout_ms);
 

@@ -32,6 +32,8 @@ static int failures = 0;
 typedef struct counters {
     int frames, changed, connected, reconnecting;
     uint64_t last_revision;
+    int after_reconnect; /* frames since the last CONNECTED event */
+    int first_key;       /* that first frame was a keyframe with sequence 1 */
 } counters;
 
 static void on_frame(lc_client *c, const lc_client_frame *f, void *user) {
@@ -39,6 +41,7 @@ static void on_frame(lc_client *c, const lc_client_frame *f, void *user) {
     counters *n = user;
     n->frames++;
     n->last_revision = f->revision;
+    if (n->after_reconnect++ == 0) n->first_key = f->keyframe && f->sequence == 1;
 }
 
 static void on_message(lc_client *c, const char *json, void *user) {
@@ -51,7 +54,10 @@ static void on_connection(lc_client *c, int event, const char *reason, void *use
     (void)c;
     counters *n = user;
     fprintf(stderr, "connection event %d: %s\n", event, reason);
-    if (event == LC_CLIENT_CONNECTED) n->connected++;
+    if (event == LC_CLIENT_CONNECTED) {
+        n->connected++;
+        n->after_reconnect = 0;
+    }
     if (event == LC_CLIENT_RECONNECTING) n->reconnecting++;
 }
 
@@ -151,8 +157,14 @@ static int test_basic(const char *url) {
         EXPECT(lc_client_wait_frame(view, LC_CLIENT_LIGHTMAP, rev, 0, 10000, &f, err, sizeof err) == 0,
                "frame for revision %llu: %s", (unsigned long long)rev, err);
     }
+    /* a change far below the delta threshold: a delta frame (with no tiles or few) */
+    lc_client_poll(view, 1500);
+    EXPECT(set_light(ctl, 0.15, 2.002, &rev) == 0, "tiny change");
+    lc_client_frame tiny;
+    EXPECT(lc_client_wait_frame(view, LC_CLIENT_LIGHTMAP, rev, 0, 10000, &tiny, err, sizeof err) == 0, "tiny frame: %s",
+           err);
     lc_client_poll(view, 300);
-    EXPECT(b.changed >= changed0 + 6, "changed callbacks %d -> %d", changed0, b.changed);
+    EXPECT(b.changed >= changed0 + 7, "changed callbacks %d -> %d", changed0, b.changed);
     lc_client_stats st;
     lc_client_get_stats(view, &st);
     EXPECT(st.deltas > 0 && st.bad_frames == 0, "deltas %lu bad %lu", st.deltas, st.bad_frames);
@@ -263,10 +275,10 @@ static int test_reconnect(const char *url) {
     /* the script restarts the daemon now */
     for (int i = 0; i < 600 && !(n.reconnecting && n.connected); i++) lc_client_poll(c, 50);
     EXPECT(n.reconnecting >= 1 && n.connected >= 1, "reconnecting %d connected %d", n.reconnecting, n.connected);
-    /* the copy was reset at the new welcome: any frame now is the new connection's keyframe */
-    EXPECT(lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, 0, 0, 10000, &f, err, sizeof err) == 0 && f.keyframe &&
-               f.sequence == 1,
-           "keyframe after reconnect: %s", err);
+    /* the copy was reset at the new welcome: the first frame is the new connection's keyframe */
+    EXPECT(lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, 0, 0, 10000, &f, err, sizeof err) == 0, "frame after reconnect: %s",
+           err);
+    EXPECT(n.after_reconnect > 0 && n.first_key, "first frame after reconnect: keyframe with sequence 1");
     EXPECT(n.frames > frames, "frames after reconnect");
     /* requests work on the new connection */
     EXPECT(lc_client_request(c, "{\"type\":\"state.get\"}", NULL, 5000, err, sizeof err) == 0, "state after reconnect");
