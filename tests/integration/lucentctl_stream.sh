@@ -50,6 +50,11 @@ done
 cmp -s "$TMP/snap/lightmap.f32" "$TMP/py.lightmap" || fail "lightmap.f32 differs from the server's f32 payload"
 cmp -s "$TMP/snap/shgrid.bin" "$TMP/py.shgrid" || fail "shgrid.bin differs from the server's f32 payload"
 json_check "$TMP/snap/snapshot.json" "j['lightmap']['revision'] == $REV and j['lightmap']['encoding'] == 'f32'"
+# watch's files too: its first frame (a keyframe of the same, settled state), f32 raw
+expect_exit 0 "" timeout 30 "$CTL" watch --stream lightmap --encoding f32 --raw --count 1 --out "$TMP/wf32"
+cmp -s "$TMP/wf32/lightmap-000001.f32" "$TMP/py.lightmap" || fail "watch lightmap .f32 differs from the server's f32 payload"
+expect_exit 0 "" timeout 30 "$CTL" watch --stream shgrid --encoding f32 --count 1 --out "$TMP/wgf32"
+cmp -s "$TMP/wgf32/shgrid-000001.bin" "$TMP/py.shgrid" || fail "watch shgrid .bin differs from the server's f32 payload"
 json_check "$TMP/snap/shgrid.json" "len(j['values']) == j['dims'][0] * j['dims'][1] * j['dims'][2] * 27 and len(j['origin']) == 3"
 json_check "$TMP/snap/objects.json" "[o['id'] for o in j['objects']] == ['box'] and len(j['objects'][0]['sh']) == 27"
 head -c 4 "$TMP/snap/lightmap.exr" | od -An -tx1 | grep -q "76 2f 31 01" || fail "lightmap.exr lacks the OpenEXR magic"
