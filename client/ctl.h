@@ -17,6 +17,8 @@ enum { CTL_EXIT_OK = 0, CTL_EXIT_REFUSED = 1, CTL_EXIT_USAGE = 2, CTL_EXIT_CONN 
 extern const char *ctl_url;   /* --url / LUCENT_URL */
 extern const char *ctl_token; /* --token / LUCENT_TOKEN */
 extern int ctl_json;          /* --json */
+extern int ctl_insecure;      /* --insecure: wss with self-signed / mismatched certificates */
+extern const char *ctl_ca_file; /* --ca-file / LUCENT_CA_FILE: PEM bundle for wss (NULL = system) */
 
 /* Prints "lucentctl: <message>" and the hint to stderr; returns CTL_EXIT_USAGE. */
 int ctl_usage_error(const char *fmt, ...);

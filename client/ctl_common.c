@@ -174,15 +174,16 @@ long long ctl_reply_revision(const char *reply_json) {
 lc_client *ctl_connect(const lc_client_options *opts, int *rc) {
     char err[CTL_ERR_MAX];
     lc_client *c;
-    if (opts) {
-        lc_client_options o = *opts;
-        if (!o.url) o.url = ctl_url;
-        if (!o.token) o.token = ctl_token;
-        if (!o.name) o.name = "lucentctl";
-        c = lc_client_open(&o, err, sizeof err);
-    } else {
-        c = lc_client_connect(ctl_url, ctl_token, "lucentctl", CTL_TIMEOUT_MS, err, sizeof err);
-    }
+    lc_client_options o;
+    if (opts) o = *opts;
+    else lc_client_options_init(&o);
+    if (!o.url) o.url = ctl_url;
+    if (!o.token) o.token = ctl_token;
+    if (!o.name) o.name = "lucentctl";
+    if (ctl_insecure) o.insecure = 1;
+    if (!o.ca_file) o.ca_file = ctl_ca_file;
+    if (!opts) o.timeout_ms = CTL_TIMEOUT_MS;
+    c = lc_client_open(&o, err, sizeof err);
     if (c) return c;
     /* the library reports a refused hello as "server error CODE: message" */
     if (strncmp(err, "server error ", 13) == 0) {

@@ -8,6 +8,8 @@
 
 const char *ctl_url = "ws://127.0.0.1:7700/";
 const char *ctl_token = "";
+int ctl_insecure = 0;
+const char *ctl_ca_file = NULL;
 int ctl_json = 0;
 
 typedef struct ctl_command {
@@ -44,6 +46,8 @@ static void ctl_usage(FILE *f) {
                "global options (before or after COMMAND):\n"
                "  --url URL                server (default ws://127.0.0.1:7700/, env LUCENT_URL)\n"
                "  --token TOKEN            access token (env LUCENT_TOKEN)\n"
+               "  --ca-file FILE           wss: trust the CA certificates in FILE (env LUCENT_CA_FILE)\n"
+               "  --insecure               wss: accept self-signed certificates and any host name\n"
                "  --json                   machine-readable output (server replies as JSON lines)\n"
                "  --help                   this help; 'lucentctl COMMAND --help' for a command\n"
                "\n"
@@ -56,6 +60,18 @@ static int ctl_global_option(int argc, char **argv, int *i) {
     const char *a = argv[*i];
     if (strcmp(a, "--json") == 0) {
         ctl_json = 1;
+        return 1;
+    }
+    if (strcmp(a, "--insecure") == 0) {
+        ctl_insecure = 1;
+        return 1;
+    }
+    if (strcmp(a, "--ca-file") == 0) {
+        if (*i + 1 >= argc) {
+            ctl_usage_error("%s needs a value", a);
+            return -1;
+        }
+        ctl_ca_file = argv[++*i];
         return 1;
     }
     if (strncmp(a, "--url=", 6) == 0 || strncmp(a, "--token=", 8) == 0) {
@@ -81,6 +97,8 @@ int main(int argc, char **argv) {
     if (env && *env) ctl_url = env;
     env = getenv("LUCENT_TOKEN");
     if (env) ctl_token = env;
+    env = getenv("LUCENT_CA_FILE");
+    if (env && *env) ctl_ca_file = env;
     int i = 1;
     for (; i < argc && argv[i][0] == '-'; i++) {
         int r = ctl_global_option(argc, argv, &i);

@@ -36,9 +36,16 @@ kill "$DPID"; wait "$DPID" 2>/dev/null
 
 if command -v openssl >/dev/null; then
   openssl req -x509 -newkey rsa:2048 -nodes -keyout "$TMP/key.pem" -out "$TMP/cert.pem" -days 1 \
-    -subj /CN=127.0.0.1 >/dev/null 2>&1 || fail "openssl req"
+    -subj /CN=127.0.0.1 -addext "subjectAltName=IP:127.0.0.1" >/dev/null 2>&1 || fail "openssl req"
   start_daemon tls --port 0 --tls-cert "$TMP/cert.pem" --tls-key "$TMP/key.pem"
   timeout 60 "$LIVE" tls "wss://127.0.0.1:$PORT/" || fail "tls"
+  # lucentctl over wss: refused certificate without --insecure (exit 3), fine with it or the CA
+  timeout 20 "$BIN/lucentctl" --url "wss://127.0.0.1:$PORT/" ping >/dev/null 2>"$TMP/ctl.err"; rc=$?
+  [ "$rc" = 3 ] || fail "lucentctl wss without --insecure exited $rc: $(cat "$TMP/ctl.err")"
+  timeout 20 "$BIN/lucentctl" --url "wss://127.0.0.1:$PORT/" --insecure ping >/dev/null 2>"$TMP/ctl.err" \
+    || fail "lucentctl --insecure over wss: $(cat "$TMP/ctl.err")"
+  timeout 20 "$BIN/lucentctl" --url "wss://127.0.0.1:$PORT/" --ca-file "$TMP/cert.pem" state >/dev/null 2>"$TMP/ctl.err" \
+    || fail "lucentctl --ca-file over wss: $(cat "$TMP/ctl.err")"
   kill "$DPID"; wait "$DPID" 2>/dev/null
 else
   echo "openssl missing: wss part skipped"
