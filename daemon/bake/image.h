@@ -21,6 +21,11 @@ int lc_image_read_rgb(const char *path, uint64_t max_pixels, uint32_t *width, ui
 int lc_image_write(const char *path, uint32_t width, uint32_t height, int nch, const float *pixels,
                    char *err, size_t errlen);
 
+/* Same, but .exr is written as 32-bit float (for data that must round-trip exactly, e.g. the
+ * reference lightmaps of lucent-ref); other formats as lc_image_write. */
+int lc_image_write_float(const char *path, uint32_t width, uint32_t height, int nch, const float *pixels,
+                         char *err, size_t errlen);
+
 #ifdef __cplusplus
 }
 #endif

@@ -101,8 +101,10 @@ extern "C" int lc_image_read_rgb(const char *path, uint64_t max_pixels, uint32_t
     return -1;
 }
 
-extern "C" int lc_image_write(const char *path, uint32_t width, uint32_t height, int nch,
-                              const float *pixels, char *err, size_t errlen) {
+namespace {
+
+int image_write(const char *path, uint32_t width, uint32_t height, int nch, const float *pixels, bool exr_float,
+                char *err, size_t errlen) {
     if (!path || !pixels || width == 0 || height == 0 || nch < 1 || nch > 4 || width > (1u << 20) ||
         height > (1u << 20)) {
         set_err(err, errlen, std::string("image write ") + (path ? path : "(null)") +
@@ -118,7 +120,7 @@ extern "C" int lc_image_write(const char *path, uint32_t width, uint32_t height,
         }
         OIIO::TypeDesc fmt = OIIO::TypeDesc::UINT8;
         if (ext == "exr")
-            fmt = OIIO::TypeDesc::HALF;
+            fmt = exr_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::HALF;
         else if (ext == "hdr" || ext == "tif" || ext == "tiff" || ext == "pfm")
             fmt = OIIO::TypeDesc::FLOAT;
         OIIO::ImageSpec spec((int)width, (int)height, nch, fmt);
@@ -145,4 +147,16 @@ extern "C" int lc_image_write(const char *path, uint32_t width, uint32_t height,
         set_err(err, errlen, std::string(path) + ": image write failed: unknown exception");
     }
     return -1;
+}
+
+}  // namespace
+
+extern "C" int lc_image_write(const char *path, uint32_t width, uint32_t height, int nch,
+                              const float *pixels, char *err, size_t errlen) {
+    return image_write(path, width, height, nch, pixels, false, err, errlen);
+}
+
+extern "C" int lc_image_write_float(const char *path, uint32_t width, uint32_t height, int nch,
+                                    const float *pixels, char *err, size_t errlen) {
+    return image_write(path, width, height, nch, pixels, true, err, errlen);
 }

@@ -1,0 +1,123 @@
+#!/usr/bin/env bash
+# Fidelity of the PIC relight engine against the path-traced reference (lucent-ref):
+#   1. the embedded Cornell box, moderate preset (the build's bake), its own ceiling lamp
+#      (emissive material, the daemon's initial state): mean / p95 / max relative error;
+#   2. the trade-off on the Cornell box: error vs links per cache, surfels and SH bands;
+#   3. sponza-dabrovic, moderate, under a sun-like directional light (skipped when
+#      ../shared/scenes is absent).
+# Usage: bench/fidelity.sh BUILD_DIR [OUT_JSON]   (default OUT_JSON: bench/out/fidelity.json)
+# Environment: CORNELL_SPP (8192), SPONZA_SPP (8192), THREADS (0 = all cores),
+#              TRADEOFF=0 to skip step 2, SHARED (../shared).
+# Each step's lucent-ref output (reference EXR, error heat maps, per-texel CSV) stays in
+# bench/out/fidelity/. Runtime on 2 cores: ~4 min (Cornell + trade-off) + ~6 min (Sponza).
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build="${1:?usage: bench/fidelity.sh BUILD_DIR [OUT_JSON]}"
+build="$(cd "$build" && pwd)"
+out_json="${2:-$root/bench/out/fidelity.json}"
+shared="${SHARED:-$root/../shared}"
+bin="$build/bin"
+threads="${THREADS:-0}"
+cornell_spp="${CORNELL_SPP:-8192}"
+sponza_spp="${SPONZA_SPP:-8192}"
+for tool in lucent-bake lucent-ref; do
+  [ -x "$bin/$tool" ] || { echo "fidelity: $bin/$tool missing (build first)" >&2; exit 1; }
+done
+command -v jq >/dev/null || { echo "fidelity: needs jq" >&2; exit 1; }
+work="$root/bench/out/fidelity"
+mkdir -p "$work" "$(dirname "$out_json")"
+tmp="$(mktemp -d)"; trap 'rm -rf "$tmp"' EXIT
+
+cornell_obj="$root/scenes/cornell-box/cornell-box.obj"
+# The build's embedded bake: moderate, 64x64 lightmap, 1024 grid samples, seed 1.
+cornell_flags=(--quality moderate --atlas-size 64 --grid-max-samples 1024 --seed 1 --quiet --no-write-glb
+               --threads "$threads")
+
+bake() { # OUT.lcb SCENE flags...
+  local out="$1" scene="$2"; shift 2
+  "$bin/lucent-bake" bake "$scene" -o "$out" "$@" >/dev/null
+}
+
+fidelity() { # NAME BAKE REFDIR [extra lucent-ref flags]; prints the fidelity.json path
+  local name="$1" lcb="$2" ref="$3"; shift 3
+  "$bin/lucent-ref" fidelity "$lcb" --reference "$ref" --out "$work/$name" --quiet --threads "$threads" "$@" \
+      >"$work/$name.txt" 2>&1 || { cat "$work/$name.txt" >&2; return 1; }
+  echo "$work/$name/fidelity.json"
+}
+
+results=()
+
+# --- 1. Cornell box, moderate ------------------------------------------------------------------
+echo "fidelity: Cornell box: bake + reference ($cornell_spp spp)..." >&2
+bake "$tmp/cornell.lcb" "$cornell_obj" "${cornell_flags[@]}"
+"$bin/lucent-ref" render "$tmp/cornell.lcb" --out "$work/cornell-reference" --spp "$cornell_spp" --batch 1024 \
+    --quiet --threads "$threads" 2>"$work/cornell-reference.txt"
+f="$(fidelity cornell-moderate "$tmp/cornell.lcb" "$work/cornell-reference")"
+results+=("$(jq -c '{name: "cornell-moderate", scene: "cornell-box (embedded)", state: "daemon initial state (ceiling lamp, emissive 17/12/4 nits)",
+  preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands,
+  lightmap, grid, reference, relights, b0_power_engine, b0_power_reference}' "$f")")
+jq -r '"  lightmap mean \(.lightmap.mean*100)% p95 \(.lightmap.p95*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
+
+# Bounce-by-bounce (diagnostics): only the lamp seen directly (0) and one reflection (1).
+for b in 0 1; do
+  "$bin/lucent-ref" render "$tmp/cornell.lcb" --out "$work/cornell-reference-b$b" --spp 4096 --batch 1024 \
+      --bounce-limit "$b" --quiet --threads "$threads" 2>/dev/null
+  f="$(fidelity "cornell-moderate-b$b" "$tmp/cornell.lcb" "$work/cornell-reference-b$b" --bounce-limit "$b")"
+  results+=("$(jq -c --arg b "$b" '{name: ("cornell-moderate-bounces" + $b), bounce_limit: ($b|tonumber), lightmap, grid}' "$f")")
+done
+
+# --- 2. Trade-off: links, surfels, bands (the paper's Figure 10, measured here) -----------------
+if [ "${TRADEOFF:-1}" != 0 ]; then
+  variants=("links=32:--links 32" "links=64:--links 64" "links=256:--links 256" "links=512:--links 512"
+            "surfels=8192:--surfels 8192" "surfels=16384:--surfels 16384" "surfels=65536:--surfels 65536"
+            "surfels=131072:--surfels 131072"
+            "bands=1:--bands 1" "bands=2:--bands 2" "bands=4:--bands 4"
+            "high:--quality high --atlas-size 64 --grid-max-samples 1024")
+  for v in "${variants[@]}"; do
+    name="${v%%:*}"; flags="${v#*:}"
+    echo "fidelity: Cornell trade-off $name..." >&2
+    # shellcheck disable=SC2086
+    bake "$tmp/cornell-v.lcb" "$cornell_obj" "${cornell_flags[@]}" $flags
+    f="$(fidelity "cornell-$name" "$tmp/cornell-v.lcb" "$work/cornell-reference")" || continue
+    results+=("$(jq -c --arg n "cornell-$name" --arg fl "$flags" '{name: $n, bake_flags: $fl, links: .links_per_cache,
+      surfels: .surfels, bands: .bands, ms_first_relight, lightmap, grid}' "$f")")
+  done
+fi
+
+# --- 3. Sponza under the sun --------------------------------------------------------------------
+sponza="$shared/scenes/sponza-dabrovic/sponza.obj"
+if [ -f "$sponza" ]; then
+  echo "fidelity: sponza-dabrovic: bake + reference ($sponza_spp spp)..." >&2
+  cat >"$tmp/sun.json" <<'EOF'
+{"type": "state", "revision": 1,
+ "lights": [{"id": "sun", "type": "directional", "color": [1, 0.95, 0.9], "intensity": 100000,
+             "direction": [0.3, -1, 0.2]}],
+ "objects": [], "materials": [], "environment": {"type": "none"}, "settings": {}}
+EOF
+  cp "$tmp/sun.json" "$work/sponza-sun-state.json"
+  bake "$tmp/sponza.lcb" "$sponza" --quality moderate --quiet --no-write-glb --threads "$threads"
+  "$bin/lucent-ref" render "$tmp/sponza.lcb" --state "$tmp/sun.json" --out "$work/sponza-reference" \
+      --spp "$sponza_spp" --batch 1024 --quiet --threads "$threads" 2>"$work/sponza-reference.txt"
+  f="$(fidelity sponza-moderate "$tmp/sponza.lcb" "$work/sponza-reference" --state "$tmp/sun.json")"
+  results+=("$(jq -c '{name: "sponza-moderate-sun", scene: "sponza-dabrovic", state: "directional (0.3,-1,0.2), 100000 lux, colour (1,0.95,0.9)",
+    preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, reference,
+    relights, b0_power_engine, b0_power_reference}' "$f")")
+  jq -r '"  lightmap mean \(.lightmap.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
+  for v in "surfels=131072:--surfels 131072" "links=512:--links 512"; do
+    name="${v%%:*}"; flags="${v#*:}"
+    echo "fidelity: sponza $name..." >&2
+    # shellcheck disable=SC2086
+    bake "$tmp/sponza-v.lcb" "$sponza" --quality moderate --quiet --no-write-glb --threads "$threads" $flags
+    f="$(fidelity "sponza-$name" "$tmp/sponza-v.lcb" "$work/sponza-reference" --state "$tmp/sun.json")" || continue
+    results+=("$(jq -c --arg n "sponza-$name" --arg fl "$flags" '{name: $n, bake_flags: $fl, links: .links_per_cache,
+      surfels: .surfels, bands: .bands, lightmap, grid}' "$f")")
+  done
+else
+  echo "fidelity: skip sponza-dabrovic: $sponza absent" >&2
+fi
+
+printf '%s\n' "${results[@]}" | jq -s --arg date "$(date -u +%FT%TZ)" --arg host "$(uname -n)" \
+  '{bench: "fidelity", date: $date, host: $host,
+    metric: "relative error of luminance per texel (owners, > 1% of the brightest reference texel); grid: sum over 14 directions of |dE| / sum E",
+    targets: {cornell_mean: 0.10, cornell_p95: 0.25, sponza_mean: 0.15}, results: .}' >"$out_json"
+echo "fidelity: wrote $out_json" >&2

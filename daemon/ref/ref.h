@@ -1,0 +1,210 @@
+/* ref: the ground-truth reference for the relight engine, and the tools that compare the
+ * engine against it.
+ *
+ * WHAT IS COMPUTED (the engine's definition, verified in engine.c / transport_cpu.c):
+ *   lightmap texel  E(p, n) = integral over the hemisphere of n of L_s(p, w) cos(n, w) dw
+ *   grid cell       L_lm(p) = integral over the sphere of L_s(p, w) y_lm(w) dw, output as the
+ *                   cosine-convolved irradiance SH c_lm = A_l L_lm (A = pi, 2pi/3, pi/4), the
+ *                   layout of lc_engine_frame.grid_sh (cells x 9 coefficients x RGB)
+ * where p, n are the cache's (relocated) position and normal from the bake, and L_s(p, w) is
+ * the radiance leaving the FIRST SURFACE seen from p along w, toward p:
+ *   - only front faces count: a back face is black (the bake's links drop back-face hits);
+ *   - L_s = L_e + (albedo / pi) * E_all(x): the surface's emission (the state's material
+ *     emission, nits, one-sided) plus everything it reflects: direct light from the point,
+ *     spot, directional and area lights (the engine's formulas: candela with the glTF range
+ *     window and spot t^2 falloff, lux, one-sided area lights in nits with the range window),
+ *     the environment (sky) it sees, and light from other surfaces, to any number of bounces;
+ *   - rays that leave p and escape see NOTHING: direct light from lights and the directly seen
+ *     sky are not part of the lightmap / grid (the client adds direct light itself); the sky
+ *     does light surfaces (it enters through their reflection).
+ * So the lightmap holds "indirect" irradiance in the engine's sense: light arriving from
+ * surfaces, emissive surfaces included (the Cornell box's ceiling lamp is a surface).
+ *
+ * MATERIALS as the engine sees them: Lambertian, albedo clamped to [0, 0.99] like the bake;
+ * a textured material takes the albedo of the nearest surfel of that material (facing the
+ * same way), which is exactly the albedo the engine uses there (the .lcb keeps no texture);
+ * a textured triangle smaller than 4 surfels takes one albedo, the surfel nearest its centroid.
+ * Dynamic objects are real geometry here: they occlude every ray and reflect with their
+ * baked per-vertex albedo (the engine only lets them shadow direct light — that difference
+ * is part of the engine's error, as it should be).
+ *
+ * ESTIMATOR: path tracing with Embree, unbiased up to max_bounces bounces counted as the
+ * engine counts its passes (light from emitters after at most N reflections, light from the
+ * lights and the sky, which the engine puts in B0, after N + 1; longer paths are cut: relative
+ * bias below albedo^(N+1), 3e-5 for a 0.73 albedo at the default 32), with Russian roulette
+ * after rr_depth bounces. Next-event
+ * estimation to every analytic light (one area-light sample per vertex) and to emissive
+ * triangles (picked by power, uniform on the triangle), combined with the BSDF-sampled hits of
+ * emissive triangles by multiple importance sampling (balance heuristic). Samples are iid, so
+ * the reported standard error (sample standard deviation / sqrt(n)) is honest. Every cache
+ * draws from its own random stream (seed, cache, pass): results are identical for any thread
+ * count.
+ *
+ * Ownership: lc_ref borrows the bake (it must outlive the handle) and copies the state.
+ * Results (lc_ref_result) own their arrays; free with lc_ref_result_free. */
+#ifndef LC_REF_H
+#define LC_REF_H
+#include <stddef.h>
+#include <stdint.h>
+
+#include "engine/engine.h"
+#include "lcb/lcb.h"
+
+/* --- state ----------------------------------------------------------------------------------- */
+
+/* An engine state with its own arrays, loaded from a daemon state JSON (`lucentctl state
+ * --json`, the snapshot file) or the daemon's initial state (the bake's emission, no lights). */
+typedef struct lc_ref_state {
+    lc_engine_state st;
+    lc_engine_light *lights;
+    lc_engine_object *objects;
+    float *emission;
+} lc_ref_state;
+
+/* path NULL: the daemon's initial state for this bake. Returns 0 or -1 with err set (the
+ * JSON pointer of a bad field, an unknown asset...). */
+int lc_ref_state_load(const lc_lcb *bake, const char *path, lc_ref_state *out, char *err, size_t errlen);
+void lc_ref_state_free(lc_ref_state *s);
+
+/* --- the reference renderer -------------------------------------------------------------------- */
+
+typedef struct lc_ref_settings {
+    uint32_t spp;           /* samples per cache: fixed, or the cap when target_stderr > 0 */
+    uint32_t batch_spp;     /* samples per cache per pass (adaptive: convergence is checked per pass) */
+    double target_stderr;   /* relative standard error to reach per cache (0 = fixed spp) */
+    double floor_frac;      /* a cache darker than floor_frac x the brightest counts as converged
+                               when its stderr is below target x floor_frac x brightest */
+    uint32_t max_bounces;   /* bounces as the engine's settings.bounces counts them (default 32; 0 = emitters
+                               seen directly and light-source light reflected once, i.e. B0) */
+    uint32_t rr_depth;      /* Russian roulette after this many bounces (default 3) */
+    uint64_t seed;
+    int threads;            /* 0 = all cores */
+    int texels, grid;       /* which outputs to compute */
+    int quiet;              /* no progress bars */
+} lc_ref_settings;
+
+lc_ref_settings lc_ref_default_settings(void);
+
+typedef struct lc_ref_stats {
+    uint32_t n;              /* caches (texel caches or valid grid cells) */
+    uint64_t samples;        /* paths traced */
+    double spp_mean;
+    uint32_t spp_min, spp_max;
+    uint32_t n_bright;       /* caches above 1% of the brightest (the set compare uses) */
+    double mean_rel_stderr;  /* over n_bright: stderr(luminance) / luminance */
+    double p95_rel_stderr, max_rel_stderr;
+} lc_ref_stats;
+
+typedef struct lc_ref_result {
+    uint32_t width, height;
+    float *lightmap;         /* W*H*3 irradiance; dilated texels copy their cache (as the engine) */
+    float *lightmap_stderr;  /* W*H*3 standard error per channel */
+    uint8_t *texel_mask;     /* W*H: 0 empty, 1 owns its cache, 2 dilated copy */
+    uint32_t grid_dims[3];
+    float grid_origin[3], grid_cell;
+    uint32_t n_cells;
+    float *grid_sh;          /* cells*27: irradiance SH (cosine-convolved), engine layout */
+    float *grid_sh_stderr;   /* cells*27 */
+    uint8_t *grid_mask;      /* cells: 1 valid, 0 inside geometry (the engine outputs zero) */
+    lc_ref_stats texel_stats, grid_stats;
+    double seconds;
+    uint64_t rays;
+    uint32_t cache_crc;      /* CRC-32 of the bake's caches (position, normal, flags, index) */
+    uint32_t max_bounces;    /* the paths' reflection limit it was rendered with */
+} lc_ref_result;
+
+typedef struct lc_ref lc_ref;
+
+/* Builds the ray-tracing scene (static mesh + placed objects), the emitter table and the
+ * textured-albedo lookup. Returns NULL with err set. */
+lc_ref *lc_ref_create(const lc_lcb *bake, const lc_engine_state *state, int threads, char *err, size_t errlen);
+void lc_ref_release(lc_ref *r);
+
+/* Renders the reference for every texel cache and grid cell. Returns 0 or -1 with err set;
+ * on success *out owns its arrays. */
+int lc_ref_render(lc_ref *r, const lc_ref_settings *s, lc_ref_result *out, char *err, size_t errlen);
+void lc_ref_result_free(lc_ref_result *res);
+
+/* One point, for tests and probes: irradiance for normal n at p (n != NULL; mean and stderr
+ * RGB), with spp samples. */
+void lc_ref_irradiance(lc_ref *r, const float p[3], const float n[3], uint32_t spp, uint64_t seed, double mean[3],
+                       double stderr_out[3]);
+
+/* Total power leaving the static surfaces before any transport (W, RGB): the integral over
+ * every triangle's front of pi L_e + albedo (direct + sky) irradiance — the engine's
+ * sum of B0 x surfel area. Estimated from `samples` points spread by area; stderr may be NULL. */
+void lc_ref_b0_power(lc_ref *r, uint32_t samples, uint64_t seed, double power[3], double stderr_out[3]);
+
+/* CRC-32 identifying the bake's caches (a reference only compares with bakes that share it). */
+uint32_t lc_ref_cache_crc(const lc_lcb_view *v);
+
+/* Writes DIR/reference.json, reference_lightmap.exr (+ _stderr.exr, float32), reference_texels.u8,
+ * reference_grid.f32 (+ _stderr.f32), reference_grid_mask.u8. `extra_json` (may be NULL) is
+ * an object text merged under "run" (settings, scene). Returns 0 or -1 with err set. */
+int lc_ref_write(const char *dir, const lc_ref_result *res, const char *extra_json, char *err, size_t errlen);
+/* Reads what lc_ref_write wrote. */
+int lc_ref_read(const char *dir, lc_ref_result *res, char *err, size_t errlen);
+
+/* --- comparison ------------------------------------------------------------------------------ */
+
+/* Relative error statistics over the compared set. */
+typedef struct lc_ref_errstats {
+    uint32_t n;         /* texels / cells compared */
+    uint32_t n_total;   /* candidates before the brightness threshold */
+    double threshold;   /* absolute luminance threshold used (threshold_frac x the brightest) */
+    double mean, p50, p95, max; /* of |a - r| / r (luminance) */
+    double bias;        /* sum(a - r) / sum(r): the luminance-weighted signed error */
+    double mean_signed; /* mean of (a - r) / r */
+    double ref_noise;   /* mean relative standard error of the reference over the same set (0 if unknown) */
+} lc_ref_errstats;
+
+/* Luminance (Rec. 709) of linear RGB. */
+static inline double lc_ref_luminance(const float *c) { return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]; }
+
+/* Per texel, on luminance: err = |Y_a - Y_r| / Y_r over texels whose mask is 1 (owners; dilated
+ * copies would count a cache twice) and Y_r > threshold_frac x max Y_r. p95 and p50 are
+ * nearest-rank percentiles. ref_stderr may be NULL. err_image (W*H, may be NULL) receives the
+ * signed relative error (a - r) / r of compared texels and NAN elsewhere. Returns 0, or -1
+ * when nothing is compared. */
+int lc_ref_compare_lightmap(const float *approx, const float *ref, const float *ref_stderr, const uint8_t *mask,
+                            uint32_t width, uint32_t height, double threshold_frac, lc_ref_errstats *out,
+                            float *err_image);
+
+/* Per grid cell: both SH evaluated as irradiance E(d) = sum c_i y_i(d) at 14 directions (the 6
+ * axes and the 8 cube diagonals); err = sum_d |Y_a(d) - Y_r(d)| / sum_d max(Y_r(d), 0). Cells
+ * with mask 1 whose mean reference irradiance exceeds threshold_frac x the brightest cell's.
+ * ref_stderr may be NULL (else ref_noise = mean stderr(c_0) / c_0). cell_err may be NULL. */
+int lc_ref_compare_grid(const float *approx_sh, const float *ref_sh, const float *ref_stderr, const uint8_t *mask,
+                        uint32_t cells, double threshold_frac, lc_ref_errstats *out, float *cell_err);
+
+/* Heat map of |relative error| (0 black-blue ... max_err red, NAN texels dark grey), 8-bit
+ * PNG, each texel scaled up `zoom` times. Returns 0 or -1 with err set. */
+int lc_ref_write_heatmap(const char *path, const float *err_image, uint32_t width, uint32_t height, double max_err,
+                         uint32_t zoom, char *err, size_t errlen);
+
+/* JSON object text for stats (malloc'd). */
+char *lc_ref_errstats_json(const lc_ref_errstats *s);
+
+/* --- the engine side of a fidelity run --------------------------------------------------------- */
+
+typedef struct lc_ref_engine_run {
+    float *lightmap;     /* W*H*3 */
+    float *grid_sh;      /* cells*27 */
+    uint32_t relights;   /* progressive relights until converged */
+    double last_change;  /* max relative texel change of the last relight */
+    double ms_first, ms_total;
+    double b0_power[3];  /* sum of B0 x area over the surfels (one extra relight, bounces 0) */
+    char backend[16];
+} lc_ref_engine_run;
+
+/* Relights `state` with the engine (progressive on, the state's bounces per relight) until the
+ * largest relative change of a bright texel's luminance between two relights is below tol
+ * (or max_relights). bounce_limit >= 0 instead runs ONE relight with progressive off and
+ * settings.bounces = bounce_limit: exactly that many reflections, for comparing with a
+ * reference rendered with max_bounces = bounce_limit. Returns 0 or -1 with err set. */
+int lc_ref_engine_converge(const lc_lcb *bake, const lc_engine_state *state, lc_backend_kind backend, int threads,
+                           double tol, uint32_t max_relights, int bounce_limit, lc_ref_engine_run *out, char *err,
+                           size_t errlen);
+void lc_ref_engine_run_free(lc_ref_engine_run *run);
+
+#endif

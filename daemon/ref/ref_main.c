@@ -1,0 +1,473 @@
+/* lucent-ref: the ground-truth reference and the comparison tool.
+ *   lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N] [--target-stderr F] ...
+ *   lucent-ref compare --reference DIR --lightmap EXR_OR_F32 [--grid F32] [--out DIR]
+ *   lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--backend cpu] [--out DIR]
+ * Exit codes: 0 ok, 1 failure, 2 usage error. */
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "bake/image.h"
+#include "ref/ref.h"
+#include "util/fsutil.h"
+#include "util/log.h"
+#include "util/opt.h"
+#include "util/progress.h"
+
+enum { EXIT_OK = 0, EXIT_FAIL = 1, EXIT_USAGE = 2 };
+#define REF_PATH_MAX 1024
+
+typedef struct ref_opts {
+    char state[REF_PATH_MAX], out[REF_PATH_MAX], reference[REF_PATH_MAX], lightmap[REF_PATH_MAX], grid[REF_PATH_MAX];
+    int spp, batch, max_bounces, rr_depth, seed, threads, texels, grid_on, quiet;
+    double target_stderr, floor_frac, threshold, max_err, tol;
+    int zoom, max_relights, backend, bounce_limit;
+} ref_opts;
+
+#define OFF(f) offsetof(ref_opts, f)
+static const lc_opt ref_options[] = {
+    {"state", LC_OPT_STRING, OFF(state), 0, REF_PATH_MAX, NULL, NULL,
+     "[render, fidelity] daemon state JSON (`lucentctl state --json`, a snapshot); default: the daemon's initial "
+     "state (the bake's emission, no lights)", "PATH", NULL},
+    {"out", LC_OPT_STRING, OFF(out), 0, REF_PATH_MAX, NULL, NULL,
+     "output directory (render: required; compare/fidelity: default none / fidelity-out)", "DIR", NULL},
+    {"spp", LC_OPT_INT, OFF(spp), 1, 1 << 24, "4096", NULL, "[render] paths per cache (the cap with --target-stderr)",
+     "N", NULL},
+    {"batch", LC_OPT_INT, OFF(batch), 1, 1 << 20, "256", NULL, "[render] paths per cache per pass", "N", NULL},
+    {"target-stderr", LC_OPT_FLOAT, OFF(target_stderr), 0, 1, "0", NULL,
+     "[render] stop a cache when its relative standard error is below F (0 = fixed --spp)", "F", NULL},
+    {"floor", LC_OPT_FLOAT, OFF(floor_frac), 0, 1, "0.05", NULL,
+     "[render] adaptive: caches darker than this fraction of the brightest need only the brightest x floor x F",
+     "F", NULL},
+    {"max-bounces", LC_OPT_INT, OFF(max_bounces), 8, 1024, "32", NULL,
+     "[render] surface reflections per path (Russian roulette cuts most paths earlier)", "N", NULL},
+    {"rr-depth", LC_OPT_INT, OFF(rr_depth), 1, 1024, "3", NULL, "[render] Russian roulette from this bounce on", "N",
+     NULL},
+    {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "[render] random seed (same seed, same result)", "S",
+     NULL},
+    {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", "N", NULL},
+    {"texels", LC_OPT_BOOL, OFF(texels), 0, 1, "true", NULL, "[render] compute the lightmap texels (--no-texels)",
+     NULL, NULL},
+    {"cells", LC_OPT_BOOL, OFF(grid_on), 0, 1, "true", NULL, "[render] compute the SH grid cells (--no-cells)", NULL,
+     NULL},
+    {"reference", LC_OPT_STRING, OFF(reference), 0, REF_PATH_MAX, NULL, NULL,
+     "[compare, fidelity] reference directory from `render` (fidelity: rendered into OUT/reference when absent)",
+     "DIR", NULL},
+    {"lightmap", LC_OPT_STRING, OFF(lightmap), 0, REF_PATH_MAX, NULL, NULL,
+     "[compare] lightmap to judge: an image (EXR...) or raw float32 RGB W*H (.f32/.bin)", "PATH", NULL},
+    {"grid", LC_OPT_STRING, OFF(grid), 0, REF_PATH_MAX, NULL, NULL,
+     "[compare] SH grid to judge: raw float32, cells x 9 x RGB irradiance SH", "PATH", NULL},
+    {"threshold", LC_OPT_FLOAT, OFF(threshold), 0, 1, "0.01", NULL,
+     "[compare, fidelity] compare texels/cells brighter than this fraction of the brightest", "F", NULL},
+    {"max-err", LC_OPT_FLOAT, OFF(max_err), 0.001, 100, "0.5", NULL, "[compare, fidelity] heat map: red at this error",
+     "F", NULL},
+    {"zoom", LC_OPT_INT, OFF(zoom), 1, 64, "4", NULL, "[compare, fidelity] heat map pixels per texel", "N", NULL},
+    {"backend", LC_OPT_ENUM, OFF(backend), 0, 0, "cpu", "auto|cpu|egl", "[fidelity] engine backend", NULL, NULL},
+    {"tol", LC_OPT_FLOAT, OFF(tol), 0, 1, "1e-4", NULL,
+     "[fidelity] relight progressively until no bright texel changes by more than this", "F", NULL},
+    {"max-relights", LC_OPT_INT, OFF(max_relights), 1, 100000, "500", NULL, "[fidelity] cap on relights", "N", NULL},
+    {"bounce-limit", LC_OPT_INT, OFF(bounce_limit), -1, 16, "-1", NULL,
+     "[render, fidelity] diagnostics: truncate both solutions at N reflections (reference paths; the engine runs one "
+     "non-progressive relight with N bounces); -1 = off (converged)", "N", NULL},
+    {"quiet", LC_OPT_BOOL, OFF(quiet), 0, 1, "false", NULL, "no progress output", NULL, NULL},
+    {NULL, 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL},
+};
+
+static void usage(FILE *out) {
+    fprintf(out,
+            "usage: lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N | --target-stderr F] ...\n"
+            "         path-trace the engine's indirect irradiance at every texel cache and SH grid cell\n"
+            "       lucent-ref compare --reference DIR --lightmap EXR_OR_F32 [--grid F32] [--out DIR]\n"
+            "         relative error of a lightmap / SH grid against a reference\n"
+            "       lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--out DIR]\n"
+            "         relight with the engine to convergence and compare (renders the reference if absent)\n\n"
+            "options:\n");
+    lc_opt_help(ref_options, out);
+    fprintf(out, "\nerrors are |Y_a - Y_r| / Y_r on luminance per texel that owns its cache, over texels above\n"
+                 "--threshold x the brightest; grid cells: sum over 14 directions of |dE| / sum of E.\n"
+                 "exit codes: 0 ok, 1 failure, 2 usage error\n");
+}
+
+static int parse(ref_opts *o, int argc, char **argv, char **pos, int max_pos) {
+    char err[512];
+    for (int i = 2; i < argc; i++)
+        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
+            usage(stdout);
+            exit(EXIT_OK);
+        }
+    if (lc_opt_defaults(ref_options, o, err, sizeof err) != 0) {
+        fprintf(stderr, "lucent-ref: %s\n", err);
+        return -1;
+    }
+    int n = lc_opt_parse(ref_options, o, argc, argv, 2, pos, max_pos, err, sizeof err);
+    if (n < 0) fprintf(stderr, "lucent-ref: %s\n", err);
+    lc_progress_set_enabled(n >= 0 && !o->quiet);
+    return n;
+}
+
+static lc_ref_settings settings_from(const ref_opts *o) {
+    lc_ref_settings s = lc_ref_default_settings();
+    s.spp = (uint32_t)o->spp;
+    s.batch_spp = (uint32_t)o->batch;
+    s.target_stderr = o->target_stderr;
+    s.floor_frac = o->floor_frac;
+    s.max_bounces = (uint32_t)(o->bounce_limit >= 0 ? o->bounce_limit : o->max_bounces);
+    s.rr_depth = (uint32_t)o->rr_depth;
+    s.seed = (uint64_t)o->seed;
+    s.threads = o->threads;
+    s.texels = o->texels;
+    s.grid = o->grid_on;
+    s.quiet = o->quiet;
+    return s;
+}
+
+/* Renders the reference of bake into dir. */
+static int do_render(const char *bake_path, const lc_lcb *bake, const lc_ref_state *st, const ref_opts *o,
+                     const char *dir, lc_ref_result *res, char *err, size_t errlen) {
+    lc_ref_settings s = settings_from(o);
+    lc_ref *r = lc_ref_create(bake, &st->st, o->threads, err, errlen);
+    if (!r) return -1;
+    int rc = lc_ref_render(r, &s, res, err, errlen);
+    lc_ref_release(r);
+    if (rc != 0) return -1;
+    cJSON *run = cJSON_CreateObject();
+    cJSON_AddStringToObject(run, "bake", bake_path);
+    cJSON_AddStringToObject(run, "state", o->state[0] ? o->state : "(daemon initial state)");
+    cJSON_AddNumberToObject(run, "spp", s.spp);
+    cJSON_AddNumberToObject(run, "batch_spp", s.batch_spp);
+    cJSON_AddNumberToObject(run, "target_stderr", s.target_stderr);
+    cJSON_AddNumberToObject(run, "floor", s.floor_frac);
+    cJSON_AddNumberToObject(run, "max_bounces", s.max_bounces);
+    cJSON_AddNumberToObject(run, "bounce_limit", o->bounce_limit);
+    cJSON_AddNumberToObject(run, "rr_depth", s.rr_depth);
+    cJSON_AddNumberToObject(run, "seed", (double)s.seed);
+    cJSON_AddNumberToObject(run, "threads", o->threads);
+    char *extra = cJSON_PrintUnformatted(run);
+    cJSON_Delete(run);
+    rc = lc_ref_write(dir, res, extra, err, errlen);
+    cJSON_free(extra);
+    if (rc != 0) return -1;
+    fprintf(stderr,
+            "lucent-ref: %s: %u texel caches, %.0f spp mean, relative stderr mean %.4f p95 %.4f max %.4f; "
+            "%u grid cells, stderr mean %.4f max %.4f; %.1f s, %.2f Mrays/s\n",
+            dir, res->texel_stats.n, res->texel_stats.spp_mean, res->texel_stats.mean_rel_stderr,
+            res->texel_stats.p95_rel_stderr, res->texel_stats.max_rel_stderr, res->grid_stats.n,
+            res->grid_stats.mean_rel_stderr, res->grid_stats.max_rel_stderr, res->seconds,
+            res->seconds > 0 ? res->rays / res->seconds / 1e6 : 0);
+    return 0;
+}
+
+static int cmd_render(int argc, char **argv) {
+    static ref_opts o;
+    char *pos[2];
+    char err[1024] = "";
+    int n = parse(&o, argc, argv, pos, 2);
+    if (n < 0) return EXIT_USAGE;
+    if (n != 1 || !o.out[0]) {
+        fprintf(stderr, "lucent-ref: render needs one BAKE.lcb and --out DIR (see --help)\n");
+        return EXIT_USAGE;
+    }
+    lc_lcb *bake = NULL;
+    lc_ref_state st;
+    memset(&st, 0, sizeof st);
+    lc_ref_result res;
+    memset(&res, 0, sizeof res);
+    int rc = EXIT_FAIL;
+    if (lc_lcb_open(pos[0], &bake, err, sizeof err) != 0) goto done;
+    if (lc_ref_state_load(bake, o.state[0] ? o.state : NULL, &st, err, sizeof err) != 0) goto done;
+    if (do_render(pos[0], bake, &st, &o, o.out, &res, err, sizeof err) != 0) goto done;
+    rc = EXIT_OK;
+done:
+    if (rc != EXIT_OK) fprintf(stderr, "lucent-ref: %s\n", err);
+    lc_ref_result_free(&res);
+    lc_ref_state_free(&st);
+    lc_lcb_close(bake);
+    return rc;
+}
+
+/* Loads a lightmap: raw float32 (.f32/.bin, W*H*3) or any image OIIO reads. */
+static float *load_lightmap(const char *path, uint32_t w, uint32_t h, char *err, size_t errlen) {
+    const char *dot = strrchr(path, '.');
+    if (dot && (!strcmp(dot, ".f32") || !strcmp(dot, ".bin"))) {
+        size_t len = 0, expect = (size_t)w * h * 3 * sizeof(float);
+        char *data = lc_fs_read(path, expect + 1, &len, err, errlen);
+        if (data && len != expect) {
+            lc_set_err(err, errlen, "%s: %zu bytes, expected %ux%u float32 RGB (%zu)", path, len, w, h, expect);
+            free(data);
+            return NULL;
+        }
+        return (float *)data;
+    }
+    uint32_t iw, ih;
+    float *img = NULL;
+    if (lc_image_read_rgb(path, (uint64_t)w * h, &iw, &ih, &img, err, errlen) != 0) return NULL;
+    if (iw != w || ih != h) {
+        lc_set_err(err, errlen, "%s: %ux%u, the reference is %ux%u", path, iw, ih, w, h);
+        free(img);
+        return NULL;
+    }
+    return img;
+}
+
+static void print_row(const char *what, const lc_ref_errstats *s) {
+    printf("%-10s %8u %8.2f%% %8.2f%% %8.2f%% %8.2f%% %+8.2f%% %8.2f%%\n", what, s->n, 100 * s->mean, 100 * s->p50,
+           100 * s->p95, 100 * s->max, 100 * s->bias, 100 * s->ref_noise);
+}
+
+/* Compares and reports; writes DIR/compare.json (+ heat maps) when dir is set. extra may be NULL. */
+static int do_compare(const lc_ref_result *ref, const float *lightmap, const float *grid, const ref_opts *o,
+                      const char *dir, cJSON *extra, char *err, size_t errlen) {
+    lc_ref_errstats lm = {0}, gr = {0};
+    float *err_img = NULL, *cell_err = NULL;
+    int have_lm = 0, have_grid = 0, rc = -1;
+    size_t texels = (size_t)ref->width * ref->height;
+    if (lightmap && texels) {
+        err_img = malloc(texels * sizeof(float));
+        if (!err_img) goto oom;
+        have_lm = lc_ref_compare_lightmap(lightmap, ref->lightmap, ref->lightmap_stderr, ref->texel_mask, ref->width,
+                                          ref->height, o->threshold, &lm, err_img) == 0;
+    }
+    if (grid && ref->n_cells) {
+        cell_err = malloc((size_t)ref->n_cells * sizeof(float));
+        if (!cell_err) goto oom;
+        have_grid = lc_ref_compare_grid(grid, ref->grid_sh, ref->grid_sh_stderr, ref->grid_mask, ref->n_cells,
+                                        o->threshold, &gr, cell_err) == 0;
+    }
+    if (!have_lm && !have_grid) {
+        lc_set_err(err, errlen, "nothing to compare (no lightmap/grid given, or no texel above the threshold)");
+        goto done;
+    }
+    printf("%-10s %8s %9s %9s %9s %9s %9s %9s\n", "", "n", "mean", "p50", "p95", "max", "bias", "ref-noise");
+    if (have_lm) print_row("lightmap", &lm);
+    if (have_grid) print_row("grid", &gr);
+    fflush(stdout);
+    if (dir && dir[0]) {
+        char path[REF_PATH_MAX + 64];
+        mkdir(dir, 0755);
+        if (have_lm) {
+            snprintf(path, sizeof path, "%s/error_lightmap.png", dir);
+            if (lc_ref_write_heatmap(path, err_img, ref->width, ref->height, o->max_err, (uint32_t)o->zoom, err,
+                                     errlen) != 0)
+                goto done;
+            for (size_t i = 0; i < texels; i++)
+                if (isnan(err_img[i])) err_img[i] = 0;
+            snprintf(path, sizeof path, "%s/error_lightmap.exr", dir);
+            if (lc_image_write_float(path, ref->width, ref->height, 1, err_img, err, errlen) != 0) goto done;
+        }
+        if (have_grid) {
+            snprintf(path, sizeof path, "%s/error_grid.bin", dir);
+            if (lc_fs_write_atomic(path, cell_err, (size_t)ref->n_cells * sizeof(float), err, errlen) != 0) goto done;
+        }
+        cJSON *root = extra ? extra : cJSON_CreateObject();
+        extra = NULL;
+        cJSON_AddStringToObject(root, "metric",
+                                "relative error |Y_a - Y_r| / Y_r of luminance per texel owning its cache, over texels "
+                                "whose reference exceeds threshold x the brightest; grid: sum_d |dE(d)| / sum_d E(d) "
+                                "over 14 directions per cell; p50/p95 nearest rank; bias = sum(a - r) / sum(r); "
+                                "ref_noise = mean relative standard error of the reference over the same set");
+        cJSON_AddNumberToObject(root, "threshold_frac", o->threshold);
+        if (have_lm) {
+            char *t = lc_ref_errstats_json(&lm);
+            cJSON_AddItemToObject(root, "lightmap", cJSON_Parse(t));
+            cJSON_free(t);
+        }
+        if (have_grid) {
+            char *t = lc_ref_errstats_json(&gr);
+            cJSON_AddItemToObject(root, "grid", cJSON_Parse(t));
+            cJSON_free(t);
+        }
+        cJSON *rs = cJSON_AddObjectToObject(root, "reference");
+        cJSON_AddNumberToObject(rs, "texel_mean_rel_stderr", ref->texel_stats.mean_rel_stderr);
+        cJSON_AddNumberToObject(rs, "texel_max_rel_stderr", ref->texel_stats.max_rel_stderr);
+        cJSON_AddNumberToObject(rs, "texel_spp_mean", ref->texel_stats.spp_mean);
+        cJSON_AddNumberToObject(rs, "grid_mean_rel_stderr", ref->grid_stats.mean_rel_stderr);
+        cJSON_AddNumberToObject(rs, "seconds", ref->seconds);
+        char *text = cJSON_Print(root);
+        cJSON_Delete(root);
+        snprintf(path, sizeof path, "%s/compare.json", dir);
+        int wrc = text ? lc_fs_write_atomic(path, text, strlen(text), err, errlen) : -1;
+        cJSON_free(text);
+        if (wrc != 0) goto done;
+        fprintf(stderr, "lucent-ref: wrote %s (and error_lightmap.png/.exr)\n", path);
+    }
+    rc = 0;
+    goto done;
+oom:
+    lc_set_err(err, errlen, "out of memory");
+done:
+    cJSON_Delete(extra);
+    free(err_img);
+    free(cell_err);
+    return rc;
+}
+
+static int cmd_compare(int argc, char **argv) {
+    static ref_opts o;
+    char *pos[2];
+    char err[1024] = "";
+    int n = parse(&o, argc, argv, pos, 2);
+    if (n < 0) return EXIT_USAGE;
+    if (n != 0 || !o.reference[0] || (!o.lightmap[0] && !o.grid[0])) {
+        fprintf(stderr, "lucent-ref: compare needs --reference DIR and --lightmap and/or --grid (see --help)\n");
+        return EXIT_USAGE;
+    }
+    lc_ref_result ref;
+    float *lm = NULL, *grid = NULL;
+    int rc = EXIT_FAIL;
+    if (lc_ref_read(o.reference, &ref, err, sizeof err) != 0) goto done;
+    if (o.lightmap[0] && !(lm = load_lightmap(o.lightmap, ref.width, ref.height, err, sizeof err))) goto done;
+    if (o.grid[0]) {
+        size_t len = 0, expect = (size_t)ref.n_cells * 27 * sizeof(float);
+        grid = (float *)lc_fs_read(o.grid, expect + 1, &len, err, sizeof err);
+        if (!grid) goto done;
+        if (len != expect) {
+            lc_set_err(err, sizeof err, "%s: %zu bytes, the reference grid needs %zu", o.grid, len, expect);
+            goto done;
+        }
+    }
+    if (do_compare(&ref, lm, grid, &o, o.out, NULL, err, sizeof err) != 0) goto done;
+    rc = EXIT_OK;
+done:
+    if (rc != EXIT_OK) fprintf(stderr, "lucent-ref: %s\n", err);
+    lc_ref_result_free(&ref);
+    free(lm);
+    free(grid);
+    return rc;
+}
+
+static int cmd_fidelity(int argc, char **argv) {
+    static ref_opts o;
+    char *pos[2];
+    char err[1024] = "";
+    int n = parse(&o, argc, argv, pos, 2);
+    if (n < 0) return EXIT_USAGE;
+    if (n != 1) {
+        fprintf(stderr, "lucent-ref: fidelity needs one BAKE.lcb (see --help)\n");
+        return EXIT_USAGE;
+    }
+    const char *dir = o.out[0] ? o.out : "fidelity-out";
+    lc_lcb *bake = NULL;
+    lc_ref_state st;
+    memset(&st, 0, sizeof st);
+    lc_ref_result ref;
+    memset(&ref, 0, sizeof ref);
+    lc_ref_engine_run run;
+    memset(&run, 0, sizeof run);
+    int rc = EXIT_FAIL;
+    char path[REF_PATH_MAX + 64];
+    if (lc_lcb_open(pos[0], &bake, err, sizeof err) != 0) goto done;
+    const lc_lcb_view *v = lc_lcb_get(bake);
+    if (lc_ref_state_load(bake, o.state[0] ? o.state : NULL, &st, err, sizeof err) != 0) goto done;
+    mkdir(dir, 0755);
+    if (o.reference[0]) {
+        if (lc_ref_read(o.reference, &ref, err, sizeof err) != 0) goto done;
+        if (ref.width != v->lightmap_width || ref.height != v->lightmap_height ||
+            ref.cache_crc != lc_ref_cache_crc(v)) {
+            lc_set_err(err, sizeof err,
+                       "%s was rendered for other caches (lightmap %ux%u, cache CRC %08x; this bake %ux%u, %08x)",
+                       o.reference, ref.width, ref.height, ref.cache_crc, v->lightmap_width, v->lightmap_height,
+                       lc_ref_cache_crc(v));
+            goto done;
+        }
+        if (o.bounce_limit >= 0 && ref.max_bounces != (uint32_t)o.bounce_limit) {
+            lc_set_err(err, sizeof err, "--bounce-limit %d needs a reference rendered with it (%s has %u)",
+                       o.bounce_limit, o.reference, ref.max_bounces);
+            goto done;
+        }
+    } else {
+        snprintf(path, sizeof path, "%s/reference", dir);
+        if (do_render(pos[0], bake, &st, &o, path, &ref, err, sizeof err) != 0) goto done;
+    }
+    static const lc_backend_kind kinds[3] = {LC_BACKEND_AUTO, LC_BACKEND_CPU, LC_BACKEND_EGL};
+    if (lc_ref_engine_converge(bake, &st.st, kinds[o.backend], o.threads, o.tol, (uint32_t)o.max_relights, o.bounce_limit,
+                               &run, err, sizeof err) != 0)
+        goto done;
+    printf("engine (%s): %u relights to converge (last change %.2e), first relight %.1f ms\n", run.backend,
+           run.relights, run.last_change, run.ms_first);
+    /* Where the light starts: the surfels' B0 against the exact surface integral. */
+    double pw[3], pw_se[3];
+    {
+        lc_ref *r = lc_ref_create(bake, &st.st, o.threads, err, sizeof err);
+        if (!r) goto done;
+        lc_ref_b0_power(r, 1u << 20, (uint64_t)o.seed, pw, pw_se);
+        lc_ref_release(r);
+    }
+    double pw_y = lc_ref_luminance((float[3]){(float)pw[0], (float)pw[1], (float)pw[2]});
+    double eng_y = lc_ref_luminance((float[3]){(float)run.b0_power[0], (float)run.b0_power[1], (float)run.b0_power[2]});
+    double pw_se_y = lc_ref_luminance((float[3]){(float)pw_se[0], (float)pw_se[1], (float)pw_se[2]});
+    printf("B0 power (luminance W): engine surfels %.6g, exact surfaces %.6g +- %.2g: %+.2f%%\n", eng_y, pw_y, pw_se_y,
+           pw_y > 0 ? 100 * (eng_y / pw_y - 1) : 0);
+    snprintf(path, sizeof path, "%s/engine_lightmap.exr", dir);
+    if (lc_image_write_float(path, v->lightmap_width, v->lightmap_height, 3, run.lightmap, err, sizeof err) != 0)
+        goto done;
+    snprintf(path, sizeof path, "%s/engine_grid.bin", dir);
+    if (lc_fs_write_atomic(path, run.grid_sh, (size_t)ref.n_cells * 27 * sizeof(float), err, sizeof err) != 0)
+        goto done;
+    /* Per texel cache, for digging into where the error is. */
+    snprintf(path, sizeof path, "%s/texels.csv", dir);
+    FILE *csv = fopen(path, "w");
+    if (csv) {
+        fprintf(csv, "cache,x,y,px,py,pz,nx,ny,nz,moved,ref_y,ref_stderr_y,engine_y,rel_err\n");
+        for (uint32_t c = 0; c < v->n_texel_caches; c++) {
+            const lc_lcb_cache *ca = &v->caches[c];
+            uint32_t i = ca->index;
+            if (i >= (uint32_t)(v->lightmap_width * v->lightmap_height)) continue;
+            double yr = lc_ref_luminance(ref.lightmap + 3 * (size_t)i), ya = lc_ref_luminance(run.lightmap + 3 * (size_t)i);
+            fprintf(csv, "%u,%u,%u,%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%d,%.6g,%.6g,%.6g,%.6g\n", c, i % v->lightmap_width,
+                    i / v->lightmap_width, ca->position[0], ca->position[1], ca->position[2], ca->normal[0],
+                    ca->normal[1], ca->normal[2], (ca->flags & LC_CACHE_MOVED) != 0, yr,
+                    lc_ref_luminance(ref.lightmap_stderr + 3 * (size_t)i), ya, yr > 0 ? (ya - yr) / yr : 0);
+        }
+        fclose(csv);
+    }
+    fflush(stdout);
+    cJSON *extra = cJSON_CreateObject();
+    cJSON_AddStringToObject(extra, "bake", pos[0]);
+    cJSON_AddStringToObject(extra, "state", o.state[0] ? o.state : "(daemon initial state)");
+    cJSON_AddStringToObject(extra, "backend", run.backend);
+    cJSON_AddNumberToObject(extra, "relights", run.relights);
+    cJSON_AddNumberToObject(extra, "last_change", run.last_change);
+    cJSON_AddNumberToObject(extra, "bounce_limit", o.bounce_limit);
+    cJSON_AddNumberToObject(extra, "bounces_per_relight", st.st.settings.bounces);
+    cJSON_AddNumberToObject(extra, "bands", st.st.settings.bands);
+    cJSON_AddNumberToObject(extra, "surfels", v->n_surfels);
+    cJSON_AddNumberToObject(extra, "links_per_cache", v->links_per_cache);
+    cJSON_AddNumberToObject(extra, "texel_caches", v->n_texel_caches);
+    cJSON_AddNumberToObject(extra, "ms_first_relight", run.ms_first);
+    cJSON_AddNumberToObject(extra, "b0_power_engine", eng_y);
+    cJSON_AddNumberToObject(extra, "b0_power_reference", pw_y);
+    cJSON_AddNumberToObject(extra, "b0_power_reference_stderr", pw_se_y);
+    if (do_compare(&ref, run.lightmap, run.grid_sh, &o, dir, extra, err, sizeof err) != 0) goto done;
+    snprintf(path, sizeof path, "%s/compare.json", dir);
+    char dst[REF_PATH_MAX + 64];
+    snprintf(dst, sizeof dst, "%s/fidelity.json", dir);
+    if (rename(path, dst) != 0) {
+        lc_set_err(err, sizeof err, "cannot rename %s to %s", path, dst);
+        goto done;
+    }
+    fprintf(stderr, "lucent-ref: wrote %s\n", dst);
+    rc = EXIT_OK;
+done:
+    if (rc != EXIT_OK) fprintf(stderr, "lucent-ref: %s\n", err);
+    lc_ref_engine_run_free(&run);
+    lc_ref_result_free(&ref);
+    lc_ref_state_free(&st);
+    lc_lcb_close(bake);
+    return rc;
+}
+
+int main(int argc, char **argv) {
+    if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
+        usage(argc < 2 ? stderr : stdout);
+        return argc < 2 ? EXIT_USAGE : EXIT_OK;
+    }
+    if (!strcmp(argv[1], "render")) return cmd_render(argc, argv);
+    if (!strcmp(argv[1], "compare")) return cmd_compare(argc, argv);
+    if (!strcmp(argv[1], "fidelity")) return cmd_fidelity(argc, argv);
+    fprintf(stderr, "lucent-ref: unknown command '%s' (render, compare, fidelity; see --help)\n", argv[1]);
+    return EXIT_USAGE;
+}
