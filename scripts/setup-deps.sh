@@ -9,7 +9,7 @@ packages=(
   libcjson-dev libwebsockets-dev libssl-dev libpng-dev
   libepoxy-dev libegl-dev libegl1-mesa-dev libgl1-mesa-dri libgl-dev
   liblapacke-dev libblas-dev
-  python3-websockets python3-pytest python3-jsonschema
+  python3-websockets python3-pytest python3-jsonschema jq
 )
 
 missing=()

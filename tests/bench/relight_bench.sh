@@ -16,7 +16,7 @@ while [ $# -gt 0 ]; do
     *) echo "usage: $0 [--runs N] [--out FILE]" >&2; exit 2 ;;
   esac
 done
-bin="$root/build/bin"
+bin="${LUCENT_BUILD_DIR:-$root/build}/bin"
 [ -x "$bin/lucent-bench" ] || { echo "build first: bash scripts/build.sh" >&2; exit 1; }
 tmp="$(mktemp -d)"; trap 'rm -rf "$tmp"' EXIT
 mkdir -p "$(dirname "$out")"

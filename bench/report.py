@@ -1,0 +1,212 @@
+#!/usr/bin/python3
+"""Builds bench/RESULTS.md and bench/results.json from the raw outputs bench/run leaves in
+bench/out/ (bake.json, relight.json, latency-*.json, fidelity.json). Missing inputs are
+reported as "not run" rather than failing, so partial runs (--skip) still give a report."""
+import argparse
+import datetime
+import glob
+import json
+import os
+import platform
+import subprocess
+
+PAPER = {  # DESIGN.md 4.1: PIC, Sponza, 10 585 caches
+    "moderate": {"cpu_i7_4510u_2c": 33.8, "cpu_i7_4790s": 21.1, "gpu_gtx980": 3.65, "memory_mib": 32.2},
+    "high": {"cpu_i7_4510u_2c": 198.0, "cpu_i7_4790s": 131.0, "gpu_gtx980": 7.17},
+}
+TARGETS = {
+    "bake_sponza_moderate_s": 60, "bake_sponza_moderate_mib": 2048,
+    "relight_sponza_moderate_cpu_ms": 15, "relight_sponza_high_cpu_ms": 60,
+    "latency_cornell_10_p50_ms": 10, "latency_cornell_10_p99_ms": 30, "latency_sponza_p50_ms": 40,
+    "delta_small_move_fraction": 0.25,
+    "fidelity_cornell_mean": 0.10, "fidelity_cornell_p95": 0.25, "fidelity_sponza_mean": 0.15,
+}
+
+
+def load(path):
+    try:
+        with open(path) as fh:
+            return json.load(fh)
+    except (OSError, ValueError):
+        return None
+
+
+def machine(lucent_bench_json):
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem_gib = None
+    try:
+        for line in open("/proc/meminfo"):
+            if line.startswith("MemTotal"):
+                mem_gib = round(int(line.split()[1]) / 2**20, 1)
+    except OSError:
+        pass
+    commit = None
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=os.path.dirname(os.path.abspath(__file__))).stdout.strip() or None
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "memory_gib": mem_gib, "os": platform.platform(),
+            "memcpy_gbps": (lucent_bench_json or {}).get("memcpy_gbps"), "commit": commit,
+            "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
+
+
+def ok(cond):
+    return "met" if cond else "**not met**"
+
+
+def fmt(v, f="{:.1f}"):
+    return "–" if v is None else f.format(v)
+
+
+def bake_section(b, md):
+    md.append("## Bake (moderate preset)\n")
+    if not b:
+        md.append("not run\n")
+        return
+    md.append("| scene | triangles | surfels | caches | links/cache | time s | peak MiB | file MiB |")
+    md.append("|---|---|---|---|---|---|---|---|")
+    for name, r in b["scenes"].items():
+        md.append("| %s | %s | %s | %s | %s | %.1f | %.0f | %.1f |" % (
+            name, r.get("triangles"), r.get("surfels"), r.get("caches"), r.get("links_per_cache"),
+            r.get("total_s", 0), r.get("peak_rss_mib", 0), r.get("file_bytes", 0) / 2**20))
+    s = b["scenes"].get("sponza-dabrovic")
+    if s:
+        md.append("\nTarget: sponza-dabrovic moderate ≤ %d s and ≤ %d MiB peak — %s (%.1f s, %.0f MiB)." % (
+            TARGETS["bake_sponza_moderate_s"], TARGETS["bake_sponza_moderate_mib"],
+            ok(s["total_s"] <= TARGETS["bake_sponza_moderate_s"] and s["peak_rss_mib"] <= TARGETS["bake_sponza_moderate_mib"]),
+            s["total_s"], s["peak_rss_mib"]))
+    md.append("")
+
+
+def relight_section(r, md):
+    md.append("## Relight after one light change (median, `lucent-bench`, 1 feedback bounce)\n")
+    if not r:
+        md.append("not run\n")
+        return
+    stages = ["direct", "bounce", "pull", "gather", "lightmap", "grid", "objects"]
+    md.append("| bake | backend | surfels | caches | links | " + " | ".join(stages) + " | total ms | paper ms (same setting) |")
+    md.append("|---|---|---|---|---|" + "---|" * len(stages) + "---|---|")
+    for row in r["results"]:
+        name = os.path.basename(row["bake"])
+        preset = "high" if "high" in name else "moderate"
+        paper = ""
+        if name.startswith("sponza"):
+            p = PAPER[preset]
+            paper = "CPU 2-core %.1f / 4-core %.1f; GPU %.2f" % (p["cpu_i7_4510u_2c"], p["cpu_i7_4790s"], p["gpu_gtx980"])
+        md.append("| %s | %s | %d | %d | %d | %s | %.1f | %s |" % (
+            name, row["backend"], row["surfels"], row["caches"], row["links"],
+            " | ".join("%.2f" % row["stages_ms"].get(s, 0) for s in stages), row["total_ms"], paper))
+    for preset, key in (("moderate", "relight_sponza_moderate_cpu_ms"), ("high", "relight_sponza_high_cpu_ms")):
+        rows = [x for x in r["results"] if os.path.basename(x["bake"]).startswith("sponza-" + preset) and x["backend"] == "cpu"]
+        if rows:
+            md.append("\nTarget: Sponza %s CPU ≤ %d ms — %s (%.1f ms)." % (
+                preset, TARGETS[key], ok(rows[0]["total_ms"] <= TARGETS[key]), rows[0]["total_ms"]))
+    md.append("\nThe EGL rows run on whatever EGL device the machine has (Mesa llvmpipe when there is no GPU:"
+              " the same cores as the CPU backend).\n")
+
+
+def latency_section(lat, md):
+    md.append("## Service: update → frame at the client (`tests/bench/latency_bench.py`, 10 updates/s)\n")
+    if not lat:
+        md.append("not run\n")
+        return
+    md.append("| scene | backend | clients | p50 ms | p99 ms | max ms | on final revision | keyframe B | delta B (mean) | small move: delta / keyframe | daemon peak RSS MiB | daemon CPU s |")
+    md.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    checks = []
+    for j in lat:
+        for r in j["results"]:
+            L = r["latency_ms"]
+            key = (r.get("keyframe_bytes") or {}).get("mean")
+            dl = (r.get("delta_bytes") or {}).get("mean")
+            sm = r.get("small_move") or {}
+            frac = (sm.get("first_delta_bytes") / key) if key and sm.get("first_delta_bytes") is not None else None
+            d = r.get("daemon") or {}
+            md.append("| %s | %s | %d | %s | %s | %s | %.0f%% | %s | %s | %s | %s | %s |" % (
+                j["scene"], j["backend"], r["clients"], fmt(L.get("p50")), fmt(L.get("p99")), fmt(L.get("max")),
+                100 * r.get("final_fraction", 0), fmt(key, "{:.0f}"), fmt(dl, "{:.0f}"),
+                "–" if frac is None else "%.0f%% (%s m)" % (100 * frac, sm.get("move_m")),
+                fmt(d.get("vmhwm_kb") and d["vmhwm_kb"] / 1024), fmt(d.get("cpu_s_run"), "{:.2f}")))
+            if j["scene"] == "cornell" and r["clients"] == 10:
+                checks.append("Cornell, 10 clients: p50 ≤ %d ms, p99 ≤ %d ms — %s (p50 %s, p99 %s)" % (
+                    TARGETS["latency_cornell_10_p50_ms"], TARGETS["latency_cornell_10_p99_ms"],
+                    ok(L["p50"] <= TARGETS["latency_cornell_10_p50_ms"] and L["p99"] <= TARGETS["latency_cornell_10_p99_ms"]),
+                    fmt(L["p50"]), fmt(L["p99"])))
+            if j["scene"] == "cornell" and r["clients"] >= 100:
+                checks.append("%d clients at 10 updates/s, every client on the latest revision — %s (%.0f%%)" % (
+                    r["clients"], ok(r.get("final_fraction") == 1.0), 100 * r.get("final_fraction", 0)))
+            if j["scene"].startswith("sponza"):
+                checks.append("Sponza, %d client(s): p50 ≤ %d ms — %s (%s)" % (
+                    r["clients"], TARGETS["latency_sponza_p50_ms"], ok(L["p50"] <= TARGETS["latency_sponza_p50_ms"]), fmt(L["p50"])))
+            if frac is not None and j["scene"] == "cornell" and r["clients"] == 1:
+                checks.append("small light move (%s m): delta ≤ 25%% of a keyframe — %s (%.0f%%)" % (
+                    sm.get("move_m"), ok(frac <= TARGETS["delta_small_move_fraction"]), 100 * frac))
+    md.append("")
+    md += ["- " + c for c in checks]
+    md.append("\nThe clients are one Python process on the same machine as the daemon: on 2 cores they compete"
+              " with it, so these latencies are an upper bound for the daemon.\n")
+
+
+def fidelity_section(f, md):
+    md.append("## Fidelity against the path-traced reference (`bench/fidelity.sh`, details in `bench/fidelity.md`)\n")
+    if not f:
+        md.append("not run\n")
+        return
+    md.append("| run | links | surfels | bands | lightmap mean | p95 | max | bias | grid mean | grid p95 | reference noise |")
+    md.append("|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in f["results"]:
+        lm, g = r.get("lightmap") or {}, r.get("grid") or {}
+        pct = lambda v: "–" if v is None else "%.1f%%" % (100 * v)
+        md.append("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+            r["name"], r.get("links"), r.get("surfels"), r.get("bands"), pct(lm.get("mean")), pct(lm.get("p95")),
+            pct(lm.get("max")), pct(lm.get("bias")), pct(g.get("mean")), pct(g.get("p95")), pct(lm.get("ref_noise"))))
+    by = {r["name"]: r for r in f["results"]}
+    c, s = by.get("cornell-moderate"), by.get("sponza-moderate-sun")
+    if c:
+        md.append("\n- Cornell moderate: mean ≤ 10%%, p95 ≤ 25%% — %s" % ok(
+            c["lightmap"]["mean"] <= TARGETS["fidelity_cornell_mean"] and c["lightmap"]["p95"] <= TARGETS["fidelity_cornell_p95"]))
+    if s:
+        md.append("- Sponza moderate, sun: mean ≤ 15%% — %s" % ok(s["lightmap"]["mean"] <= TARGETS["fidelity_sponza_mean"]))
+    md.append("")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--out-dir", required=True)
+    ap.add_argument("--md", required=True)
+    ap.add_argument("--json", required=True)
+    ap.add_argument("--lucent-bench", default=None)
+    a = ap.parse_args()
+    bake = load(os.path.join(a.out_dir, "bake.json"))
+    relight = load(os.path.join(a.out_dir, "relight.json"))
+    lat = [j for j in (load(p) for p in sorted(glob.glob(os.path.join(a.out_dir, "latency-*.json")))) if j]
+    fid = load(os.path.join(a.out_dir, "fidelity.json"))
+    m = machine(relight)
+    md = ["# lucent benchmark results", "",
+          "Written by `bench/run` on %s (commit %s). Machine: %s, %s cores, %s GiB, %s; memcpy %s GB/s "
+          "(read+write, measured by lucent-bench — this shared machine's speed varies between runs, compare "
+          "numbers from one report only)." % (m["date"], m["commit"], m["cpu"], m["cores"], m["memory_gib"], m["os"],
+                                              fmt(m["memcpy_gbps"])), "",
+          "Paper figures (DESIGN.md 4.1, PIC on Sponza with 10 585 caches): moderate (3 bands, 128 links, 32k "
+          "surfels) CPU 21.1 ms (i7-4790S) / 33.8 ms (i7-4510U, 2 cores), GPU 3.65 ms (GTX 980); high (4 bands, "
+          "254 links, 128k surfels) CPU 131 ms / GPU 7.17 ms; 32.2 MiB at moderate.", ""]
+    bake_section(bake, md)
+    relight_section(relight, md)
+    latency_section(lat, md)
+    fidelity_section(fid, md)
+    with open(a.md, "w") as fh:
+        fh.write("\n".join(md) + "\n")
+    with open(a.json, "w") as fh:
+        json.dump({"machine": m, "paper": PAPER, "targets": TARGETS, "bake": bake, "relight": relight,
+                   "latency": lat, "fidelity": fid}, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
