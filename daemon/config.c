@@ -58,7 +58,8 @@ static const lc_opt config_options[] = {
      "extra progressive relights while no update waits (each adds a bounce)", NULL, NULL},
     {"bounces", LC_OPT_INT, OFF(bounces), 0, 16, "0", NULL,
      "initial feedback bounces per relight (updates stay fast; refinement adds the rest)", NULL, NULL},
-    {"tile", LC_OPT_INT, OFF(tile), 8, 256, "32", NULL, "lightmap tile size for delta frames (texels)", NULL, NULL},
+    {"tile", LC_OPT_INT, OFF(tile), 0, 256, "0", NULL,
+     "lightmap tile size for delta frames (texels, >= 8; 0 = 32, 16 or 8: at least 64 tiles)", NULL, NULL},
     {"keyframe-interval", LC_OPT_INT, OFF(keyframe_interval), 1, 100000, "30", NULL,
      "frames between lightmap keyframes", NULL, NULL},
     {"delta-threshold", LC_OPT_FLOAT, OFF(delta_threshold), 0, 1, "0.01", NULL,
@@ -196,6 +197,10 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
 int lc_config_validate(const lc_config *c, char *err, size_t errlen) {
     if (!c->tls_cert[0] != !c->tls_key[0]) {
         lc_set_err(err, errlen, "--tls-cert and --tls-key go together (give both or neither)");
+        return -1;
+    }
+    if (c->tile > 0 && c->tile < 8) {
+        lc_set_err(err, errlen, "--tile %d: give 0 (automatic) or at least 8 texels", c->tile);
         return -1;
     }
     /* A token in both lists would make the role ambiguous. */

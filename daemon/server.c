@@ -67,6 +67,7 @@ typedef struct lc_server {
     lc_session *sessions;
     uint32_t n_sessions;
     uint64_t pub_seq; /* compute publications seen */
+    uint32_t tile;    /* lightmap delta tile side: --tile, or chosen from the lightmap size */
     const char **asset_names, **material_names;
     lc_proto_limits limits;
     lws_sorted_usec_list_t tick;
@@ -151,12 +152,21 @@ static int session_tx_reserve(lc_session *ss, size_t need) {
     return 0;
 }
 
+/* The delta tile side: the configured one, or (0 = auto) the largest of 32, 16, 8 that still
+ * cuts the lightmap into at least 64 tiles, so small lightmaps get deltas worth sending. */
+static uint32_t server_tile_size(int configured, uint32_t w, uint32_t h) {
+    if (configured > 0) return (uint32_t)configured;
+    uint32_t t = 32;
+    while (t > 8 && lc_tiles_count(w, h, t) < 64) t /= 2;
+    return t;
+}
+
 /* Lightmap frame: a keyframe when forced, first, every keyframe_interval frames or when the
  * delta would not be smaller; otherwise a delta of the tiles where some texel moved by more
  * than delta_threshold (relative) from what this client last received. */
 static size_t session_encode_lightmap(lc_server *s, lc_session *ss, lc_frame_header *h, int force_key) {
     const lc_published *p = ss->frame;
-    const uint32_t W = p->lm_w, H = p->lm_h, S = (uint32_t)s->cfg->tile;
+    const uint32_t W = p->lm_w, H = p->lm_h, S = s->tile;
     const size_t texels = (size_t)W * H, tb = lc_frame_texel_bytes((lc_encoding)h->encoding);
     const uint32_t T = lc_tiles_count(W, H, S);
     int key = force_key || !ss->lm_sent || ss->lm_sent_texels != texels ||
@@ -175,13 +185,14 @@ static size_t session_encode_lightmap(lc_server *s, lc_session *ss, lc_frame_hea
             int dirty = 0;
             for (uint32_t y = y0; y < y1 && !dirty; y++)
                 for (uint32_t x = x0; x < x1 && !dirty; x++)
-                    for (int c = 0; c < 3; c++) {
-                        float a = p->lightmap[3 * ((size_t)y * W + x) + c], b = ss->lm_sent[3 * ((size_t)y * W + x) + c];
-                        if (fabsf(a - b) > thr * fmaxf(fmaxf(fabsf(a), fabsf(b)), floor_v)) {
-                            dirty = 1;
-                            break;
-                        }
-                    }
+                {
+                    /* relative to the texel's brightest channel: a dim channel (the blue of a
+                     * warm light) must not mark a tile dirty for changes nobody can see */
+                    const float *a = p->lightmap + 3 * ((size_t)y * W + x), *b = ss->lm_sent + 3 * ((size_t)y * W + x);
+                    float ref = fmaxf(fmaxf(fmaxf(a[0], a[1]), fmaxf(a[2], b[0])), fmaxf(fmaxf(b[1], b[2]), floor_v));
+                    for (int c = 0; c < 3; c++)
+                        if (fabsf(a[c] - b[c]) > thr * ref) dirty = 1;
+                }
             if (dirty) {
                 tiles[n_tiles++] = t;
                 delta_texels += (size_t)(x1 - x0) * (y1 - y0);
@@ -244,7 +255,7 @@ static size_t session_encode(lc_server *s, lc_session *ss, int stream, int force
         h.width = p->lm_w;
         h.height = p->lm_h;
         h.depth = 1;
-        h.tile_size = (uint32_t)s->cfg->tile;
+        h.tile_size = s->tile;
         return session_encode_lightmap(s, ss, &h, force_key);
     }
     size_t per = lc_frame_sh_value_bytes(enc), count, payload_len;
@@ -303,7 +314,7 @@ static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) 
     w.revision = s->state.revision;
     w.lightmap_width = s->v->lightmap_width;
     w.lightmap_height = s->v->lightmap_height;
-    w.tile = (uint32_t)s->cfg->tile;
+    w.tile = s->tile;
     memcpy(w.grid_origin, s->v->grid_origin, sizeof w.grid_origin);
     w.grid_cell = s->v->grid_cell;
     memcpy(w.grid_dims, s->v->grid_dims, sizeof w.grid_dims);
@@ -741,6 +752,7 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     s.cfg = cfg;
     s.bake = bake;
     s.v = lc_lcb_get(bake);
+    s.tile = server_tile_size(s.cfg->tile, s.v->lightmap_width, s.v->lightmap_height);
     lc_proto_default_limits(&s.limits);
     s.limits.max_message = (size_t)cfg->max_message;
     s.limits.max_depth = cfg->max_depth;

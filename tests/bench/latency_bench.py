@@ -10,7 +10,7 @@ is >= the revision the `ok` acknowledged.
 
 Reported per N: latency p50/p99/max (ms), frames received per client, the fraction of
 clients whose last frame is on the final revision, bytes per keyframe and per delta frame
-(header flags bit 0 / bit 1, whole WebSocket message length), the delta of a single small
+(header flags bit 0 / bit 1, whole WebSocket message length), the frame carrying a single small
 light move, and the daemon's peak RSS (VmHWM) and CPU seconds (utime+stime).
 
 Needs Debian's python3 with python3-websockets (asyncio API, 10.x). Example:
@@ -419,15 +419,19 @@ async def run_n(args, n):
             k_before, d_before = len(c0.key_bytes), len(c0.delta_bytes)
             _, fut = await ctl.send_light("small", base)
             r = await asyncio.wait_for(fut, 15)
+            move = (None, None, None, None, None)
             try:
-                await asyncio.wait_for(c0.wait_revision(r), 10)
+                move = await asyncio.wait_for(c0.wait_revision(r), 10)
                 await asyncio.sleep(0.5)  # progressive refinement frames of the same move
             except asyncio.TimeoutError:
                 pass
             ks, ds = c0.key_bytes[k_before:], c0.delta_bytes[d_before:]
-            dt = c0.delta_tiles[d_before:]
+            # The frame that carries the move (the first one of its revision): a delta, or a
+            # keyframe when the delta would have been larger (then it counts as 100%).
+            _, _, move_bytes, move_flags, move_tiles = move
             small = {"move_m": args.small_move, "keyframes": len(ks), "deltas": len(ds),
-                     "first_delta_bytes": ds[0] if ds else None, "first_delta_tiles": dt[0] if dt else None,
+                     "first_delta_bytes": move_bytes, "first_delta_tiles": move_tiles,
+                     "move_frame_keyframe": bool(move_flags & 1) if move_flags is not None else None,
                      "delta_bytes_max": max(ds) if ds else None}
 
         tpt = -(-lm["width"] // lm["tile"]) * -(-lm["height"] // lm["tile"])  # tiles in the lightmap

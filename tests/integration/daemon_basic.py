@@ -90,6 +90,9 @@ async def scenario(state_dir):
         check(welcome.get("type") == "welcome" and welcome.get("id") == 1, "welcome: %r" % welcome)
         check(welcome.get("role") == "controller" and welcome.get("protocol") == "lucent/1", "role/protocol")
         lm = welcome["scene"]["lightmap"]
+        # --tile 0 (default): 32, 16 or 8, the largest giving at least 64 tiles
+        want_tile = next((t for t in (32, 16) if -(-lm["width"] // t) * -(-lm["height"] // t) >= 64), 8)
+        check(lm["tile"] == want_tile, "automatic tile %r for %dx%d, expected %d" % (lm["tile"], lm["width"], lm["height"], want_tile))
         await ws.send(json.dumps({"type": "subscribe", "id": "s1", "stream": "lightmap", "encoding": "rgb9e5"}))
         ok = await recv_json(ws, "ok")
         check(ok.get("id") == "s1", "subscribe ok echoes id")
