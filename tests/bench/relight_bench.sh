@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Relight benchmark across presets: bakes the embedded Cornell box and sponza-dabrovic (when
-# ../shared/scenes has it) at the moderate and high presets, then runs lucent-bench on both
+# ../shared/scenes has it) at the moderate and high presets, sibenik and the conference room
+# (when present) at moderate, then runs lucent-bench on both
 # backends. Prints lucent-bench's tables (per-stage ms, where the time goes, the paper's
 # figures) and writes JSON (default bench/relight-results.json).
 # Usage: relight_bench.sh [--runs N] [--out FILE]
@@ -34,6 +35,16 @@ for preset in moderate high; do
   else
     echo "skip sponza-dabrovic: $shared/scenes/sponza-dabrovic absent" >&2
   fi
+done
+# The other shared scenes at the moderate preset only (their high bakes add little).
+for entry in "sibenik|$shared/scenes/sibenik/sibenik.obj|" \
+             "conference-room|$shared/scenes/conference-room/conference.obj|--scale 0.003"; do
+  IFS='|' read -r name file extra <<<"$entry"
+  if [ ! -f "$file" ]; then echo "skip $name: $file absent" >&2; continue; fi
+  echo "baking $name (moderate)..." >&2
+  # shellcheck disable=SC2086
+  "$bin/lucent-bake" bake "$file" -o "$tmp/$name-moderate.lcb" --quality moderate --quiet --no-write-glb $extra
+  bakes+=("$tmp/$name-moderate.lcb")
 done
 "$bin/lucent-bench" --runs "$runs" --backend both --json "$out" "${bakes[@]}"
 echo "wrote $out"
