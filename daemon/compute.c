@@ -232,14 +232,23 @@ int lc_compute_submit(lc_compute *c, const lc_state *state, uint64_t *job) {
 
 void lc_compute_discard(lc_compute *c, uint64_t job) {
     compute_job *drop = NULL;
+    lc_published *unpublish = NULL;
     pthread_mutex_lock(&c->lock);
     c->discarded[c->discard_next++ % LC_COMPUTE_DISCARDS] = job;
     if (c->pending && c->pending->id == job) {
         drop = c->pending;
         c->pending = NULL;
     }
+    /* A fast relight may already have published it: the service thread (the caller) has not
+     * taken it yet, since it only takes results between requests, so withdraw it. */
+    if (c->latest && c->latest->job == job) {
+        unpublish = c->latest;
+        c->latest = NULL;
+        if (--unpublish->refs > 0) unpublish = NULL;
+    }
     pthread_mutex_unlock(&c->lock);
     compute_job_free(drop);
+    published_free(unpublish);
 }
 
 lc_published *lc_compute_take_newer(lc_compute *c, uint64_t *seen) {

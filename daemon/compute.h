@@ -41,8 +41,9 @@ lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int r
  * service thread sends them. */
 int lc_compute_submit(lc_compute *c, const lc_state *state, uint64_t *job);
 /* Service thread: the submission `job` must never be published (its change could not be
- * stored): dropped if pending, its results discarded if in flight. Remembers the last
- * LC_COMPUTE_DISCARDS ids. */
+ * stored): dropped if pending, its results discarded if in flight, withdrawn if already
+ * published (the service thread cannot have taken it: it calls this within the request).
+ * Remembers the last LC_COMPUTE_DISCARDS ids. */
 #define LC_COMPUTE_DISCARDS 8
 void lc_compute_discard(lc_compute *c, uint64_t job);
 /* Service thread: a new reference to the newest result (NULL before the first), or NULL if

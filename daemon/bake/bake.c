@@ -94,6 +94,8 @@ static const lc_opt bake_options[] = {
     {"dilate", LC_OPT_INT, OFF(dilate), 0, 16, "2", NULL, "lightmap seam dilation passes", NULL, NULL},
     {"surfels", LC_OPT_INT, OFF(surfels), 16, 4194304, "32768", NULL, "number of surfels", NULL, NULL},
     {"relax", LC_OPT_INT, OFF(relax), 0, 64, "4", NULL, "surfel relaxation iterations", NULL, NULL},
+    {"drop-buried", LC_OPT_BOOL, OFF(drop_buried), 0, 1, "false", NULL,
+     "drop surfels inside geometry (fewer than --surfels remain)", NULL, NULL},
     {"hierarchy", LC_OPT_ENUM, OFF(hierarchy), 0, 0, "aac", "aac|kdtree",
      "surfel hierarchy: agglomerative clustering (PIC metric) or kd-tree", NULL, NULL},
     {"links", LC_OPT_INT, OFF(links), 1, 1024, "128", NULL, "links per cache (n_L)", NULL, NULL},
@@ -355,6 +357,72 @@ static const char *bake_light_type_name(lc_light_type t) {
     return "point";
 }
 
+
+/* Buried surfels: a surfel whose hemisphere mostly sees back faces lies inside closed
+ * geometry (the floor under a column base, faces covered by other faces). No cache can see
+ * it and no light reaches it, but in the hierarchy it shares nodes with visible surfels, so
+ * it pulls every node average down (Sponza under the sun: lightmap mean 24.0% -> 22.6%,
+ * bias -19.0% -> -15.8%). Opt-in (--drop-buried): fewer surfels than --surfels remain. BAKE_BURIED_RAYS fixed directions (a spherical Fibonacci
+ * hemisphere in the surfel's frame): deterministic for any thread count. */
+#define BAKE_BURIED_RAYS 32u
+#define BAKE_BURIED_FRACTION 0.5f
+
+typedef struct {
+    const lc_rt *rt;
+    const lc_lcb_surfel *s;
+    uint8_t *buried;
+} bake_buried_ctx;
+
+static void bake_buried_range(void *arg, size_t begin, size_t end, int thread) {
+    (void)thread;
+    bake_buried_ctx *c = arg;
+    const uint32_t R = BAKE_BURIED_RAYS;
+    for (size_t i = begin; i < end; i++) {
+        const lc_lcb_surfel *x = &c->s[i];
+        lc_vec3 n = lc_v3_load(x->normal), t, b;
+        lc_v3_basis(n, &t, &b);
+        float pm = fmaxf(fabsf(x->position[0]), fmaxf(fabsf(x->position[1]), fabsf(x->position[2])));
+        float org[3];
+        lc_v3_store(org, lc_v3_add(lc_v3_load(x->position), lc_v3_scale(n, 1e-4f + 1e-6f * pm)));
+        uint32_t back = 0;
+        for (uint32_t j = 0; j < R; j++) {
+            float z = 1.0f - ((float)j + 0.5f) / (float)R, r = sqrtf(fmaxf(0.0f, 1 - z * z));
+            float phi = 2.0f * (float)M_PI * (float)j * 0.6180339887f;
+            float dir[3];
+            lc_v3_store(dir, lc_v3_add(lc_v3_add(lc_v3_scale(t, r * cosf(phi)), lc_v3_scale(b, r * sinf(phi))),
+                                       lc_v3_scale(n, z)));
+            lc_hit h;
+            if (lc_rt_intersect(c->rt, org, dir, 0.0f, INFINITY, &h) && h.backface) back++;
+        }
+        c->buried[i] = (float)back >= BAKE_BURIED_FRACTION * (float)R;
+    }
+}
+
+/* Drops buried surfels in place (surfels and their triangles stay paired, order kept).
+ * Keeps everything when all would go. Returns the number dropped, or -1 (out of memory). */
+static int64_t bake_drop_buried(const lc_rt *rt, lc_lcb_surfel *surfels, uint32_t *tri, uint32_t *n) {
+    uint8_t *bur = malloc(*n ? *n : 1);
+    if (!bur) return -1;
+    bake_buried_ctx bc = {rt, surfels, bur};
+    lc_parallel_for(*n, 256, bake_buried_range, &bc);
+    uint32_t k = 0;
+    for (uint32_t i = 0; i < *n; i++) k += !bur[i];
+    if (k > 0 && k < *n) {
+        k = 0;
+        for (uint32_t i = 0; i < *n; i++) {
+            if (bur[i]) continue;
+            surfels[k] = surfels[i];
+            tri[k++] = tri[i];
+        }
+    } else {
+        k = *n;
+    }
+    free(bur);
+    int64_t dropped = (int64_t)*n - k;
+    *n = k;
+    return dropped;
+}
+
 /* Initial state for the daemon: the scene's lights and emissive materials. */
 static cJSON *bake_lights_json(const lc_scene *scene) {
     cJSON *arr = cJSON_CreateArray();
@@ -522,6 +590,10 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
                            .relax_iterations = (uint32_t)s->relax,
                            .seed = (uint64_t)s->seed};
     if (lc_surfels_generate(&scene, &sp, &surfels, &surfel_tri, &n_surfels, err, errlen) != 0) goto err;
+    int64_t n_buried = s->drop_buried ? bake_drop_buried(rt, surfels, surfel_tri, &n_surfels) : 0;
+    if (n_buried < 0) goto oom;
+    if (!s->quiet && n_buried > 0)
+        lc_info("bake", "dropped %lld buried surfels (inside geometry), %u left", (long long)n_buried, n_surfels);
     bake_stage(r, "surfels", &t0, s->quiet);
 
     /* 8. hierarchy (reorders surfels) */

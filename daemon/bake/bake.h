@@ -34,6 +34,7 @@ typedef struct lc_bake_settings {
     int dilate;
     int surfels;
     int relax;
+    int drop_buried; /* drop surfels inside geometry (changes the surfel count) */
     int hierarchy;
     int links;
     int node_samples;

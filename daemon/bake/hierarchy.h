@@ -1,7 +1,8 @@
 /* hierarchy: a binary tree over the surfels for hierarchical light transport.
  * LC_HIERARCHY_AAC: approximate agglomerative clustering (Gu et al. 2013) with the PIC
  * metric d(a,b) = |x_a - x_b|^2 / extent^2 + C_n (1 - n_a.n_b) + C_b |A_a - A_b| / max(A_a, A_b),
- * C_n = 0.1, C_b = 0.02. LC_HIERARCHY_KDTREE: median split on the longest axis (reference). */
+ * C_n = 0.1, C_b = 0.02, plus C_e = 1 unless both clusters are pure and share an emission class
+ * (emitters get their own subtrees; lc_hierarchy_quality leaves C_e out). LC_HIERARCHY_KDTREE: median split on the longest axis (reference). */
 #ifndef LC_HIERARCHY_H
 #define LC_HIERARCHY_H
 #include <stddef.h>

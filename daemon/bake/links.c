@@ -17,6 +17,16 @@
  * fraction of its unoccluded estimate, so it is refined only when budget is left over. */
 #define LINKS_OCCLUDED_PRIORITY 0.05
 
+/* Refinement priority = visible solid angle x (1 + LINKS_SPREAD_K x CV), CV the coefficient
+ * of variation of the per-surfel visible solid angle w over the node's sampled surfels
+ * (occluded, back-facing and below-horizon samples count as w = 0). A link carries the
+ * node's area-weighted mean radiosity, the cache sees the w-weighted mean: the two differ
+ * by Cov(w, B) / mean(w) <= CV(w) x std(B). A node seen evenly (CV = 0) is exact whatever
+ * its radiosity; a partly hidden, horizon-clipped or very oblique one is what to split.
+ * Measured (moderate, 128 links): Cornell lightmap mean 6.49% -> 6.28%; Sponza p95 67% ->
+ * 61%, grid p95 53% -> 44%. */
+#define LINKS_SPREAD_K 1.0
+
 /* Stream salts: refinement and the final estimate use independent jitter. */
 #define LINKS_PASS_REFINE 0x5EF1E5ull
 #define LINKS_PASS_FINAL 0xF17A1ull
@@ -49,6 +59,8 @@ typedef struct {
     double unocc;   /* the same without visibility */
     double m[3];    /* sum of w * h1 * dir over visible samples */
     double wsum;    /* sum of visible w (unscaled) */
+    double w2sum;   /* sum of visible w^2 (unscaled): the spread of w over the samples */
+    uint32_t n;     /* samples taken (occluded and back-facing ones count with w = 0) */
 } links_est;
 
 typedef struct {
@@ -364,6 +376,7 @@ static links_est links_estimate(const links_ctx *ctx, links_cache *lc, uint32_t 
         if (cos_a < -1) cos_a = -1;
         double h1 = 0.5 * (1.0 + cos_a);
         e.wsum += w;
+        e.w2sum += w * w;
         for (int a = 0; a < 3; a++) e.m[a] += w * h1 * dir[a];
         if (sh) {
             float y[LC_SH_MAX_COEFFS];
@@ -374,6 +387,7 @@ static links_est links_estimate(const links_ctx *ctx, links_cache *lc, uint32_t 
             }
         }
     }
+    e.n = taken;
     e.omega = e.wsum * stratum;
     e.unocc = sum_unocc * stratum;
     if (sh)
@@ -431,11 +445,19 @@ static int links_consider(const links_ctx *ctx, links_scratch *sc, links_cache *
     it.node = node;
     int probed = links_probe_estimate(ctx, sc, lc, node, &it.est, NULL, 0);
     if (!probed) it.est = links_estimate(ctx, lc, node, k, LINKS_PASS_REFINE, NULL, 0);
+    /* Spread of w (see LINKS_SPREAD_K): near nodes take their solid angle from the probe
+     * rays, so they are sampled too, for the spread only. No visible sample at all: the
+     * largest CV n samples can show. */
+    links_est sp = it.est;
+    if (probed) sp = links_estimate(ctx, lc, node, k, LINKS_PASS_REFINE, NULL, 0);
+    double cv = 0;
+    if (sp.n > 1)
+        cv = sp.wsum > 0 ? sqrt(fmax(0.0, sp.n * sp.w2sum / (sp.wsum * sp.wsum) - 1.0)) : sqrt((double)sp.n - 1.0);
     int internal = nd->child[0] != LC_NONE && nd->child[1] != LC_NONE && nd->child[0] < ctx->h->n_nodes &&
                    nd->child[1] < ctx->h->n_nodes;
     int exhaustive = nd->surfel_count <= k && !probed;
     if (it.est.omega > 0) {
-        it.prio = it.est.omega;
+        it.prio = it.est.omega * (1.0 + LINKS_SPREAD_K * cv);
     } else {
         if (exhaustive || !internal) return 0; /* every surfel was tested and none is visible */
         it.prio = LINKS_OCCLUDED_PRIORITY * it.est.unocc;

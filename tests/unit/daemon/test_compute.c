@@ -1,6 +1,6 @@
 /* The compute thread: every submission gets an increasing job id and its result carries it;
- * latest wins; a discarded submission (its journal write failed) is never published, while
- * the next one is. */
+ * latest wins; a discarded submission (its journal write failed) is never handed out —
+ * whether it was pending, running or already published — while the next one is. */
 #include <libwebsockets.h>
 #include <time.h>
 
@@ -67,6 +67,25 @@ int main(void) {
         CHECK(got3, "the resubmission was published (round %d)", round);
         job1 = job3;
     }
+    /* withdrawn when it was already published but not yet taken (a relight faster than the
+     * journal write) */
+    uint64_t before = lc_compute_count(c);
+    s.revision++;
+    CHECK(lc_compute_submit(c, &s, &job2) == 0, "submit");
+    for (int i = 0; i < 1000 && lc_compute_count(c) == before; i++) {
+        struct timespec ts = {0, 2 * 1000 * 1000};
+        nanosleep(&ts, NULL);
+    }
+    CHECK(lc_compute_count(c) > before, "published");
+    lc_compute_discard(c, job2);
+    lc_published *w = lc_compute_take_newer(c, &seen);
+    CHECK(w == NULL || w->job != job2, "a withdrawn result was handed out");
+    lc_published_release(c, w);
+    s.revision--;
+    CHECK(lc_compute_submit(c, &s, &job3) == 0, "resubmit after withdrawal");
+    w = wait_pub(c, &seen, 5000);
+    CHECK(w && w->job == job3, "the resubmission is published after a withdrawal");
+    lc_published_release(c, w);
     lc_compute_stop(c);
     lc_state_release(&s);
     lws_context_destroy(ctx);

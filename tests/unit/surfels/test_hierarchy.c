@@ -268,6 +268,46 @@ static double build_quality(lc_lcb_surfel *(*make)(uint32_t, uint64_t), uint32_t
     return q;
 }
 
+/* A flush ceiling lamp (Cornell-box-like): a 2 x 2 m ceiling at y = 2 facing down, its
+ * central 0.5 x 0.4 m patch an emissive material, other surfels non-emissive (two
+ * materials), plus a floor. The AAC emission term must give the lamp its own subtree: some
+ * node holds exactly the lamp surfels (without the term the lamp was clustered with the
+ * ceiling and no node was lamp-only). Returns the number of lamp surfels. */
+static uint32_t flush_lamp_case(uint32_t n, int *lamp_only_root, uint32_t *pure_nodes) {
+    lc_lcb_surfel *s = calloc(n, sizeof *s);
+    lc_rng r = lc_rng_seed(7, 3);
+    uint32_t n_lamp = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        float u = 2 * lc_rng_float(&r), v = 2 * lc_rng_float(&r);
+        int ceiling = i % 2;
+        s[i].position[0] = u, s[i].position[1] = ceiling ? 2.0f : 0.0f, s[i].position[2] = v;
+        set_normal(&s[i], 0, ceiling ? -1.0f : 1.0f, 0);
+        s[i].area = 8.0f / (float)n;
+        s[i].material = ceiling ? 0 : 2;
+        s[i].cache = LC_NONE;
+        if (ceiling && fabsf(u - 1) < 0.25f && fabsf(v - 1) < 0.2f) {
+            s[i].material = 1;
+            s[i].emission[0] = 17, s[i].emission[1] = 12, s[i].emission[2] = 4;
+            n_lamp++;
+        }
+    }
+    lc_hierarchy h = {0};
+    char err[256] = "";
+    CHECK(lc_hierarchy_build(s, n, LC_HIERARCHY_AAC, &h, NULL, err, sizeof err) == 0, "flush lamp: %s", err);
+    *lamp_only_root = 0;
+    *pure_nodes = 0;
+    for (uint32_t i = 0; i < h.n_nodes; i++) {
+        const lc_lcb_node *nd = &h.nodes[i];
+        uint32_t lamp = 0;
+        for (uint32_t j = nd->first_surfel; j < nd->first_surfel + nd->surfel_count; j++) lamp += s[j].material == 1;
+        if (lamp == nd->surfel_count && nd->surfel_count > 1) (*pure_nodes)++;
+        if (lamp == n_lamp && nd->surfel_count == n_lamp) *lamp_only_root = 1;
+    }
+    lc_hierarchy_release(&h);
+    free(s);
+    return n_lamp;
+}
+
 int main(void) {
     char err[256] = "";
     lc_hierarchy h = {0};
@@ -307,6 +347,16 @@ int main(void) {
         }
         free(c);
         free(s);
+    }
+
+    /* Emitters get their own subtree. */
+    for (uint32_t n = 2000; n <= 32000; n *= 4) {
+        int root = 0;
+        uint32_t pure = 0, n_lamp = flush_lamp_case(n, &root, &pure);
+        fprintf(stderr, "flush lamp n=%u: %u lamp surfels, lamp-only subtree %s, %u pure internal lamp nodes\n", n,
+                n_lamp, root ? "yes" : "no", pure);
+        CHECK(n_lamp > 10, "flush lamp n=%u: too few lamp surfels (%u)", n, n_lamp);
+        CHECK(root, "flush lamp n=%u: no node holds exactly the %u lamp surfels", n, n_lamp);
     }
 
     fprintf(stderr, "quality (area-weighted mean PIC merge cost, lower is better):\n");
