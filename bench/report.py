@@ -31,6 +31,18 @@ def load(path):
         return None
 
 
+def cpu_shares(out_dir):
+    """Busy and stolen CPU shares over the run, from /proc/stat snapshots bench/run took."""
+    try:
+        a = [int(x) for x in open(os.path.join(out_dir, "procstat.start")).read().split()[1:]]
+        b = [int(x) for x in open(os.path.join(out_dir, "procstat.end")).read().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    d = [y - x for x, y in zip(a, b)]
+    total = sum(d[:8]) or 1
+    return {"steal_fraction": round(d[7] / total, 3), "idle_fraction": round((d[3] + d[4]) / total, 3)}
+
+
 def machine(lucent_bench_json):
     cpu = platform.processor() or platform.machine()
     try:
@@ -189,11 +201,13 @@ def main():
     lat = [j for j in (load(p) for p in sorted(glob.glob(os.path.join(a.out_dir, "latency-*.json")))) if j]
     fid = load(os.path.join(a.out_dir, "fidelity.json"))
     m = machine(relight)
+    m["cpu_during_run"] = cpu_shares(a.out_dir)
     md = ["# lucent benchmark results", "",
           "Written by `bench/run` on %s (commit %s). Machine: %s, %s cores, %s GiB, %s; memcpy %s GB/s "
-          "(read+write, measured by lucent-bench — this shared machine's speed varies between runs, compare "
-          "numbers from one report only)." % (m["date"], m["commit"], m["cpu"], m["cores"], m["memory_gib"], m["os"],
-                                              fmt(m["memcpy_gbps"])), "",
+          "(read+write, measured by lucent-bench); CPU stolen by the hypervisor during the run: %s — this shared "
+          "machine's speed varies between runs, compare numbers from one report only." % (
+              m["date"], m["commit"], m["cpu"], m["cores"], m["memory_gib"], m["os"], fmt(m["memcpy_gbps"]),
+              "%.0f%%" % (100 * m["cpu_during_run"]["steal_fraction"]) if m["cpu_during_run"] else "unknown"), "",
           "Paper figures (DESIGN.md 4.1, PIC on Sponza with 10 585 caches): moderate (3 bands, 128 links, 32k "
           "surfels) CPU 21.1 ms (i7-4790S) / 33.8 ms (i7-4510U, 2 cores), GPU 3.65 ms (GTX 980); high (4 bands, "
           "254 links, 128k surfels) CPU 131 ms / GPU 7.17 ms; 32.2 MiB at moderate.", ""]
