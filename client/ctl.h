@@ -35,6 +35,11 @@ void ctl_print_server_error(const char *reply_json);
 /* Parses "x,y,z" style lists of exactly n finite numbers. Returns 0 or -1. */
 int ctl_parse_floats(const char *s, double *out, int n);
 
+/* The script parser without playing (ctl_script.c; the fuzz target's entry): reads JSON
+ * Lines from f, reports malformed lines as NAME:LINE: on stderr. *messages = valid messages,
+ * *errors = malformed lines. Returns 0, or -1 when f cannot be read or memory runs out. */
+int ctl_script_validate(FILE *f, const char *name, size_t *messages, long *errors);
+
 /* Streaming commands (ctl_stream.c). */
 int ctl_cmd_watch(int argc, char **argv);
 int ctl_cmd_snapshot(int argc, char **argv);

@@ -8,6 +8,13 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* Global options (ctl.h): defaults here, set by main before dispatch. */
+const char *ctl_url = "ws://127.0.0.1:7700/";
+const char *ctl_token = "";
+int ctl_insecure = 0;
+const char *ctl_ca_file = NULL;
+int ctl_json = 0;
+
 #define CTL_ERR_MAX 512
 #define CTL_STRING_MAX 256 /* PROTOCOL.md §1.3: longest string field */
 

@@ -198,19 +198,17 @@ bad:
 
 /* Reads and validates the whole file. Returns 0 (s->errors counts malformed lines) or -1
  * when the file cannot be read (reported). */
-static int ctl_script_load(const char *path, ctl_script *s) {
-    FILE *f = strcmp(path, "-") == 0 ? stdin : fopen(path, "r");
+static void ctl_script_release(ctl_script *s);
+
+/* Reads and validates every line of f into s (malformed lines counted in s->errors and
+ * reported as NAME:LINE: on stderr). Returns 0, or -1 when f cannot be read. */
+static int ctl_script_read(FILE *f, ctl_script *s) {
     char *line = NULL;
     size_t cap = 0;
     ssize_t n;
     long lineno = 0;
     double prev_at = 0;
     int rc = 0;
-    s->name = f == stdin ? "<stdin>" : path;
-    if (!f) {
-        fprintf(stderr, "lucentctl: script: cannot open %s: %s\n", path, strerror(errno));
-        return -1;
-    }
     while ((n = getline(&line, &cap, f)) >= 0) {
         lineno++;
         size_t len = (size_t)n;
@@ -236,7 +234,29 @@ static int ctl_script_load(const char *path, ctl_script *s) {
         rc = -1;
     }
     free(line);
+    return rc;
+}
+
+static int ctl_script_load(const char *path, ctl_script *s) {
+    FILE *f = strcmp(path, "-") == 0 ? stdin : fopen(path, "r");
+    s->name = f == stdin ? "<stdin>" : path;
+    if (!f) {
+        fprintf(stderr, "lucentctl: script: cannot open %s: %s\n", path, strerror(errno));
+        return -1;
+    }
+    int rc = ctl_script_read(f, s);
     if (f != stdin) fclose(f);
+    return rc;
+}
+
+int ctl_script_validate(FILE *f, const char *name, size_t *messages, long *errors) {
+    ctl_script s;
+    memset(&s, 0, sizeof s);
+    s.name = name;
+    int rc = ctl_script_read(f, &s);
+    if (messages) *messages = s.n;
+    if (errors) *errors = s.errors;
+    ctl_script_release(&s);
     return rc;
 }
 

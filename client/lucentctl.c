@@ -6,11 +6,6 @@
 
 #include "ctl.h"
 
-const char *ctl_url = "ws://127.0.0.1:7700/";
-const char *ctl_token = "";
-int ctl_insecure = 0;
-const char *ctl_ca_file = NULL;
-int ctl_json = 0;
 
 typedef struct ctl_command {
     const char *name;
