@@ -23,6 +23,7 @@ layout(location = 0) uniform uint u_count;
 layout(location = 1) uniform uint u_base;
 layout(location = 2) uniform uint u_links_per_cache;
 layout(location = 3) uniform uint u_use_list; // 1: caches are list[idx] (single window)
+layout(location = 4) uniform int u_texel_nc;   // coefficients gathered at texel caches (lc_transport_texel_bands^2)
 
 const int BAND_OF[64] = int[64](0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5,
                                 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7);
@@ -114,6 +115,7 @@ void main() {
         acc2[j] = 0.0;
     }
     uint used = caches[c].link_count;
+    int nc_here = (caches[c].flags & 1u) != 0u ? min(u_texel_nc, NC) : NC; // 1 = LC_CACHE_TEXEL
     uint lb = local * u_links_per_cache;
     for (uint k = 0u; k < used; k++) {
         Link lk = links[lb + k];
@@ -126,6 +128,7 @@ void main() {
         precise float p1 = flux[3u * lk.node + 1u] * f;
         precise float p2 = flux[3u * lk.node + 2u] * f;
         for (int j = 0; j < NC; j++) {
+            if (j >= nc_here) break;
             precise float w = cone[hb + uint(BAND_OF[j])] * y[j];
             acc0[j] += w * p0;
             if (j < NCC) {

@@ -114,6 +114,7 @@ typedef struct {
     const uint32_t *list; /* cache indices, or NULL = all caches */
     int bands, chroma_bands;
     int chroma;           /* flux is YCoCg: Co/Cg use chroma_bands only */
+    int texel_bands;      /* bands gathered at texel caches (see lc_transport_texel_bands) */
 } tcpu_gather_job;
 
 static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
@@ -255,22 +256,28 @@ static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
     tcpu *t = job->t;
     const lc_lcb_view *v = t->v;
     const int nc = job->bands * job->bands;
-    const int ncc = job->chroma ? job->chroma_bands * job->chroma_bands : nc;
+    const int ncc_all = job->chroma ? job->chroma_bands * job->chroma_bands : nc;
     const uint32_t nl = v->links_per_cache;
     for (size_t i = begin; i < end; i++) {
         uint32_t c = job->list ? job->list[i] : (uint32_t)i;
         const lc_lcb_link *lk = v->links + (size_t)c * nl;
         uint32_t used = v->caches[c].link_count;
+        const int bands = (v->caches[c].flags & LC_CACHE_TEXEL) ? job->texel_bands : job->bands;
+        const int ncu = bands * bands, ncc = ncc_all < ncu ? ncc_all : ncu;
         float acc[3][TCPU_MAX_COEFFS];
-        if (job->bands <= 4) {
+        if (bands <= 4) {
             float a16[3][16];
-            tcpu_gather_blocked(t, lk, used, job->bands, ncc, a16);
+            tcpu_gather_blocked(t, lk, used, bands, ncc, a16);
             for (int ch = 0; ch < 3; ch++) memcpy(acc[ch], a16[ch], sizeof a16[ch]);
         } else {
-            tcpu_gather_generic(t, lk, used, job->bands, ncc, acc);
+            tcpu_gather_generic(t, lk, used, bands, ncc, acc);
         }
         float *out = t->cache_sh + (size_t)c * t->coeff_cap * 3;
         for (int j = 0; j < nc; j++) {
+            if (j >= ncu) { /* bands this cache does not carry */
+                out[3 * j + 0] = out[3 * j + 1] = out[3 * j + 2] = 0;
+                continue;
+            }
             float a = acc[0][j], b = j < ncc ? acc[1][j] : 0, g = j < ncc ? acc[2][j] : 0;
             if (job->chroma) { /* Y, Co, Cg -> RGB (Malvar-Sullivan YCoCg-R, linear) */
                 float tt = a - g;
@@ -404,7 +411,8 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
         double t3 = lc_clock_ms();
         ms_pull += t3 - t2;
         /* Intermediate passes only need the caches some surfel reads. */
-        tcpu_gather_job job = {t, last ? NULL : t->feedback_list, bands, (int)st->chroma_bands, chroma};
+        tcpu_gather_job job = {t, last ? NULL : t->feedback_list, bands, (int)st->chroma_bands, chroma,
+                               lc_transport_texel_bands(st)};
         lc_parallel_for(last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
         double t4 = lc_clock_ms();
         ms_gather += t4 - t3;

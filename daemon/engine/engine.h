@@ -97,7 +97,8 @@ typedef struct lc_engine_frame {
                                  first bands^2 are set) */
     const float *lightmap_sh; /* W*H*sh_stride*3 radiance SH (RGB interleaved per coefficient), or NULL */
     uint32_t n_caches;
-    const float *cache_sh;    /* n_caches*sh_stride*3 incident radiance SH at each cache */
+    const float *cache_sh;    /* n_caches*sh_stride*3 incident radiance SH at each cache (texel
+                                 caches: bands 0-1 only, zeros above, unless sh_lightmap) */
     uint32_t grid_dims[3];
     float grid_origin[3], grid_cell;
     const float *grid_sh;     /* cells*9*3: L2 irradiance SH (cosine-convolved: E(n) = sum c_i y_i(n)) */

@@ -41,6 +41,14 @@ typedef struct lc_transport_ops {
     int (*run)(void *impl, const lc_transport_input *in, lc_engine_frame *frame, char *err, size_t errlen);
 } lc_transport_ops;
 
+/* Bands a texel cache gathers. Its irradiance reads band 1 only (band 0 with one band), so
+ * the higher bands are not gathered there unless the per-texel SH lightmap is asked for:
+ * at 3 bands this drops 5 of 9 coefficients at every texel-cache link. The cache_sh of a
+ * texel cache holds zeros above these bands. Both backends use it (identical outputs). */
+static inline int lc_transport_texel_bands(const lc_engine_settings *st) {
+    return st->sh_lightmap || st->bands < 2 ? (int)st->bands : 2;
+}
+
 extern const lc_transport_ops lc_transport_cpu;
 extern const lc_transport_ops lc_transport_egl;
 

@@ -409,6 +409,7 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
         lc_gl_bind(6, t->b_list, 0, (size_t)t->n_feedback * 4);
         lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
         glProgramUniform1ui(gather, 2, v->links_per_cache);
+        glProgramUniform1i(gather, 4, lc_transport_texel_bands(st) * lc_transport_texel_bands(st));
         const size_t link_bytes = (size_t)v->links_per_cache * sizeof(lc_lcb_link), sh_bytes = (size_t)nc * 12;
         if (!last && single_window && t->n_feedback < v->n_caches) {
             lc_gl_bind(0, t->b_links, 0, (size_t)v->n_caches * link_bytes);

@@ -50,6 +50,28 @@ static void test_closed_box(void) {
     double mean = sum / n;
     CHECK(fabs(mean / expect - 1) < 0.02, "closed box: mean texel irradiance %.4f, expected %.4f (2%%)", mean, expect);
     CHECK(worst < 0.03, "closed box: worst texel off by %.1f%%", worst * 100);
+    /* Texel caches gather bands 0-1 only (all their irradiance needs), grid caches all three;
+     * with the SH lightmap requested, texel caches carry every band again. */
+    {
+        const uint32_t stride = fr->sh_stride * 3, tc = 0, gc = f.v->n_texel_caches;
+        int zero_texel = 1, band1 = 0, band2_grid = 0;
+        for (int j = 4; j < 9; j++)
+            for (int k = 0; k < 3; k++) {
+                zero_texel &= fr->cache_sh[tc * stride + 3 * j + k] == 0.0f;
+                for (uint32_t g = gc; g < f.v->n_caches; g++) band2_grid |= fr->cache_sh[(size_t)g * stride + 3 * j + k] != 0.0f;
+            }
+        for (int j = 1; j < 4; j++) band1 |= fr->cache_sh[tc * stride + 3 * j] != 0.0f;
+        CHECK(zero_texel && band1 && band2_grid, "texel band limit: zeros above band 1 %d, band 1 %d, grid band 2 %d",
+              zero_texel, band1, band2_grid);
+        lc_engine_state st2 = st;
+        st2.settings.sh_lightmap = 1;
+        const lc_engine_frame *fr2;
+        CHECK(lc_engine_relight(f.engine, &st2, &fr2, err, sizeof err) == 0, "relight with sh_lightmap: %s", err);
+        int band2 = 0;
+        for (int j = 4; j < 9; j++) band2 |= fr2->cache_sh[tc * stride + 3 * j] != 0.0f;
+        CHECK(band2, "with the SH lightmap, texel caches carry band 2");
+        CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight again: %s", err);
+    }
     /* Surfel radiosity. */
     double bsum = 0;
     for (uint32_t s = 0; s < f.v->n_surfels; s++) bsum += fr->surfel_radiosity[3 * s];
