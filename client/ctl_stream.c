@@ -458,10 +458,11 @@ int ctl_cmd_snapshot(int argc, char **argv) {
         cJSON_AddNumberToObject(e, "width", f.width);
         cJSON_AddNumberToObject(e, "height", f.height);
         cJSON_AddNumberToObject(e, "depth", f.depth);
-        cJSON_AddNumberToObject(e, "bytes", (double)f.raw_len);
+        cJSON_AddNumberToObject(e, "last_frame_bytes", (double)f.raw_len); /* the frame that completed the copy */
+        cJSON_AddBoolToObject(e, "last_frame_keyframe", f.keyframe);
         if (!ctl_json)
-            printf("%s: revision %llu, %ux%ux%u, %zu B -> %s/%s.%s\n", stream_name(s), (unsigned long long)f.revision,
-                   f.width, f.height, f.depth, f.raw_len, dir, stream_name(s),
+            printf("%s: revision %llu, %ux%ux%u -> %s/%s.%s\n", stream_name(s), (unsigned long long)f.revision,
+                   f.width, f.height, f.depth, dir, stream_name(s),
                    s == LC_CLIENT_LIGHTMAP ? "{exr,png}" : "{json,bin}");
     }
     if (rc == CTL_EXIT_OK) {
