@@ -11,7 +11,9 @@
 #include <cjson/cJSON.h>
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
 #include <signal.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -493,7 +495,9 @@ static void usage_latency(FILE *o) {
             "sends N light.set updates for a dim probe point light (ID, default lucentctl-probe;\n"
             "removed afterwards) and times each from sending to the first frame whose revision\n"
             "includes it. Prints min/p50/p90/p99/max. Needs a controller token.\n"
-            "  --count N (default 20)   --interval SECONDS between updates (default 0.1)\n");
+            "  --count N (default 20)   --interval SECONDS between updates (default 0.1)\n"
+            "  --clients N (default 1)  subscribers measured: N-1 more connections, one thread each;\n"
+            "                           update_to_frame then has count x N samples\n");
 }
 
 static int cmp_double(const void *a, const void *b) {
@@ -527,12 +531,67 @@ static void latency_report(const char *name, double *v, int n, cJSON *json) {
         printf("%-16s %5d %9.2f %9.2f %9.2f %9.2f %9.2f\n", name, n, st[0], st[1], st[2], st[3], st[4]);
 }
 
+/* --clients N: N-1 more subscribers, each on its own thread with its own connection (a
+ * blocking lc_client per thread), recording when each revision's first frame arrived. */
+typedef struct latency_viewer {
+    pthread_t thread;
+    int started, ok;
+    atomic_int ready;
+    const atomic_int *stop;
+    uint64_t *rev; /* revision of each frame received, with its arrival time (monotonic ms) */
+    double *at;
+    size_t n, cap;
+} latency_viewer;
+
+static void latency_viewer_frame(lc_client *c, const lc_client_frame *f, void *user) {
+    (void)c;
+    latency_viewer *v = user;
+    if (v->n == v->cap) {
+        size_t cap = v->cap ? 2 * v->cap : 256;
+        uint64_t *r = realloc(v->rev, cap * sizeof *r);
+        if (r) v->rev = r;
+        double *a = realloc(v->at, cap * sizeof *a);
+        if (a) v->at = a;
+        if (!r || !a) return;
+        v->cap = cap;
+    }
+    v->rev[v->n] = f->revision;
+    v->at[v->n++] = mono_ms();
+}
+
+/* Thread: one viewer. */
+static void *latency_viewer_main(void *arg) {
+    latency_viewer *v = arg;
+    int rc = 0;
+    char err[256];
+    lc_client *c = ctl_connect(NULL, &rc);
+    if (c) {
+        lc_client_callbacks cb = {latency_viewer_frame, NULL, NULL, v};
+        lc_client_set_callbacks(c, &cb);
+        v->ok = lc_client_subscribe(c, LC_CLIENT_LIGHTMAP, 0, 0, err, sizeof err) == 0 &&
+                lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, 0, 0, CTL_TIMEOUT_MS * 2, NULL, err, sizeof err) == 0;
+        if (!v->ok) fprintf(stderr, "lucentctl: latency viewer: %s\n", err);
+    }
+    atomic_store(&v->ready, 1);
+    while (v->ok && !atomic_load(v->stop))
+        if (lc_client_poll(c, 20) != 0) break;
+    lc_client_close(c);
+    return NULL;
+}
+
+/* Milliseconds from t_send to the first frame of revision >= want, or -1. */
+static double latency_viewer_delay(const latency_viewer *v, uint64_t want, double t_send) {
+    for (size_t i = 0; i < v->n; i++)
+        if (v->rev[i] >= want && v->at[i] >= t_send) return v->at[i] - t_send;
+    return -1;
+}
+
 int ctl_cmd_latency(int argc, char **argv) {
     if (ctl_wants_help(argc, argv)) {
         usage_latency(stdout);
         return CTL_EXIT_OK;
     }
-    double count = 20, interval = 0.1;
+    double count = 20, interval = 0.1, clients = 1;
     const char *light = "lucentctl-probe";
     for (int i = 1; i < argc; i++) {
         const char *k = argv[i];
@@ -547,16 +606,22 @@ int ctl_cmd_latency(int argc, char **argv) {
         } else if (!strcmp(k, "--light")) {
             if (!*v || strlen(v) > 64) return ctl_usage_error("latency: --light '%s' must be 1..64 bytes", v);
             light = v;
+        } else if (!strcmp(k, "--clients")) {
+            if (parse_positive(v, &clients) != 0 || clients != floor(clients) || clients > 1000)
+                return ctl_usage_error("latency: --clients '%s' is not a whole number in 1..1000", v);
         } else
             return ctl_usage_error("latency: unknown option '%s'", k);
     }
-    int n = (int)count, rc = CTL_EXIT_OK;
+    int n = (int)count, rc = CTL_EXIT_OK, n_viewers = (int)clients - 1;
     double *ping = calloc((size_t)n, sizeof *ping), *ack = calloc((size_t)n, sizeof *ack),
-           *frame = calloc((size_t)n, sizeof *frame);
+           *frame = calloc((size_t)n * (size_t)clients, sizeof *frame), *t_send = calloc((size_t)n, sizeof *t_send);
+    uint64_t *want_rev = calloc((size_t)n, sizeof *want_rev);
+    latency_viewer *viewers = calloc((size_t)(n_viewers > 0 ? n_viewers : 1), sizeof *viewers);
+    atomic_int viewers_stop = 0;
     int n_ping = 0, n_ack = 0, n_frame = 0;
     char err[512], req[512];
     lc_client *c = NULL;
-    if (!ping || !ack || !frame) {
+    if (!ping || !ack || !frame || !t_send || !want_rev || !viewers) {
         fprintf(stderr, "lucentctl: out of memory\n");
         rc = CTL_EXIT_CONN;
         goto out;
@@ -580,6 +645,12 @@ int ctl_cmd_latency(int argc, char **argv) {
         rc = r == 1 ? CTL_EXIT_REFUSED : CTL_EXIT_CONN;
         goto out;
     }
+    for (int k = 0; k < n_viewers; k++) {
+        viewers[k].stop = &viewers_stop;
+        viewers[k].started = pthread_create(&viewers[k].thread, NULL, latency_viewer_main, &viewers[k]) == 0;
+    }
+    for (int k = 0; k < n_viewers; k++) /* all subscribed (or failed) before the first update */
+        while (viewers[k].started && !atomic_load(&viewers[k].ready)) lc_client_poll(c, 5);
     const cJSON *pos = NULL;
     cJSON *wel = cJSON_Parse(lc_client_welcome(c));
     const cJSON *grid = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(wel, "scene"), "grid");
@@ -618,11 +689,29 @@ int ctl_cmd_latency(int argc, char **argv) {
         const cJSON *rev = cJSON_GetObjectItemCaseSensitive(o, "revision");
         uint64_t want = cJSON_IsNumber(rev) ? (uint64_t)rev->valuedouble : 0;
         cJSON_Delete(o);
+        t_send[n_ack] = t0;
+        want_rev[n_ack] = want;
         ack[n_ack++] = t_ok - t0;
         if (lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, want, 0, CTL_TIMEOUT_MS, &f, err, sizeof err) == 0)
             frame[n_frame++] = mono_ms() - t0;
         else
             fprintf(stderr, "lucentctl: no frame for revision %llu: %s\n", (unsigned long long)want, err);
+    }
+    if (n_viewers > 0) { /* the viewers' frames of the last update, then their delays */
+        lc_client_poll(c, 1000);
+        atomic_store(&viewers_stop, 1);
+        int missing = 0;
+        for (int k = 0; k < n_viewers; k++) {
+            if (!viewers[k].started) continue;
+            pthread_join(viewers[k].thread, NULL);
+            viewers[k].started = 0;
+            for (int i = 0; i < n_ack; i++) {
+                double d = viewers[k].ok ? latency_viewer_delay(&viewers[k], want_rev[i], t_send[i]) : -1;
+                if (d >= 0) frame[n_frame++] = d;
+                else missing++;
+            }
+        }
+        if (missing) fprintf(stderr, "lucentctl: %d update/viewer pairs saw no frame\n", missing);
     }
     snprintf(req, sizeof req, "{\"type\":\"light.remove\",\"light_id\":\"%s\"}", light);
     lc_client_request(c, req, NULL, 0, err, sizeof err);
@@ -637,9 +726,18 @@ int ctl_cmd_latency(int argc, char **argv) {
         free(t);
         cJSON_Delete(json);
     }
-    if (n_frame < n_ack) rc = CTL_EXIT_CONN;
+    if (n_frame < n_ack * (int)clients) rc = CTL_EXIT_CONN;
 out:
+    atomic_store(&viewers_stop, 1);
+    for (int k = 0; viewers && k < n_viewers; k++) {
+        if (viewers[k].started) pthread_join(viewers[k].thread, NULL);
+        free(viewers[k].rev);
+        free(viewers[k].at);
+    }
     lc_client_close(c);
+    free(viewers);
+    free(want_rev);
+    free(t_send);
     free(ping);
     free(ack);
     free(frame);

@@ -94,6 +94,9 @@ ls "$TMP/wgrid"/shgrid-000001.bin >/dev/null 2>&1 || fail "watch --duration wrot
 # latency
 expect_exit 0 "" timeout 60 "$CTL" --json latency --count 5 --interval 0.05
 json_check "$TMP/out" "j['update_to_frame']['n'] == 5 and 0 < j['update_to_frame']['p50_ms'] < 5000 and j['ping']['n'] >= 5"
+expect_exit 0 "" timeout 60 "$CTL" --json latency --count 3 --interval 0.05 --clients 3
+json_check "$TMP/out" "j['update_to_frame']['n'] == 9 and j['update_to_ok']['n'] == 3"
+expect_exit 2 "clients" timeout 10 "$CTL" latency --clients 0
 expect_exit 0 "" timeout 60 "$CTL" latency --count 3 --interval 0.05
 grep -q "update_to_frame" "$TMP/out" || fail "latency table: $(head -c 300 "$TMP/out")"
 expect_exit 0 "" timeout 20 "$CTL" --json state
