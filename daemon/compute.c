@@ -25,7 +25,7 @@ typedef struct compute_job {
 struct lc_compute {
     const lc_lcb *bake;
     struct lws_context *ctx;
-    int backend, threads, refine_passes;
+    int backend, threads, refine_passes, refine_delay_ms;
     pthread_t thread;
     pthread_mutex_t lock;
     pthread_cond_t cond;
@@ -122,9 +122,24 @@ static void *compute_main(void *arg) {
      * each extra pass adds a bounce (same revision, a newer frame). */
     compute_job *last = NULL;
     int refine_left = 0;
+    struct timespec refine_due = {0, 0}; /* CLOCK_MONOTONIC: no refinement pass before this */
     for (;;) {
         pthread_mutex_lock(&c->lock);
-        while (!c->pending && !c->stop && !(last && refine_left > 0)) pthread_cond_wait(&c->cond, &c->lock);
+        for (;;) {
+            if (c->pending || c->stop) break;
+            if (last && refine_left > 0) {
+                /* Refinement waits a moment after each publication, so the frames just
+                 * published reach the clients before a refinement pass takes the cores. */
+                struct timespec now;
+                clock_gettime(CLOCK_MONOTONIC, &now);
+                if (now.tv_sec > refine_due.tv_sec ||
+                    (now.tv_sec == refine_due.tv_sec && now.tv_nsec >= refine_due.tv_nsec))
+                    break;
+                pthread_cond_timedwait(&c->cond, &c->lock, &refine_due);
+                continue;
+            }
+            pthread_cond_wait(&c->cond, &c->lock);
+        }
         if (c->stop && !c->pending) { /* nothing left in flight */
             pthread_mutex_unlock(&c->lock);
             break;
@@ -167,14 +182,18 @@ static void *compute_main(void *arg) {
         if (old && --old->refs == 0) published_free(old);
         pthread_mutex_unlock(&c->lock);
         lws_cancel_service(c->ctx); /* the only lws call allowed off the service thread */
+        clock_gettime(CLOCK_MONOTONIC, &refine_due);
+        refine_due.tv_nsec += (long)c->refine_delay_ms * 1000000L;
+        refine_due.tv_sec += refine_due.tv_nsec / 1000000000L;
+        refine_due.tv_nsec %= 1000000000L;
     }
     compute_job_free(last);
     lc_engine_release(e);
     return NULL;
 }
 
-lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, struct lws_context *ctx,
-                             char *err, size_t errlen) {
+lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, int refine_delay_ms,
+                             struct lws_context *ctx, char *err, size_t errlen) {
     lc_compute *c = calloc(1, sizeof *c);
     if (!c) {
         lc_set_err(err, errlen, "out of memory");
@@ -185,8 +204,13 @@ lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int r
     c->backend = backend;
     c->threads = threads;
     c->refine_passes = refine_passes;
+    c->refine_delay_ms = refine_delay_ms;
     pthread_mutex_init(&c->lock, NULL);
-    pthread_cond_init(&c->cond, NULL);
+    pthread_condattr_t ca;
+    pthread_condattr_init(&ca);
+    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC); /* refine_due is monotonic */
+    pthread_cond_init(&c->cond, &ca);
+    pthread_condattr_destroy(&ca);
     if (pthread_create(&c->thread, NULL, compute_main, c) != 0) {
         lc_set_err(err, errlen, "cannot start the compute thread");
         free(c);

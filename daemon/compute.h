@@ -31,10 +31,11 @@ typedef struct lc_compute lc_compute;
 
 /* Starts the thread and creates the engine on it (the EGL context belongs to that thread).
  * With progressive settings, up to refine_passes extra relights of the same state run
+ * (each at least refine_delay_ms after the previous publication, so its frames go out first)
  * while no update waits, each adding a bounce (frames of the same revision).
  * Returns NULL with err when the engine cannot start. */
-lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, struct lws_context *ctx,
-                             char *err, size_t errlen);
+lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, int refine_delay_ms,
+                             struct lws_context *ctx, char *err, size_t errlen);
 /* Service thread: submit the state to relight (copied). *job (may be NULL) receives the
  * submission's id, increasing from 1. The server submits before its journal fsync so the
  * relight overlaps the disk write; frames still go out only after the fsync, because the

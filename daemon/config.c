@@ -54,6 +54,8 @@ static const lc_opt config_options[] = {
      "seconds a client may stay behind (a frame it cannot take) before it is dropped (1008)", NULL, NULL},
     {"backend", LC_OPT_ENUM, OFF(backend), 0, 0, "auto", "auto|cpu|egl", "relight backend", NULL, NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "relight threads (0 = all cores)", NULL, NULL},
+    {"refine-delay", LC_OPT_INT, OFF(refine_delay), 0, 10000, "20", NULL,
+     "milliseconds after a frame before an idle refinement pass (lets the frame reach clients first)", "MS", NULL},
     {"refine-passes", LC_OPT_INT, OFF(refine_passes), 0, 64, "4", NULL,
      "extra progressive relights while no update waits (each adds a bounce)", NULL, NULL},
     {"bounces", LC_OPT_INT, OFF(bounces), 0, 16, "0", NULL,
@@ -173,6 +175,7 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
     RESTART_IF(backend, "backend")
     RESTART_IF(threads, "threads")
     RESTART_IF(refine_passes, "refine-passes")
+    RESTART_IF(refine_delay, "refine-delay")
     RESTART_IF(bounces, "bounces")
     RESTART_IF(max_lights, "max-lights")
     RESTART_IF(max_objects, "max-objects")

@@ -805,7 +805,8 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     }
     struct lws_vhost *vh = lws_get_vhost_by_name(s.ctx, "default");
     s.port = vh ? lws_get_vhost_listen_port(vh) : cfg->port;
-    s.compute = lc_compute_start(bake, cfg->backend, cfg->threads, cfg->refine_passes, s.ctx, err, sizeof err);
+    s.compute = lc_compute_start(bake, cfg->backend, cfg->threads, cfg->refine_passes, cfg->refine_delay,
+                                  s.ctx, err, sizeof err);
     if (!s.compute) {
         lc_error("server", "%s", err);
         goto done;

@@ -37,7 +37,7 @@ int main(void) {
     struct lws_context *ctx = lws_create_context(&info);
     CHECK(ctx != NULL, "lws context");
     char err[256];
-    lc_compute *c = lc_compute_start(f.bake, LC_BACKEND_CPU, 1, 0, ctx, err, sizeof err);
+    lc_compute *c = lc_compute_start(f.bake, LC_BACKEND_CPU, 1, 0, 0, ctx, err, sizeof err);
     CHECK(c != NULL, "compute start: %s", err);
     if (!c || !ctx) CHECK_DONE();
     lc_state_limits lim = {.max_lights = 8, .max_objects = 2};
