@@ -48,3 +48,15 @@ sys.exit(0 if eval(sys.argv[2]) else 1)' "$1" "$2" 2>"$TMP/json_check.err"; then
     fail "JSON check failed: $2 on $(head -c 600 "$1") $(head -c 300 "$TMP/json_check.err")"
   fi
 }
+# lucentctl_setup: the common start of the lucentctl tests. Skips (77) when lucentd or
+# lucentctl is not built; starts lucentd on a free port (state in $TMP/d, killed on exit);
+# exports LUCENT_URL; sets BIN, CTL and DPID.
+lucentctl_setup() {
+  BIN="${LUCENT_BINARY_DIR:?run through ctest}/bin"
+  CTL="$BIN/lucentctl"
+  if [ ! -x "$BIN/lucentd" ] || [ ! -x "$CTL" ]; then echo "lucentd/lucentctl not built: skip"; exit 77; fi
+  start_lucentd "$TMP/d" || exit 1
+  DPID=$LUCENTD_PID
+  trap 'kill "$DPID" 2>/dev/null; wait "$DPID" 2>/dev/null; rm -rf "$TMP"' EXIT
+  export LUCENT_URL="ws://127.0.0.1:$LUCENTD_PORT/"
+}

@@ -2,14 +2,7 @@
 # with --help, usage errors, a server refusal), exit codes. object, material, env, settings:
 # lucentctl_scene.sh; scripts: lucentctl_script.sh.
 . "$(dirname "$0")/lib.sh"
-BIN="${LUCENT_BINARY_DIR:?run through ctest}/bin"
-CTL="$BIN/lucentctl"
-if [ ! -x "$BIN/lucentd" ] || [ ! -x "$CTL" ]; then echo "lucentd/lucentctl not built: skip"; exit 77; fi
-
-start_lucentd "$TMP/d" || exit 1
-DPID=$LUCENTD_PID
-trap 'kill "$DPID" 2>/dev/null; wait "$DPID" 2>/dev/null; rm -rf "$TMP"' EXIT
-export LUCENT_URL="ws://127.0.0.1:$LUCENTD_PORT/"
+lucentctl_setup
 T="timeout 20"
 
 # state --json into $TMP/state.json

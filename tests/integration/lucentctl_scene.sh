@@ -1,14 +1,7 @@
 # lucentctl against a live lucentd: object (the baked `cube` asset), material, env and
 # settings, each with --help, usage errors and a server refusal; the state they leave.
 . "$(dirname "$0")/lib.sh"
-BIN="${LUCENT_BINARY_DIR:?run through ctest}/bin"
-CTL="$BIN/lucentctl"
-if [ ! -x "$BIN/lucentd" ] || [ ! -x "$CTL" ]; then echo "lucentd/lucentctl not built: skip"; exit 77; fi
-
-start_lucentd "$TMP/d" || exit 1
-DPID=$LUCENTD_PID
-trap 'kill "$DPID" 2>/dev/null; wait "$DPID" 2>/dev/null; rm -rf "$TMP"' EXIT
-export LUCENT_URL="ws://127.0.0.1:$LUCENTD_PORT/"
+lucentctl_setup
 T="timeout 20"
 
 # state --json into $TMP/state.json

@@ -2,12 +2,7 @@
 # bit-exact with what the server sends (f32, compared with an independent Python client),
 # frames.jsonl, usage errors, connection loss.
 . "$(dirname "$0")/lib.sh"
-BIN="${LUCENT_BINARY_DIR:?run through ctest}/bin"
-CTL="$BIN/lucentctl"
-if [ ! -x "$BIN/lucentd" ] || [ ! -x "$CTL" ]; then echo "lucentd/lucentctl not built: skip"; exit 77; fi
-start_lucentd "$TMP/d" || exit 1
-trap 'kill "$LUCENTD_PID" 2>/dev/null; wait "$LUCENTD_PID" 2>/dev/null; rm -rf "$TMP"' EXIT
-export LUCENT_URL="ws://127.0.0.1:$LUCENTD_PORT/"
+lucentctl_setup
 
 expect_exit 0 "" timeout 20 "$CTL" light set key --type point --position 0.28,0.4,0.28 --intensity 0.5
 expect_exit 0 "" timeout 20 "$CTL" object set box --asset cube --position 0.3,0,0.3
