@@ -11,6 +11,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "engine/embree_device.h"
 #include "engine/transport.h"
 #include "util/clock.h"
 #include "util/log.h"
@@ -50,11 +51,6 @@ struct lc_engine {
     int have_state;
     lc_engine_frame frame;
 };
-
-static void engine_embree_error(void *user, enum RTCError code, const char *str) {
-    (void)user;
-    lc_error("engine", "embree error %d: %s", (int)code, str ? str : "");
-}
 
 lc_engine_settings lc_engine_default_settings(const lc_lcb *bake) {
     const lc_lcb_view *v = lc_lcb_get(bake);
@@ -171,19 +167,9 @@ lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int thread
     e->v = lc_lcb_get(bake);
     const lc_lcb_view *v = e->v;
     lc_parallel_set_threads(threads);
-    float extent = 0;
-    for (uint32_t i = 0; i < v->n_vertices; i++)
-        for (int k = 0; k < 3; k++) extent = fmaxf(extent, fabsf(v->vertices[i].position[k]));
-    e->scene_eps = 1e-4f + 2e-6f * extent;
-
-    char config[32] = "";
-    if (threads > 0) snprintf(config, sizeof config, "threads=%d", threads);
-    e->device = rtcNewDevice(config[0] ? config : NULL);
-    if (!e->device) {
-        lc_set_err(err, errlen, "embree: rtcNewDevice failed");
-        goto err;
-    }
-    rtcSetDeviceErrorFunction(e->device, engine_embree_error, NULL);
+    e->scene_eps = lc_embree_scene_epsilon(v);
+    e->device = lc_embree_device_new(threads, "engine", err, errlen);
+    if (!e->device) goto err;
     e->static_scene = engine_mesh_scene(e->device, v->vertices, sizeof(lc_lcb_vertex), v->n_vertices, v->triangles,
                                         sizeof(lc_lcb_triangle), v->n_triangles);
     e->asset_scenes = calloc(v->n_assets ? v->n_assets : 1, sizeof *e->asset_scenes);

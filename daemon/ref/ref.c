@@ -9,6 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "engine/embree_device.h"
 #include "util/clock.h"
 #include "util/crc32.h"
 #include "util/log.h"
@@ -691,11 +692,6 @@ void lc_ref_b0_power(lc_ref *r, uint32_t samples, uint64_t seed, double power[3]
 
 /* --- create / release ------------------------------------------------------------------------- */
 
-static void ref_embree_error(void *user, enum RTCError code, const char *str) {
-    (void)user;
-    lc_error("ref", "embree error %d: %s", (int)code, str ? str : "");
-}
-
 void lc_ref_release(lc_ref *r) {
     if (!r) return;
     if (r->scene) rtcReleaseScene(r->scene);
@@ -820,10 +816,7 @@ lc_ref *lc_ref_create(const lc_lcb *bake, const lc_engine_state *st, int threads
     r->v = lc_lcb_get(bake);
     const lc_lcb_view *v = r->v;
     lc_parallel_set_threads(threads);
-    float extent = 0;
-    for (uint32_t i = 0; i < v->n_vertices; i++)
-        for (int k = 0; k < 3; k++) extent = fmaxf(extent, fabsf(v->vertices[i].position[k]));
-    r->eps = 1e-4f + 2e-6f * extent;
+    r->eps = lc_embree_scene_epsilon(v);
     for (uint32_t i = 0; i < st->n_objects; i++)
         if (st->objects[i].asset >= v->n_assets) {
             lc_set_err(err, errlen, "/objects/%u/asset: index %u, the bake has %u assets", i, st->objects[i].asset,
@@ -879,14 +872,8 @@ lc_ref *lc_ref_create(const lc_lcb *bake, const lc_engine_state *st, int threads
     if (ref_build_objects(r, st) != 0) goto oom;
 
     /* Embree: one scene, static mesh (geometry 0) and objects (geometry 1). */
-    char config[32] = "";
-    if (threads > 0) snprintf(config, sizeof config, "threads=%d", threads);
-    r->device = rtcNewDevice(config[0] ? config : NULL);
-    if (!r->device) {
-        lc_set_err(err, errlen, "embree: rtcNewDevice failed");
-        goto fail;
-    }
-    rtcSetDeviceErrorFunction(r->device, ref_embree_error, NULL);
+    r->device = lc_embree_device_new(threads, "ref", err, errlen);
+    if (!r->device) goto fail;
     r->scene = rtcNewScene(r->device);
     rtcSetSceneFlags(r->scene, RTC_SCENE_FLAG_ROBUST);
     rtcSetSceneBuildQuality(r->scene, RTC_BUILD_QUALITY_HIGH);
