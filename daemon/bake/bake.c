@@ -11,6 +11,7 @@
 #include <sys/stat.h>
 #include <time.h>
 
+#include "bake/exposure.h"
 #include "bake/grid.h"
 #include "bake/hierarchy.h"
 #include "bake/links.h"
@@ -96,6 +97,8 @@ static const lc_opt bake_options[] = {
     {"relax", LC_OPT_INT, OFF(relax), 0, 64, "4", NULL, "surfel relaxation iterations", NULL, NULL},
     {"drop-buried", LC_OPT_BOOL, OFF(drop_buried), 0, 1, "false", NULL,
      "drop surfels inside geometry (fewer than --surfels remain)", NULL, NULL},
+    {"exposure", LC_OPT_BOOL, OFF(exposure), 0, 1, "false", NULL,
+     "weigh surfels by how many caches see them (see bake/exposure.h)", NULL, NULL},
     {"hierarchy", LC_OPT_ENUM, OFF(hierarchy), 0, 0, "aac", "aac|kdtree",
      "surfel hierarchy: agglomerative clustering (PIC metric) or kd-tree", NULL, NULL},
     {"links", LC_OPT_INT, OFF(links), 1, 1024, "128", NULL, "links per cache (n_L)", NULL, NULL},
@@ -503,7 +506,7 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
     lc_lcb_cache *caches = NULL;
     uint32_t n_caches = 0, n_texel_caches = 0, *cell_cache = NULL;
     lc_lcb_surfel *surfels = NULL;
-    uint32_t *surfel_tri = NULL, *perm = NULL, *tri_sorted = NULL, n_surfels = 0;
+    uint32_t *surfel_tri = NULL, *perm = NULL, *tri_sorted = NULL, *seen = NULL, n_surfels = 0;
     lc_hierarchy hier;
     memset(&hier, 0, sizeof hier);
     lc_lcb_link *links = NULL;
@@ -624,6 +627,11 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
                          .sh_bands = s->link_sh ? (uint32_t)s->bands : 0,
                          .seed = (uint64_t)s->seed,
                          .probe_rays = (uint32_t)s->probe_rays};
+    if (s->exposure) {
+        seen = calloc(n_surfels ? n_surfels : 1, sizeof *seen);
+        if (!seen) goto oom;
+        lp.surfel_seen = seen;
+    }
     lc_link_stats ls;
     memset(&ls, 0, sizeof ls);
     if (lc_links_build(rt, surfels, n_surfels, &hier, caches, n_caches, &lp, links, link_sh, &ls) != 0) {
@@ -642,6 +650,16 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
             }
         caches[c].link_count = used;
     }
+    lc_exposure_stats es;
+    memset(&es, 0, sizeof es);
+    if (seen && lc_exposure_apply(seen, surfels, n_surfels, &hier, links, n_links, link_sh,
+                                  link_sh ? (uint32_t)(s->bands * s->bands) : 0, &es) != 0) {
+        lc_set_err(err, errlen, "exposure: no cache sees any surfel (or out of memory); bake with --exposure false");
+        goto err;
+    }
+    if (!s->quiet && seen)
+        lc_info("bake", "exposure: %u surfels (%.2f%% of the area) seen by no cache", es.unseen,
+                100.0 * es.unseen_area / lc_mesh_total_area(&scene.mesh));
     bake_stage(r, "links", &t0, s->quiet);
 
     /* 10. assets */
@@ -703,7 +721,11 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
     cJSON_AddItemToObject(jg, "dims", cJSON_CreateDoubleArray(dims, 3));
     cJSON *jsu = cJSON_AddObjectToObject(meta, "surfels");
     cJSON_AddNumberToObject(jsu, "count", n_surfels);
-    cJSON_AddNumberToObject(jsu, "area", n_surfels ? surfels[0].area : 0);
+    double surfel_area = 0; /* exposure keeps the sum */
+    for (uint32_t i = 0; i < n_surfels; i++) surfel_area += surfels[i].area;
+    cJSON_AddNumberToObject(jsu, "area", n_surfels ? surfel_area / n_surfels : 0); /* mean: the nominal area */
+    cJSON_AddBoolToObject(jsu, "exposure", seen != NULL);
+    cJSON_AddNumberToObject(jsu, "unseen", es.unseen);
     cJSON *jh = cJSON_AddObjectToObject(meta, "hierarchy");
     cJSON_AddStringToObject(jh, "method", s->hierarchy == LC_HIERARCHY_AAC ? "aac" : "kdtree");
     cJSON_AddNumberToObject(jh, "nodes", hier.n_nodes);
@@ -813,6 +835,7 @@ done:
     lc_hierarchy_release(&hier);
     free(perm);
     free(tri_sorted);
+    free(seen);
     free(surfel_tri);
     free(surfels);
     free(cell_cache);

@@ -35,6 +35,7 @@ typedef struct lc_bake_settings {
     int surfels;
     int relax;
     int drop_buried; /* drop surfels inside geometry (changes the surfel count) */
+    int exposure;    /* surfel areas weighted by how many caches see them (bake/exposure.h) */
     int hierarchy;
     int links;
     int node_samples;

@@ -285,6 +285,10 @@ static void links_probe(const links_ctx *ctx, links_scratch *sc, links_cache *lc
         memcpy(h->dir, d, sizeof d);
     }
     qsort(sc->hits, sc->n_hits, sizeof *sc->hits, links_hit_cmp);
+    if (ctx->prm->surfel_seen) /* integer sums: the same counts for any thread schedule */
+        for (uint32_t i = 0; i < sc->n_hits; i++)
+            if (i == 0 || sc->hits[i].surfel != sc->hits[i - 1].surfel)
+                __atomic_fetch_add(&ctx->prm->surfel_seen[sc->hits[i].surfel], 1u, __ATOMIC_RELAXED);
     sc->cum[0] = sc->cum[1] = sc->cum[2] = 0;
     for (uint32_t i = 0; i < sc->n_hits; i++)
         for (int a = 0; a < 3; a++) sc->cum[3 * (i + 1) + a] = sc->cum[3 * i + a] + sc->hits[i].dir[a];

@@ -25,6 +25,9 @@ typedef struct lc_link_params {
     uint32_t sh_bands;        /* > 0: also project each link's transport into SH (LKSH) */
     uint64_t seed;
     uint32_t probe_rays;      /* near-field probe rays per cache; 0 = far-field estimate only */
+    /* Optional output (NULL = not wanted): n_surfels counters, zeroed by the caller; each
+     * cache adds 1 to every surfel its probe rays hit (see bake/exposure.h). */
+    uint32_t *surfel_seen;
 } lc_link_params;
 
 /* A node is near (probe-ray estimate) when the cache is within 2 bounding radii of its

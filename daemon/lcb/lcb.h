@@ -91,7 +91,7 @@ typedef struct lc_lcb_surfel {
     float normal[3];
     float albedo[3];
     float emission[3]; /* nits, as baked (material emission x texture) */
-    float area;        /* m^2 */
+    float area;        /* m^2; with --exposure the effective area (exposure.h), same total */
     uint32_t material;
     uint32_t cache;    /* nearest cache (for multi-bounce feedback), LC_NONE if none */
     uint32_t reserved;

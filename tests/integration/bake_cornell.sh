@@ -35,5 +35,23 @@ for sid in ["META","MATL","VERT","TRIS","SURF","NODE","LEVL","CACH","LMAP","GRID
     check(sid in ids, "section " + sid)
 check(stats["total_s"] > 0 and stats["peak_rss_mib"] > 0, "stats")
 check(stats["stages_s"].keys() >= {"import","lightmap-uv","texels","surfels","hierarchy","links","write"}, "stages")
+check(m["surfels"]["exposure"] is False and m["settings"]["exposure"] is False, "exposure off by default")
+PY
+
+# --exposure: surfel areas reweighted by how many caches see them; the file stays valid and
+# the total (hence the nominal area in META) is kept.
+expect_exit 0 "" "$BAKE" bake "$CORNELL" -o "$TMP/exposure.lcb" --quality draft --no-write-glb --exposure --quiet
+expect_exit 0 "" "$BAKE" verify "$TMP/exposure.lcb"
+"$BAKE" info "$TMP/exposure.lcb" --json > "$TMP/exposure.json" || fail "info --json failed"
+$PY - "$TMP/exposure.json" <<'PY' || fail "exposure bake content"
+import json, sys
+m = json.load(open(sys.argv[1]))["meta"]
+def check(cond, msg):
+    if not cond:
+        print("check failed:", msg); sys.exit(1)
+check(m["surfels"]["exposure"] is True and m["settings"]["exposure"] is True, "exposure recorded")
+check(0 <= m["surfels"]["unseen"] < m["surfels"]["count"], "unseen count %s" % m["surfels"]["unseen"])
+check(abs(m["surfels"]["count"] * m["surfels"]["area"] - m["scene"]["area"]) < 1e-4 * m["scene"]["area"],
+      "exposure keeps the total surfel area")
 PY
 finish

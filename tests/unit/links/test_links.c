@@ -337,7 +337,7 @@ static void test_closed_box(void) {
     caches[nc++] = grid_cache(lc_v3(0.5f, 0.5f, 0.5f));
     caches[nc++] = grid_cache(lc_v3(0.3f, 0.6f, 0.7f));
     caches[nc++] = grid_cache(lc_v3(0.8f, 0.2f, 0.25f));
-    lc_link_params prm = {256, 8, 16, 0, 42, 0};
+    lc_link_params prm = {256, 8, 16, 0, 42, 0, NULL};
     lc_lcb_link *links = calloc((size_t)nc * prm.links_per_cache, sizeof *links);
     lc_link_stats st;
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, nc, &prm, links, NULL, &st) == 0, "build");
@@ -369,7 +369,7 @@ static void test_closed_box(void) {
     CHECK(st.rays > 0 && st.mean_links_used > 1, "stats filled");
 
     /* Fewer links: coarse nodes are sampled, not enumerated; the sum stays close. */
-    lc_link_params coarse = {32, 8, 16, 0, 42, 0};
+    lc_link_params coarse = {32, 8, 16, 0, 42, 0, NULL};
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, nc, &coarse, links, NULL, &st) == 0, "build");
     for (uint32_t c = 0; c < nc; c++) {
         double om = cache_omega(&h, links, coarse.links_per_cache, c);
@@ -407,7 +407,7 @@ static void test_patch(void) {
         caches[2 * i] = grid_cache(lc_v3(0, 0, dists[i]));
         caches[2 * i + 1] = texel_cache(lc_v3(0, 0, dists[i]), lc_v3(0, 0, -1));
     }
-    lc_link_params prm = {32, 8, 16, 3, 9, 0};
+    lc_link_params prm = {32, 8, 16, 3, 9, 0, NULL};
     uint32_t L = prm.links_per_cache, nsh = prm.sh_bands * prm.sh_bands;
     lc_lcb_link *links = calloc((size_t)6 * L, sizeof *links);
     uint16_t *sh = calloc((size_t)6 * L * nsh, sizeof *sh);
@@ -464,7 +464,7 @@ static void test_occlusion(void) {
         lc_rt *rt = make_rt(&w);
         if (!rt) return;
         lc_lcb_cache caches[2] = {grid_cache(lc_v3(0, 0, d)), texel_cache(lc_v3(0, 0, d), lc_v3(0, 0, -1))};
-        lc_link_params prm = {32, 8, 16, 0, 5, 0};
+        lc_link_params prm = {32, 8, 16, 0, 5, 0, NULL};
         lc_lcb_link *links = calloc((size_t)2 * prm.links_per_cache, sizeof *links);
         CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, 2, &prm, links, NULL, NULL) == 0, "build");
         double full = rect_solid_angle(a, a, d);
@@ -511,15 +511,29 @@ static void test_determinism(void) {
             caches[i] = grid_cache(p);
         }
     }
-    lc_link_params prm = {24, 4, 8, 2, 77, 0};
+    lc_link_params prm = {24, 4, 8, 2, 77, 64, NULL};
     size_t nl = (size_t)NC * prm.links_per_cache, ns = nl * 4;
     lc_lcb_link *a = calloc(nl, sizeof *a), *b = calloc(nl, sizeof *b);
     uint16_t *sa = calloc(ns, sizeof *sa), *sb = calloc(ns, sizeof *sb);
     lc_link_stats st1, st2;
+    uint32_t *seen1 = calloc(w.n_surfels, sizeof *seen1), *seen2 = calloc(w.n_surfels, sizeof *seen2);
     lc_parallel_set_threads(1);
+    prm.surfel_seen = seen1;
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, NC, &prm, a, sa, &st1) == 0, "build 1");
     lc_parallel_set_threads(2);
+    prm.surfel_seen = seen2;
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, NC, &prm, b, sb, &st2) == 0, "build 2");
+    prm.surfel_seen = NULL;
+    CHECK(memcmp(seen1, seen2, w.n_surfels * sizeof *seen1) == 0, "surfel_seen identical for 1 and 2 threads");
+    uint64_t seen_sum = 0, seen_max = 0;
+    for (uint32_t i = 0; i < w.n_surfels; i++) {
+        seen_sum += seen1[i];
+        if (seen1[i] > seen_max) seen_max = seen1[i];
+    }
+    CHECK(seen_sum > 0 && seen_max <= NC, "surfel_seen counts caches (sum %llu, max %llu of %d caches)",
+          (unsigned long long)seen_sum, (unsigned long long)seen_max, NC);
+    free(seen1);
+    free(seen2);
     CHECK(memcmp(a, b, nl * sizeof *a) == 0, "links identical for 1 and 2 threads");
     CHECK(memcmp(sa, sb, ns * sizeof *sa) == 0, "link SH identical for 1 and 2 threads");
     CHECK(st1.rays == st2.rays && st1.mean_solid_angle == st2.mean_solid_angle, "stats identical");
@@ -548,10 +562,10 @@ static void test_bad_params(void) {
     lc_lcb_cache c = grid_cache(lc_v3(0, 0, 1));
     lc_lcb_link links[8];
     uint16_t sh[8 * 81];
-    lc_link_params zero_links = {0, 8, 16, 0, 1, 0};
+    lc_link_params zero_links = {0, 8, 16, 0, 1, 0, NULL};
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, &c, 1, &zero_links, links, NULL, NULL) == -1,
           "links_per_cache 0 rejected");
-    lc_link_params bands9 = {8, 8, 16, 9, 1, 0};
+    lc_link_params bands9 = {8, 8, 16, 9, 1, 0, NULL};
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, &c, 1, &bands9, links, sh, NULL) == -1,
           "9 SH bands rejected");
     lc_rt_release(rt);
@@ -591,7 +605,7 @@ static void test_closed_box_real(void) {
         grid_cache(lc_v3(0.5f, 0.5f, 0.5f)),
         grid_cache(lc_v3(0.3f, 0.7f, 0.6f)),
     };
-    lc_link_params prm = {512, 8, 16, 0, 42, 0};
+    lc_link_params prm = {512, 8, 16, 0, 42, 0, NULL};
     lc_lcb_link *links = calloc((size_t)4 * prm.links_per_cache, sizeof *links);
     for (int method = 0; method < 2; method++) {
         lc_hierarchy h;
