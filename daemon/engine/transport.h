@@ -49,11 +49,26 @@ static inline int lc_transport_texel_bands(const lc_engine_settings *st) {
     return st->sh_lightmap || st->bands < 2 ? (int)st->bands : 2;
 }
 
+/* Texel caches without the SH lightmap need only their irradiance for the cache normal n,
+ * and that is linear in the flux: E = sum over links of flux[node] * w with the
+ * lighting-independent w = factor * h_1(cos alpha) * dot(dir, n) (band 1 projected on n;
+ * exactly what the irradiance formula above computes from the gathered band-1 SH). Both
+ * backends then gather one weight per link instead of decoding the direction and
+ * evaluating 4 SH coefficients, and store the cache's band-1 field along n, L_1m =
+ * E y_1m(n) / |n|^2 (band 0 zero), whose irradiance for n is E. Feedback to a surfel with
+ * another normal m reads E dot(n, m) / |n|^2 from it. */
+static inline int lc_transport_texel_scalar(const lc_engine_settings *st) { return !st->sh_lightmap && st->bands >= 2; }
+
 extern const lc_transport_ops lc_transport_cpu;
 extern const lc_transport_ops lc_transport_egl;
 
 /* Shared helpers (defined in cpu/transport_cpu.c, also used by tests and the GL backend's
  * uploads): the h_l(cos alpha) table for the 256 quantised cone angles, 8 bands each. */
 void lc_transport_cone_table(float table[256][8]);
+/* The per-link texel weights w above: out[cache * links_per_cache + k] for the used links of
+ * every texel cache, 0 elsewhere (grid caches, padding). */
+void lc_transport_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out);
+/* Octahedral 12+12-bit direction of a link (dir_cone bits 0-23), unit length. */
+void lc_transport_link_dir(uint32_t dir_cone, float d[3]);
 
 #endif

@@ -68,7 +68,7 @@ typedef struct tgl {
     GLuint prog[TGL_N_PROGS];
     GLuint gather[LC_SH_MAX_BANDS + 1][LC_SH_MAX_BANDS + 1]; /* [bands][Co/Cg bands], compiled on first use */
     /* Static (create): */
-    GLuint b_surfels, b_nodes, b_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
+    GLuint b_surfels, b_nodes, b_links, b_texel_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
     uint32_t n_feedback;
     /* Per run: */
     GLuint b_b0, b_radiosity, b_e_ind, b_flux, b_cache_sh, b_sh9, b_lightmap, b_grid_sh, b_obj_pos, b_obj_sh;
@@ -89,7 +89,7 @@ static void tgl_release(void *impl) {
         for (int b = 0; b <= LC_SH_MAX_BANDS; b++)
             for (int c = 0; c <= LC_SH_MAX_BANDS; c++)
                 if (t->gather[b][c]) glDeleteProgram(t->gather[b][c]);
-        GLuint bufs[] = {t->b_surfels, t->b_nodes,     t->b_links,   t->b_caches, t->b_lm_index, t->b_grid_index,
+        GLuint bufs[] = {t->b_surfels, t->b_nodes,     t->b_links,   t->b_texel_links, t->b_caches, t->b_lm_index, t->b_grid_index,
                          t->b_cone,    t->b_shk,       t->b_list,    t->b_b0,     t->b_radiosity, t->b_e_ind,
                          t->b_flux,    t->b_cache_sh,  t->b_sh9,     t->b_lightmap, t->b_grid_sh, t->b_obj_pos,
                          t->b_obj_sh};
@@ -253,10 +253,32 @@ static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t err
     if (!(t->b_links = lc_gl_buffer((size_t)v->n_caches * v->links_per_cache * sizeof(lc_lcb_link), v->links,
                                     "links", err, errlen)))
         goto err;
-    if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) goto err;
-    if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) goto err;
+    /* The same links with each texel cache's factors replaced by its scalar weights
+     * (transport.h, lc_transport_texel_scalar): bound instead of the links when in use. */
     float cone[256][8];
     lc_transport_cone_table(cone);
+    {
+        size_t n_links = (size_t)v->n_caches * v->links_per_cache;
+        lc_lcb_link *tl = malloc((n_links ? n_links : 1) * sizeof *tl);
+        float *w = malloc((n_links ? n_links : 1) * sizeof *w);
+        if (!tl || !w) {
+            free(tl);
+            free(w);
+            goto oom;
+        }
+        memcpy(tl, v->links, n_links * sizeof *tl);
+        lc_transport_texel_weights(v, cone, w);
+        for (uint32_t c = 0; c < v->n_caches; c++)
+            if (v->caches[c].flags & LC_CACHE_TEXEL)
+                for (uint32_t k = 0; k < v->links_per_cache; k++)
+                    tl[(size_t)c * v->links_per_cache + k].factor = w[(size_t)c * v->links_per_cache + k];
+        t->b_texel_links = lc_gl_buffer(n_links * sizeof *tl, tl, "texel links", err, errlen);
+        free(tl);
+        free(w);
+        if (!t->b_texel_links) goto err;
+    }
+    if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) goto err;
+    if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) goto err;
     if (!(t->b_cone = lc_gl_buffer(sizeof cone, cone, "cone table", err, errlen))) goto err;
     for (int i = 0; i < TGL_N_PROGS; i++) tgl_warm_up(t, t->prog[i]);
     tgl_warm_up(t, t->gather[def_bands][def_bands]);
@@ -410,9 +432,12 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
         lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
         glProgramUniform1ui(gather, 2, v->links_per_cache);
         glProgramUniform1i(gather, 4, lc_transport_texel_bands(st) * lc_transport_texel_bands(st));
+        const int scalar = lc_transport_texel_scalar(st);
+        const GLuint b_links = scalar ? t->b_texel_links : t->b_links;
+        glProgramUniform1i(gather, 5, scalar);
         const size_t link_bytes = (size_t)v->links_per_cache * sizeof(lc_lcb_link), sh_bytes = (size_t)nc * 12;
         if (!last && single_window && t->n_feedback < v->n_caches) {
-            lc_gl_bind(0, t->b_links, 0, (size_t)v->n_caches * link_bytes);
+            lc_gl_bind(0, b_links, 0, (size_t)v->n_caches * link_bytes);
             lc_gl_bind(4, t->b_cache_sh, 0, (size_t)v->n_caches * sh_bytes);
             glProgramUniform1ui(gather, 1, 0);
             glProgramUniform1ui(gather, 3, 1);
@@ -422,7 +447,7 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
             glProgramUniform1ui(gather, 3, 0);
             for (uint32_t c0 = 0; c0 < v->n_caches; c0 += t->chunk) {
                 uint32_t cnt = v->n_caches - c0 < t->chunk ? v->n_caches - c0 : t->chunk;
-                lc_gl_bind(0, t->b_links, c0 * link_bytes, cnt * link_bytes);
+                lc_gl_bind(0, b_links, c0 * link_bytes, cnt * link_bytes);
                 lc_gl_bind(4, t->b_cache_sh, c0 * sh_bytes, cnt * sh_bytes);
                 glProgramUniform1ui(gather, 1, c0);
                 tgl_uniform_count(gather, cnt);
