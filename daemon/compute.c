@@ -128,8 +128,8 @@ static void *compute_main(void *arg) {
         for (;;) {
             if (c->pending || c->stop) break;
             if (last && refine_left > 0) {
-                /* Refinement waits a moment after each publication, so the frames just
-                 * published reach the clients before a refinement pass takes the cores. */
+                /* The first refinement pass waits a moment after an update's frame, so
+                 * that frame reaches the clients before the passes take the cores. */
                 struct timespec now;
                 clock_gettime(CLOCK_MONOTONIC, &now);
                 if (now.tv_sec > refine_due.tv_sec ||
@@ -183,7 +183,7 @@ static void *compute_main(void *arg) {
         pthread_mutex_unlock(&c->lock);
         lws_cancel_service(c->ctx); /* the only lws call allowed off the service thread */
         clock_gettime(CLOCK_MONOTONIC, &refine_due);
-        refine_due.tv_nsec += (long)c->refine_delay_ms * 1000000L;
+        if (job) refine_due.tv_nsec += (long)c->refine_delay_ms * 1000000L; /* later passes: back to back */
         refine_due.tv_sec += refine_due.tv_nsec / 1000000000L;
         refine_due.tv_nsec %= 1000000000L;
     }

@@ -31,8 +31,8 @@ typedef struct lc_compute lc_compute;
 
 /* Starts the thread and creates the engine on it (the EGL context belongs to that thread).
  * With progressive settings, up to refine_passes extra relights of the same state run
- * (each at least refine_delay_ms after the previous publication, so its frames go out first)
- * while no update waits, each adding a bounce (frames of the same revision).
+ * while no update waits (the first refine_delay_ms after the update's own frame, so that frame
+ * goes out first; the rest back to back, so they end long before a next update is due), each adding a bounce (frames of the same revision).
  * Returns NULL with err when the engine cannot start. */
 lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, int refine_delay_ms,
                              struct lws_context *ctx, char *err, size_t errlen);

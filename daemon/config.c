@@ -55,7 +55,7 @@ static const lc_opt config_options[] = {
     {"backend", LC_OPT_ENUM, OFF(backend), 0, 0, "auto", "auto|cpu|egl", "relight backend", NULL, NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "relight threads (0 = all cores)", NULL, NULL},
     {"refine-delay", LC_OPT_INT, OFF(refine_delay), 0, 10000, "20", NULL,
-     "milliseconds after a frame before an idle refinement pass (lets the frame reach clients first)", "MS", NULL},
+     "milliseconds after an update's frame before the idle refinement passes (lets the frame reach clients first)", "MS", NULL},
     {"refine-passes", LC_OPT_INT, OFF(refine_passes), 0, 64, "4", NULL,
      "extra progressive relights while no update waits (each adds a bounce)", NULL, NULL},
     {"bounces", LC_OPT_INT, OFF(bounces), 0, 16, "0", NULL,

@@ -35,7 +35,7 @@ typedef struct lc_config {
     int backend;       /* 0 auto, 1 cpu, 2 egl */
     int threads;
     int refine_passes;   /* extra progressive relights while idle */
-    int refine_delay;    /* ms after a publication before a refinement pass */
+    int refine_delay;    /* ms after an update's frame before the refinement passes */
     int bounces;         /* initial feedback bounces per relight (a snapshot's settings win) */
     int tile;          /* lightmap tile size for delta frames */
     int keyframe_interval;
