@@ -138,8 +138,6 @@ static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
     d[2] = z * inv;
 }
 
-void lc_transport_link_dir(uint32_t dir_cone, float d[3]) { tcpu_oct_decode(dir_cone, d); }
-
 void lc_transport_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out) {
     const uint32_t nl = v->links_per_cache;
     for (uint32_t c = 0; c < v->n_caches; c++) {

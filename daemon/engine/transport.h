@@ -68,7 +68,5 @@ void lc_transport_cone_table(float table[256][8]);
 /* The per-link texel weights w above: out[cache * links_per_cache + k] for the used links of
  * every texel cache, 0 elsewhere (grid caches, padding). */
 void lc_transport_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out);
-/* Octahedral 12+12-bit direction of a link (dir_cone bits 0-23), unit length. */
-void lc_transport_link_dir(uint32_t dir_cone, float d[3]);
 
 #endif

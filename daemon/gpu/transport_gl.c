@@ -89,10 +89,10 @@ static void tgl_release(void *impl) {
         for (int b = 0; b <= LC_SH_MAX_BANDS; b++)
             for (int c = 0; c <= LC_SH_MAX_BANDS; c++)
                 if (t->gather[b][c]) glDeleteProgram(t->gather[b][c]);
-        GLuint bufs[] = {t->b_surfels, t->b_nodes,     t->b_links,   t->b_texel_links, t->b_caches, t->b_lm_index, t->b_grid_index,
-                         t->b_cone,    t->b_shk,       t->b_list,    t->b_b0,     t->b_radiosity, t->b_e_ind,
-                         t->b_flux,    t->b_cache_sh,  t->b_sh9,     t->b_lightmap, t->b_grid_sh, t->b_obj_pos,
-                         t->b_obj_sh};
+        GLuint bufs[] = {t->b_surfels,  t->b_nodes,       t->b_links,      t->b_texel_links, t->b_caches,
+                         t->b_lm_index, t->b_grid_index,  t->b_cone,       t->b_shk,         t->b_list,
+                         t->b_b0,       t->b_radiosity,   t->b_e_ind,      t->b_flux,        t->b_cache_sh,
+                         t->b_sh9,      t->b_lightmap,    t->b_grid_sh,    t->b_obj_pos,     t->b_obj_sh};
         glDeleteBuffers((GLsizei)(sizeof bufs / sizeof bufs[0]), bufs); /* 0 names are ignored */
         if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
     }
@@ -121,6 +121,31 @@ static GLuint tgl_gather_program(tgl *t, int bands, int ncc_bands, char *err, si
     *slot = lc_gl_compile_program_defs(name, lc_gl_shader_source("gather"), defs, err, errlen);
     if (*slot) lc_debug("egl", "compiled %s in %.1f ms", name, lc_clock_ms() - t0);
     return *slot;
+}
+
+/* The links with each texel cache's factors replaced by its scalar weights (transport.h,
+ * lc_transport_texel_scalar), same layout: bound instead of the links when in use. 0 with
+ * err on failure. Compute thread. */
+static GLuint tgl_texel_links(const lc_lcb_view *v, const float cone[256][8], char *err, size_t errlen) {
+    size_t n = (size_t)v->n_caches * v->links_per_cache;
+    lc_lcb_link *tl = malloc((n ? n : 1) * sizeof *tl);
+    float *w = malloc((n ? n : 1) * sizeof *w);
+    GLuint buf = 0;
+    if (!tl || !w) {
+        lc_set_err(err, errlen, "egl transport: out of memory for the texel links");
+        goto done;
+    }
+    memcpy(tl, v->links, n * sizeof *tl);
+    lc_transport_texel_weights(v, cone, w);
+    for (uint32_t c = 0; c < v->n_caches; c++)
+        if (v->caches[c].flags & LC_CACHE_TEXEL)
+            for (size_t k = (size_t)c * v->links_per_cache; k < (size_t)(c + 1) * v->links_per_cache; k++)
+                tl[k].factor = w[k];
+    buf = lc_gl_buffer(n * sizeof *tl, tl, "texel links", err, errlen);
+done:
+    free(tl);
+    free(w);
+    return buf;
 }
 
 /* Drivers (llvmpipe among them) translate a program to machine code at its first dispatch:
@@ -253,30 +278,9 @@ static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t err
     if (!(t->b_links = lc_gl_buffer((size_t)v->n_caches * v->links_per_cache * sizeof(lc_lcb_link), v->links,
                                     "links", err, errlen)))
         goto err;
-    /* The same links with each texel cache's factors replaced by its scalar weights
-     * (transport.h, lc_transport_texel_scalar): bound instead of the links when in use. */
     float cone[256][8];
     lc_transport_cone_table(cone);
-    {
-        size_t n_links = (size_t)v->n_caches * v->links_per_cache;
-        lc_lcb_link *tl = malloc((n_links ? n_links : 1) * sizeof *tl);
-        float *w = malloc((n_links ? n_links : 1) * sizeof *w);
-        if (!tl || !w) {
-            free(tl);
-            free(w);
-            goto oom;
-        }
-        memcpy(tl, v->links, n_links * sizeof *tl);
-        lc_transport_texel_weights(v, cone, w);
-        for (uint32_t c = 0; c < v->n_caches; c++)
-            if (v->caches[c].flags & LC_CACHE_TEXEL)
-                for (uint32_t k = 0; k < v->links_per_cache; k++)
-                    tl[(size_t)c * v->links_per_cache + k].factor = w[(size_t)c * v->links_per_cache + k];
-        t->b_texel_links = lc_gl_buffer(n_links * sizeof *tl, tl, "texel links", err, errlen);
-        free(tl);
-        free(w);
-        if (!t->b_texel_links) goto err;
-    }
+    if (!(t->b_texel_links = tgl_texel_links(v, cone, err, errlen))) goto err;
     if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) goto err;
     if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) goto err;
     if (!(t->b_cone = lc_gl_buffer(sizeof cone, cone, "cone table", err, errlen))) goto err;
