@@ -103,7 +103,7 @@ EOF
     preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, reference,
     relights, b0_power_engine, b0_power_reference}' "$f")")
   jq -r '"  lightmap mean \(.lightmap.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
-  for v in "surfels=131072:--surfels 131072" "links=512:--links 512"; do
+  for v in "surfels=131072:--surfels 131072" "links=512:--links 512" "exposure:--exposure" "links=256:--links 256"; do
     name="${v%%:*}"; flags="${v#*:}"
     echo "fidelity: sponza $name..." >&2
     # shellcheck disable=SC2086

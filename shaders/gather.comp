@@ -24,9 +24,7 @@ layout(location = 1) uniform uint u_base;
 layout(location = 2) uniform uint u_links_per_cache;
 layout(location = 3) uniform uint u_use_list; // 1: caches are list[idx] (single window)
 layout(location = 4) uniform int u_texel_nc;   // coefficients gathered at texel caches (lc_transport_texel_bands^2)
-// 1: texel caches read the scalar-weight links (lc_transport_texel_scalar; the host binds the
-// links whose texel-cache factors are the weights w of lc_transport_texel_weights)
-layout(location = 5) uniform int u_texel_scalar;
+layout(location = 5) uniform int u_texel_band1; // 1: texel caches carry band 1 only (lc_transport_texel_band1)
 
 const int BAND_OF[64] = int[64](0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5,
                                 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7);
@@ -119,29 +117,8 @@ void main() {
     }
     uint used = caches[c].link_count;
     int nc_here = (caches[c].flags & 1u) != 0u ? min(u_texel_nc, NC) : NC; // 1 = LC_CACHE_TEXEL
+    int j0 = (u_texel_band1 != 0 && (caches[c].flags & 1u) != 0u) ? 1 : 0;  // band 0 left at zero
     uint lb = local * u_links_per_cache;
-    if (u_texel_scalar != 0 && (caches[c].flags & 1u) != 0u) {
-        // E for the cache normal n, stored as the band-1 field along n (as tcpu_gather_range)
-        precise float e0 = 0.0, e1 = 0.0, e2 = 0.0;
-        for (uint k = 0u; k < used; k++) {
-            Link lk = links[lb + k];
-            e0 += flux[3u * lk.node + 0u] * lk.factor;
-            e1 += flux[3u * lk.node + 1u] * lk.factor;
-            e2 += flux[3u * lk.node + 2u] * lk.factor;
-        }
-        vec3 n = vec3(caches[c].nx, caches[c].ny, caches[c].nz);
-        float n2 = dot(n, n);
-        float kk = n2 > 0.0 ? 0.488602511903 / n2 : 0.0;
-        float y1[3] = float[3](kk * n.y, kk * n.z, kk * n.x);
-        for (int j = 1; j < NC && j < 4; j++) {
-            acc0[j] = e0 * y1[j - 1];
-            if (j < NCC) {
-                acc1[j] = e1 * y1[j - 1];
-                acc2[j] = e2 * y1[j - 1];
-            }
-        }
-        used = 0u; // skip the SH loop below
-    }
     for (uint k = 0u; k < used; k++) {
         Link lk = links[lb + k];
         vec3 d = oct_decode(lk.dir_cone);
@@ -152,7 +129,7 @@ void main() {
         precise float p0 = flux[3u * lk.node + 0u] * f;
         precise float p1 = flux[3u * lk.node + 1u] * f;
         precise float p2 = flux[3u * lk.node + 2u] * f;
-        for (int j = 0; j < NC; j++) {
+        for (int j = j0; j < NC; j++) {
             if (j >= nc_here) break;
             precise float w = cone[hb + uint(BAND_OF[j])] * y[j];
             acc0[j] += w * p0;

@@ -29,7 +29,7 @@ typedef struct tcpu {
     uint8_t *feedback_cache; /* per cache: some surfel reads it */
     uint32_t *feedback_list; /* those caches */
     uint32_t n_feedback;
-    float *texel_w;          /* n_caches*links_per_cache: lc_transport_texel_weights */
+    float *texel_w;          /* n_texel_caches*links_per_cache*3: lc_transport_texel_weights */
     float cone[256][8];
 } tcpu;
 
@@ -73,7 +73,7 @@ static void *tcpu_create(const lc_lcb_view *v, int threads, char *err, size_t er
     t->grid_sh = calloc((size_t)t->cells * 27, sizeof(float));
     t->feedback_cache = calloc(v->n_caches ? v->n_caches : 1, 1);
     t->feedback_list = calloc(v->n_caches ? v->n_caches : 1, sizeof(uint32_t));
-    t->texel_w = malloc(((size_t)v->n_caches * v->links_per_cache + 1) * sizeof(float));
+    t->texel_w = malloc(((size_t)v->n_texel_caches * v->links_per_cache * 3 + 1) * sizeof(float));
     if (!t->flux || !t->radiosity || !t->e_ind || !t->cache_sh || !t->lightmap || !t->grid_sh ||
         !t->feedback_cache || !t->feedback_list || !t->texel_w)
         goto oom;
@@ -119,7 +119,7 @@ typedef struct {
     int bands, chroma_bands;
     int chroma;           /* flux is YCoCg: Co/Cg use chroma_bands only */
     int texel_bands;      /* bands gathered at texel caches (see lc_transport_texel_bands) */
-    int texel_scalar;     /* texel caches from the scalar weights (lc_transport_texel_scalar) */
+    int texel_band1;      /* texel caches: band 1 from the precomputed weights (lc_transport_texel_band1) */
 } tcpu_gather_job;
 
 static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
@@ -140,16 +140,18 @@ static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
 
 void lc_transport_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out) {
     const uint32_t nl = v->links_per_cache;
-    for (uint32_t c = 0; c < v->n_caches; c++) {
-        float *w = out + (size_t)c * nl;
-        memset(w, 0, nl * sizeof *w);
-        if (!(v->caches[c].flags & LC_CACHE_TEXEL)) continue;
-        const float *n = v->caches[c].normal;
+    const float k1 = 0.488602511903f; /* y_1m = k1 (y, z, x) */
+    for (uint32_t c = 0; c < v->n_texel_caches; c++) {
+        float *w = out + (size_t)c * nl * 3;
+        memset(w, 0, (size_t)nl * 3 * sizeof *w);
         const lc_lcb_link *lk = v->links + (size_t)c * nl;
         for (uint32_t k = 0; k < v->caches[c].link_count; k++) {
             float d[3];
             tcpu_oct_decode(lk[k].dir_cone, d);
-            w[k] = lk[k].factor * cone[lk[k].dir_cone >> 24][1] * (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]);
+            float f = lk[k].factor * cone[lk[k].dir_cone >> 24][1] * k1;
+            w[3 * k + 0] = f * d[1];
+            w[3 * k + 1] = f * d[2];
+            w[3 * k + 2] = f * d[0];
         }
     }
 }
@@ -244,25 +246,26 @@ tcpu_gather_blocked(const tcpu *t, const lc_lcb_link *lk, uint32_t used, int ban
         }
 }
 
-/* A texel cache's irradiance for its normal from the precomputed weights (transport.h):
- * sixteen partial sums per channel, like the blocked gather. */
-static void tcpu_gather_texel(const tcpu *t, const lc_lcb_link *lk, const float *w, uint32_t used, float e[3]) {
-    float lane[3][TCPU_BLOCK];
+/* A texel cache's band 1 from the precomputed weights (transport.h): acc[channel][1..3];
+ * sixteen partial sums per accumulator, like the blocked gather. */
+static void tcpu_gather_texel(const tcpu *t, const lc_lcb_link *lk, const float *w, uint32_t used, float acc[3][16]) {
+    float lane[3][3][TCPU_BLOCK];
     memset(lane, 0, sizeof lane);
     for (uint32_t k0 = 0; k0 < used; k0 += TCPU_BLOCK) {
         uint32_t n = used - k0 < TCPU_BLOCK ? used - k0 : TCPU_BLOCK;
         for (uint32_t i = 0; i < n; i++) {
-            const float *phi = t->flux + 3 * (size_t)lk[k0 + i].node;
-            float wk = w[k0 + i];
-            lane[0][i] += phi[0] * wk;
-            lane[1][i] += phi[1] * wk;
-            lane[2][i] += phi[2] * wk;
+            const float *phi = t->flux + 3 * (size_t)lk[k0 + i].node, *wk = w + 3 * (size_t)(k0 + i);
+            for (int ch = 0; ch < 3; ch++)
+                for (int m = 0; m < 3; m++) lane[ch][m][i] += phi[ch] * wk[m];
         }
     }
     for (int ch = 0; ch < 3; ch++) {
-        float sum = 0;
-        for (uint32_t i = 0; i < TCPU_BLOCK; i++) sum += lane[ch][i];
-        e[ch] = sum;
+        acc[ch][0] = 0;
+        for (int m = 0; m < 3; m++) {
+            float sum = 0;
+            for (uint32_t i = 0; i < TCPU_BLOCK; i++) sum += lane[ch][m][i];
+            acc[ch][1 + m] = sum;
+        }
     }
 }
 
@@ -308,18 +311,10 @@ static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
         const int bands = (v->caches[c].flags & LC_CACHE_TEXEL) ? job->texel_bands : job->bands;
         const int ncu = bands * bands, ncc = ncc_all < ncu ? ncc_all : ncu;
         float acc[3][TCPU_MAX_COEFFS];
-        if (job->texel_scalar && (v->caches[c].flags & LC_CACHE_TEXEL)) {
-            /* band-1 field along n whose irradiance for n is E (transport.h) */
-            float e[3];
-            tcpu_gather_texel(t, lk, t->texel_w + (size_t)c * nl, used, e);
-            const float *n = v->caches[c].normal;
-            float n2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2], y[3];
-            float k = n2 > 0 ? 0.488602511903f / n2 : 0.0f;
-            y[0] = k * n[1], y[1] = k * n[2], y[2] = k * n[0];
-            for (int ch = 0; ch < 3; ch++) {
-                acc[ch][0] = 0;
-                for (int j = 1; j < 4; j++) acc[ch][j] = e[ch] * y[j - 1];
-            }
+        if (job->texel_band1 && c < v->n_texel_caches) {
+            float a16[3][16];
+            tcpu_gather_texel(t, lk, t->texel_w + (size_t)c * nl * 3, used, a16);
+            for (int ch = 0; ch < 3; ch++) memcpy(acc[ch], a16[ch], 4 * sizeof(float));
         } else if (bands <= 4) {
             float a16[3][16];
             tcpu_gather_blocked(t, lk, used, bands, ncc, a16);
@@ -467,7 +462,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
         ms_pull += t3 - t2;
         /* Intermediate passes only need the caches some surfel reads. */
         tcpu_gather_job job = {t, last ? NULL : t->feedback_list, bands, (int)st->chroma_bands, chroma,
-                               lc_transport_texel_bands(st), lc_transport_texel_scalar(st)};
+                               lc_transport_texel_bands(st), lc_transport_texel_band1(st)};
         lc_parallel_for(last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
         double t4 = lc_clock_ms();
         ms_gather += t4 - t3;

@@ -49,15 +49,14 @@ static inline int lc_transport_texel_bands(const lc_engine_settings *st) {
     return st->sh_lightmap || st->bands < 2 ? (int)st->bands : 2;
 }
 
-/* Texel caches without the SH lightmap need only their irradiance for the cache normal n,
- * and that is linear in the flux: E = sum over links of flux[node] * w with the
- * lighting-independent w = factor * h_1(cos alpha) * dot(dir, n) (band 1 projected on n;
- * exactly what the irradiance formula above computes from the gathered band-1 SH). Both
- * backends then gather one weight per link instead of decoding the direction and
- * evaluating 4 SH coefficients, and store the cache's band-1 field along n, L_1m =
- * E y_1m(n) / |n|^2 (band 0 zero), whose irradiance for n is E. Feedback to a surfel with
- * another normal m reads E dot(n, m) / |n|^2 from it. */
-static inline int lc_transport_texel_scalar(const lc_engine_settings *st) { return !st->sh_lightmap && st->bands >= 2; }
+/* Texel caches without the SH lightmap carry band 1 only: the irradiance for their normal
+ * and the feedback to their surfels (for the surfel's normal) read nothing else. Band 1 is
+ * linear in the node flux with lighting-independent weights per link,
+ *   L_1m += flux[node] * w_m,  w_m = factor * h_1(cos alpha) * y_1m(dir),
+ * so the CPU backend precomputes the three w_m per texel-cache link at load and gathers
+ * with 9 multiply-adds per link instead of decoding the direction and evaluating the SH
+ * basis; the GL backend keeps its SH evaluation and only skips band 0. Identical results. */
+static inline int lc_transport_texel_band1(const lc_engine_settings *st) { return !st->sh_lightmap && st->bands >= 2; }
 
 extern const lc_transport_ops lc_transport_cpu;
 extern const lc_transport_ops lc_transport_egl;
@@ -65,8 +64,8 @@ extern const lc_transport_ops lc_transport_egl;
 /* Shared helpers (defined in cpu/transport_cpu.c, also used by tests and the GL backend's
  * uploads): the h_l(cos alpha) table for the 256 quantised cone angles, 8 bands each. */
 void lc_transport_cone_table(float table[256][8]);
-/* The per-link texel weights w above: out[cache * links_per_cache + k] for the used links of
- * every texel cache, 0 elsewhere (grid caches, padding). */
+/* The band-1 weights w_m above for every texel cache (caches [0, n_texel_caches)):
+ * out[3 * (cache * links_per_cache + k) + m - 1] for m = 1..3 (y, z, x), 0 for padding. */
 void lc_transport_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out);
 
 #endif

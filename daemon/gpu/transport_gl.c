@@ -68,7 +68,7 @@ typedef struct tgl {
     GLuint prog[TGL_N_PROGS];
     GLuint gather[LC_SH_MAX_BANDS + 1][LC_SH_MAX_BANDS + 1]; /* [bands][Co/Cg bands], compiled on first use */
     /* Static (create): */
-    GLuint b_surfels, b_nodes, b_links, b_texel_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
+    GLuint b_surfels, b_nodes, b_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
     uint32_t n_feedback;
     /* Per run: */
     GLuint b_b0, b_radiosity, b_e_ind, b_flux, b_cache_sh, b_sh9, b_lightmap, b_grid_sh, b_obj_pos, b_obj_sh;
@@ -89,10 +89,10 @@ static void tgl_release(void *impl) {
         for (int b = 0; b <= LC_SH_MAX_BANDS; b++)
             for (int c = 0; c <= LC_SH_MAX_BANDS; c++)
                 if (t->gather[b][c]) glDeleteProgram(t->gather[b][c]);
-        GLuint bufs[] = {t->b_surfels,  t->b_nodes,       t->b_links,      t->b_texel_links, t->b_caches,
-                         t->b_lm_index, t->b_grid_index,  t->b_cone,       t->b_shk,         t->b_list,
-                         t->b_b0,       t->b_radiosity,   t->b_e_ind,      t->b_flux,        t->b_cache_sh,
-                         t->b_sh9,      t->b_lightmap,    t->b_grid_sh,    t->b_obj_pos,     t->b_obj_sh};
+        GLuint bufs[] = {t->b_surfels, t->b_nodes,     t->b_links,   t->b_caches, t->b_lm_index, t->b_grid_index,
+                         t->b_cone,    t->b_shk,       t->b_list,    t->b_b0,     t->b_radiosity, t->b_e_ind,
+                         t->b_flux,    t->b_cache_sh,  t->b_sh9,     t->b_lightmap, t->b_grid_sh, t->b_obj_pos,
+                         t->b_obj_sh};
         glDeleteBuffers((GLsizei)(sizeof bufs / sizeof bufs[0]), bufs); /* 0 names are ignored */
         if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
     }
@@ -121,31 +121,6 @@ static GLuint tgl_gather_program(tgl *t, int bands, int ncc_bands, char *err, si
     *slot = lc_gl_compile_program_defs(name, lc_gl_shader_source("gather"), defs, err, errlen);
     if (*slot) lc_debug("egl", "compiled %s in %.1f ms", name, lc_clock_ms() - t0);
     return *slot;
-}
-
-/* The links with each texel cache's factors replaced by its scalar weights (transport.h,
- * lc_transport_texel_scalar), same layout: bound instead of the links when in use. 0 with
- * err on failure. Compute thread. */
-static GLuint tgl_texel_links(const lc_lcb_view *v, const float cone[256][8], char *err, size_t errlen) {
-    size_t n = (size_t)v->n_caches * v->links_per_cache;
-    lc_lcb_link *tl = malloc((n ? n : 1) * sizeof *tl);
-    float *w = malloc((n ? n : 1) * sizeof *w);
-    GLuint buf = 0;
-    if (!tl || !w) {
-        lc_set_err(err, errlen, "egl transport: out of memory for the texel links");
-        goto done;
-    }
-    memcpy(tl, v->links, n * sizeof *tl);
-    lc_transport_texel_weights(v, cone, w);
-    for (uint32_t c = 0; c < v->n_caches; c++)
-        if (v->caches[c].flags & LC_CACHE_TEXEL)
-            for (size_t k = (size_t)c * v->links_per_cache; k < (size_t)(c + 1) * v->links_per_cache; k++)
-                tl[k].factor = w[k];
-    buf = lc_gl_buffer(n * sizeof *tl, tl, "texel links", err, errlen);
-done:
-    free(tl);
-    free(w);
-    return buf;
 }
 
 /* Drivers (llvmpipe among them) translate a program to machine code at its first dispatch:
@@ -278,11 +253,10 @@ static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t err
     if (!(t->b_links = lc_gl_buffer((size_t)v->n_caches * v->links_per_cache * sizeof(lc_lcb_link), v->links,
                                     "links", err, errlen)))
         goto err;
-    float cone[256][8];
-    lc_transport_cone_table(cone);
-    if (!(t->b_texel_links = tgl_texel_links(v, cone, err, errlen))) goto err;
     if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) goto err;
     if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) goto err;
+    float cone[256][8];
+    lc_transport_cone_table(cone);
     if (!(t->b_cone = lc_gl_buffer(sizeof cone, cone, "cone table", err, errlen))) goto err;
     for (int i = 0; i < TGL_N_PROGS; i++) tgl_warm_up(t, t->prog[i]);
     tgl_warm_up(t, t->gather[def_bands][def_bands]);
@@ -436,12 +410,10 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
         lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
         glProgramUniform1ui(gather, 2, v->links_per_cache);
         glProgramUniform1i(gather, 4, lc_transport_texel_bands(st) * lc_transport_texel_bands(st));
-        const int scalar = lc_transport_texel_scalar(st);
-        const GLuint b_links = scalar ? t->b_texel_links : t->b_links;
-        glProgramUniform1i(gather, 5, scalar);
+        glProgramUniform1i(gather, 5, lc_transport_texel_band1(st));
         const size_t link_bytes = (size_t)v->links_per_cache * sizeof(lc_lcb_link), sh_bytes = (size_t)nc * 12;
         if (!last && single_window && t->n_feedback < v->n_caches) {
-            lc_gl_bind(0, b_links, 0, (size_t)v->n_caches * link_bytes);
+            lc_gl_bind(0, t->b_links, 0, (size_t)v->n_caches * link_bytes);
             lc_gl_bind(4, t->b_cache_sh, 0, (size_t)v->n_caches * sh_bytes);
             glProgramUniform1ui(gather, 1, 0);
             glProgramUniform1ui(gather, 3, 1);
@@ -451,7 +423,7 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
             glProgramUniform1ui(gather, 3, 0);
             for (uint32_t c0 = 0; c0 < v->n_caches; c0 += t->chunk) {
                 uint32_t cnt = v->n_caches - c0 < t->chunk ? v->n_caches - c0 : t->chunk;
-                lc_gl_bind(0, b_links, c0 * link_bytes, cnt * link_bytes);
+                lc_gl_bind(0, t->b_links, c0 * link_bytes, cnt * link_bytes);
                 lc_gl_bind(4, t->b_cache_sh, c0 * sh_bytes, cnt * sh_bytes);
                 glProgramUniform1ui(gather, 1, c0);
                 tgl_uniform_count(gather, cnt);

@@ -72,24 +72,24 @@ static void test_closed_box(void) {
         int band2 = 0;
         for (int j = 4; j < 9; j++) band2 |= fr2->cache_sh[tc * stride + 3 * j] != 0.0f;
         CHECK(band2, "with the SH lightmap, texel caches carry band 2");
-        /* Without the SH lightmap, texel caches gather E from one scalar weight per link
-         * (transport.h); one pass of each must give the same lightmap as the full SH path. */
+        /* Without the SH lightmap, texel caches gather band 1 from precomputed weights
+         * (transport.h); with feedback bounces both paths must give the same lightmap. */
         lc_engine_state s0 = st, s1 = st2;
-        s0.settings.bounces = s1.settings.bounces = 0;
+        s0.settings.bounces = s1.settings.bounces = 2;
         size_t texels = (size_t)fr->lightmap_width * fr->lightmap_height;
-        float *scalar_lm = malloc(texels * 3 * sizeof *scalar_lm);
-        CHECK(lc_engine_relight(f.engine, &s0, &fr, err, sizeof err) == 0, "relight scalar: %s", err);
-        if (scalar_lm) memcpy(scalar_lm, fr->lightmap, texels * 3 * sizeof *scalar_lm);
-        CHECK(fr->cache_sh[tc * stride] == 0.0f, "scalar texel cache: band 0 is zero");
+        float *band1_lm = malloc(texels * 3 * sizeof *band1_lm);
+        CHECK(lc_engine_relight(f.engine, &s0, &fr, err, sizeof err) == 0, "relight band 1: %s", err);
+        if (band1_lm) memcpy(band1_lm, fr->lightmap, texels * 3 * sizeof *band1_lm);
+        CHECK(fr->cache_sh[tc * stride] == 0.0f, "band-1 texel cache: band 0 is zero");
         CHECK(lc_engine_relight(f.engine, &s1, &fr2, err, sizeof err) == 0, "relight SH: %s", err);
         double peak = 0, diff = 0;
-        for (size_t i = 0; scalar_lm && i < texels * 3; i++) {
+        for (size_t i = 0; band1_lm && i < texels * 3; i++) {
             peak = fmax(peak, fr2->lightmap[i]);
-            diff = fmax(diff, fabs((double)scalar_lm[i] - fr2->lightmap[i]));
+            diff = fmax(diff, fabs((double)band1_lm[i] - fr2->lightmap[i]));
         }
-        CHECK(scalar_lm && peak > 0 && diff < 1e-5 * peak, "scalar texel gather = SH gather: worst %.3g of peak %.3g",
+        CHECK(band1_lm && peak > 0 && diff < 1e-5 * peak, "band-1 texel gather = SH gather: worst %.3g of peak %.3g",
               diff, peak);
-        free(scalar_lm);
+        free(band1_lm);
         CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight again: %s", err);
     }
     /* Surfel radiosity. */
