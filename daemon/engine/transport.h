@@ -55,7 +55,7 @@ static inline int lc_transport_texel_bands(const lc_engine_settings *st) {
  *   L_1m += flux[node] * w_m,  w_m = factor * h_1(cos alpha) * y_1m(dir),
  * so the CPU backend precomputes the three w_m per texel-cache link at load and gathers
  * with 9 multiply-adds per link instead of decoding the direction and evaluating the SH
- * basis; the GL backend keeps its SH evaluation and only skips band 0. Identical results. */
+ * basis; the GL backend keeps its SH evaluation and clears band 0. Identical results. */
 static inline int lc_transport_texel_band1(const lc_engine_settings *st) { return !st->sh_lightmap && st->bands >= 2; }
 
 extern const lc_transport_ops lc_transport_cpu;
