@@ -29,7 +29,7 @@ typedef struct tcpu {
     uint8_t *feedback_cache; /* per cache: some surfel reads it */
     uint32_t *feedback_list; /* those caches */
     uint32_t n_feedback;
-    float *texel_w;          /* n_texel_caches*links_per_cache*3: lc_transport_texel_weights */
+    float *texel_w;          /* n_texel_caches*links_per_cache*3: tcpu_texel_weights */
     float cone[256][8];
 } tcpu;
 
@@ -39,6 +39,8 @@ void lc_transport_cone_table(float table[256][8]) {
         for (int l = 0; l < 8; l++) table[q][l] = (float)lc_sh_cone_ratio(l, cos(alpha));
     }
 }
+
+static void tcpu_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out);
 
 static void tcpu_release(void *impl) {
     tcpu *t = impl;
@@ -82,7 +84,7 @@ static void *tcpu_create(const lc_lcb_view *v, int threads, char *err, size_t er
     for (uint32_t c = 0; c < v->n_caches; c++)
         if (t->feedback_cache[c]) t->feedback_list[t->n_feedback++] = c;
     lc_transport_cone_table(t->cone);
-    lc_transport_texel_weights(v, t->cone, t->texel_w);
+    tcpu_texel_weights(v, t->cone, t->texel_w);
     return t;
 oom:
     tcpu_release(t);
@@ -138,7 +140,9 @@ static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
     d[2] = z * inv;
 }
 
-void lc_transport_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out) {
+/* The band-1 weights w_m of transport.h for every texel cache (caches [0, n_texel_caches)):
+ * out[3 * (cache * links_per_cache + k) + m - 1] for m = 1..3 (y, z, x), 0 for padding. */
+static void tcpu_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out) {
     const uint32_t nl = v->links_per_cache;
     const float k1 = 0.488602511903f; /* y_1m = k1 (y, z, x) */
     for (uint32_t c = 0; c < v->n_texel_caches; c++) {

@@ -64,8 +64,5 @@ extern const lc_transport_ops lc_transport_egl;
 /* Shared helpers (defined in cpu/transport_cpu.c, also used by tests and the GL backend's
  * uploads): the h_l(cos alpha) table for the 256 quantised cone angles, 8 bands each. */
 void lc_transport_cone_table(float table[256][8]);
-/* The band-1 weights w_m above for every texel cache (caches [0, n_texel_caches)):
- * out[3 * (cache * links_per_cache + k) + m - 1] for m = 1..3 (y, z, x), 0 for padding. */
-void lc_transport_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out);
 
 #endif

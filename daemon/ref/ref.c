@@ -25,6 +25,7 @@ struct lc_ref {
     const lc_lcb *bake;
     const lc_lcb_view *v;
     float eps; /* ray offset scaled to the scene, as the engine's */
+    float surfel_area; /* mean surfel area: the bake's spacing (exposure reweighs surfels, not the sum) */
     /* State (copied). */
     lc_engine_light *lights;
     uint32_t n_lights;
@@ -181,13 +182,6 @@ static inline uint32_t ref_cell_find(const lc_ref *r, uint64_t key, uint32_t *fi
     }
 }
 
-/* Mean surfel area: the bake's equal-area spacing (exposure reweighs single surfels, not the sum). */
-static float ref_nominal_surfel_area(const lc_lcb_view *v) {
-    double sum = 0;
-    for (uint32_t i = 0; i < v->n_surfels; i++) sum += v->surfels[i].area;
-    return v->n_surfels ? (float)(sum / v->n_surfels) : 0.0f;
-}
-
 static int ref_surfels_index(lc_ref *r) {
     const lc_lcb_view *v = r->v;
     uint32_t n = v->n_surfels;
@@ -195,7 +189,7 @@ static int ref_surfels_index(lc_ref *r) {
     float lo[3] = {INFINITY, INFINITY, INFINITY};
     for (uint32_t i = 0; i < n; i++)
         for (int k = 0; k < 3; k++) lo[k] = fminf(lo[k], v->surfels[i].position[k]);
-    float cell = 2.0f * sqrtf(fmaxf(ref_nominal_surfel_area(v), 1e-12f));
+    float cell = 2.0f * sqrtf(fmaxf(r->surfel_area, 1e-12f));
     r->cell_inv = 1.0f / cell;
     memcpy(r->cell_origin, lo, sizeof lo);
     uint64_t *pairs = malloc((size_t)n * 2 * sizeof *pairs);
@@ -277,7 +271,7 @@ static void ref_tri_albedo_range(void *ctx, size_t begin, size_t end, int thread
     (void)thread;
     lc_ref *r = ctx;
     const lc_lcb_view *v = r->v;
-    float limit = 4.0f * ref_nominal_surfel_area(v);
+    float limit = 4.0f * r->surfel_area;
     for (size_t t = begin; t < end; t++) {
         float *out = r->tri_albedo + 3 * t;
         out[0] = out[1] = out[2] = NAN;
@@ -824,6 +818,9 @@ lc_ref *lc_ref_create(const lc_lcb *bake, const lc_engine_state *st, int threads
     const lc_lcb_view *v = r->v;
     lc_parallel_set_threads(threads);
     r->eps = lc_embree_scene_epsilon(v);
+    double area_sum = 0;
+    for (uint32_t i = 0; i < v->n_surfels; i++) area_sum += v->surfels[i].area;
+    r->surfel_area = v->n_surfels ? (float)(area_sum / v->n_surfels) : 0.0f;
     for (uint32_t i = 0; i < st->n_objects; i++)
         if (st->objects[i].asset >= v->n_assets) {
             lc_set_err(err, errlen, "/objects/%u/asset: index %u, the bake has %u assets", i, st->objects[i].asset,
