@@ -34,6 +34,7 @@
 
 struct lc_client_view {
     int have_key;           /* a keyframe was applied since create/reset */
+    uint16_t flags;         /* of the last applied frame */
     int stream, encoding;
     uint64_t revision, sequence, server_time_us, client_time_us;
     uint32_t width, height, depth, tile_size;
@@ -41,6 +42,9 @@ struct lc_client_view {
     size_t value_count, value_cap;
     char **object_ids; /* objects stream: width strings */
     uint32_t n_object_ids;
+    uint8_t *words;  /* lightmap: the texels as received, encoded (residual deltas add to them) */
+    size_t words_len, words_cap;
+    int words_encoding;
     uint32_t *tiles; /* tiles of the last applied delta */
     uint32_t tile_count, tile_cap;
     const uint8_t *raw; /* last applied frame (borrowed: valid while the caller keeps it) */
@@ -88,6 +92,7 @@ void lc_client_view_release(lc_client_view *v) {
     if (!v) return;
     view_free_ids(v);
     free(v->values);
+    free(v->words);
     free(v->tiles);
     free(v);
 }
@@ -137,7 +142,8 @@ static void view_fill_out(const lc_client_view *v, lc_client_frame *out) {
     memset(out, 0, sizeof *out);
     out->stream = v->stream;
     out->encoding = v->encoding;
-    out->keyframe = v->tile_count == 0;
+    out->keyframe = v->flags == LC_FRAME_KEYFRAME;
+    out->residual = (v->flags & LC_FRAME_RESIDUAL) != 0;
     out->revision = v->revision;
     out->sequence = v->sequence;
     out->server_time_us = v->server_time_us;
@@ -166,6 +172,16 @@ static int apply_lightmap(lc_client_view *v, const lc_frame_header *h, const uin
         }
         for (size_t i = 0; i < texels; i++) decode_texel(h->encoding, payload + i * tb, v->values + 3 * i);
         v->tile_count = 0;
+        v->words_len = 0; /* no encoded copy until it is complete */
+        if (texels * tb > v->words_cap) {
+            uint8_t *n = realloc(v->words, texels * tb);
+            if (!n) return 0; /* the values are fine; residual deltas will ask for a keyframe */
+            v->words = n;
+            v->words_cap = texels * tb;
+        }
+        memcpy(v->words, payload, texels * tb);
+        v->words_len = texels * tb;
+        v->words_encoding = h->encoding;
         return 0;
     }
     if (h->width != v->width || h->height != v->height || v->stream != LC_CLIENT_LIGHTMAP) {
@@ -182,14 +198,39 @@ static int apply_lightmap(lc_client_view *v, const lc_frame_header *h, const uin
         v->tiles = n;
         v->tile_cap = h->tile_count;
     }
+    const size_t words_len = (size_t)h->width * h->height * tb;
+    const int residual = (h->flags & LC_FRAME_RESIDUAL) != 0;
+    int words_ok = v->words_len == words_len && v->words_encoding == h->encoding;
+    uint8_t *inflated = NULL;
+    if (residual) {
+        if (!words_ok) {
+            set_err(err, errlen, "residual delta without an encoded %s copy", lc_proto_encoding_name((lc_encoding)h->encoding));
+            return -2;
+        }
+        size_t expect = lc_frame_tile_texels(h, tiles) * tb;
+        inflated = malloc(expect ? expect : 1);
+        if (!inflated || lc_residual_inflate(payload, h->payload_length, inflated, expect) != 0) {
+            free(inflated);
+            set_err(err, errlen, "bad frame: the residual payload does not inflate to %zu bytes", expect);
+            return -1;
+        }
+        payload = inflated;
+    }
     const uint8_t *p = payload;
     for (uint32_t i = 0; i < h->tile_count; i++) {
         uint32_t t = get_u32(tiles + 4 * (size_t)i), x0, y0, x1, y1;
         v->tiles[i] = t;
         lc_tile_rect(h->width, h->height, h->tile_size, t, &x0, &y0, &x1, &y1);
         for (uint32_t y = y0; y < y1; y++)
-            for (uint32_t x = x0; x < x1; x++, p += tb) decode_texel(h->encoding, p, v->values + 3 * ((size_t)y * h->width + x));
+            for (uint32_t x = x0; x < x1; x++, p += tb) {
+                size_t at = (size_t)y * h->width + x;
+                if (residual) lc_residual_apply((lc_encoding)h->encoding, v->words + at * tb, p, 1);
+                else if (words_ok) memcpy(v->words + at * tb, p, tb);
+                decode_texel(h->encoding, residual ? v->words + at * tb : p, v->values + 3 * at);
+            }
     }
+    if (!words_ok) v->words_len = 0; /* a delta in another encoding: the encoded copy is gone */
+    free(inflated);
     v->tile_count = h->tile_count;
     return 0;
 }
@@ -283,6 +324,7 @@ int lc_client_view_apply(lc_client_view *v, const uint8_t *frame, size_t len, lc
         return r;
     }
     v->have_key = 1;
+    v->flags = h.flags;
     v->stream = h.stream;
     v->encoding = h.encoding;
     v->revision = h.revision;
@@ -440,16 +482,23 @@ static int ids_equal(const cJSON *a, const cJSON *b) {
     return 0;
 }
 
-static int send_subscribe(lc_client *c, int stream) {
+/* The subscribe request for a stream; `encoding` may carry LC_CLIENT_RESIDUAL. */
+static cJSON *subscribe_json(int stream, int encoding, double max_rate) {
     cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "type", "subscribe");
+    cJSON_AddStringToObject(o, "stream", lc_proto_stream_name((lc_stream)stream));
+    int enc = encoding & ~LC_CLIENT_RESIDUAL;
+    if (enc) cJSON_AddStringToObject(o, "encoding", lc_proto_encoding_name((lc_encoding)enc));
+    if (encoding & LC_CLIENT_RESIDUAL) cJSON_AddStringToObject(o, "delta", "residual");
+    if (max_rate > 0) cJSON_AddNumberToObject(o, "max_rate", max_rate);
+    return o;
+}
+
+static int send_subscribe(lc_client *c, int stream) {
+    cJSON *o = subscribe_json(stream, c->subs[stream].encoding, c->subs[stream].max_rate);
     char id[32];
     snprintf(id, sizeof id, CLIENT_ID_PREFIX "sub-%d", stream);
-    cJSON_AddStringToObject(o, "type", "subscribe");
     cJSON_AddStringToObject(o, "id", id);
-    cJSON_AddStringToObject(o, "stream", lc_proto_stream_name((lc_stream)stream));
-    if (c->subs[stream].encoding)
-        cJSON_AddStringToObject(o, "encoding", lc_proto_encoding_name((lc_encoding)c->subs[stream].encoding));
-    if (c->subs[stream].max_rate > 0) cJSON_AddNumberToObject(o, "max_rate", c->subs[stream].max_rate);
     return txq_push_json(c, o, 0);
 }
 
@@ -952,16 +1001,13 @@ out:
 }
 
 int lc_client_subscribe(lc_client *c, int stream, int encoding, double max_rate, char *err, size_t errlen) {
-    if (!c || stream < 1 || stream >= CLIENT_STREAMS || encoding < 0 || encoding > LC_CLIENT_F32 ||
-        !(max_rate >= 0) || !isfinite(max_rate)) {
+    int enc = encoding & ~LC_CLIENT_RESIDUAL;
+    if (!c || stream < 1 || stream >= CLIENT_STREAMS || enc < 0 || enc > LC_CLIENT_F32 ||
+        ((encoding & LC_CLIENT_RESIDUAL) && stream != LC_CLIENT_LIGHTMAP) || !(max_rate >= 0) || !isfinite(max_rate)) {
         set_err(err, errlen, "bad arguments (stream %d, encoding %d)", stream, encoding);
         return -1;
     }
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "type", "subscribe");
-    cJSON_AddStringToObject(o, "stream", lc_proto_stream_name((lc_stream)stream));
-    if (encoding) cJSON_AddStringToObject(o, "encoding", lc_proto_encoding_name((lc_encoding)encoding));
-    if (max_rate > 0) cJSON_AddNumberToObject(o, "max_rate", max_rate);
+    cJSON *o = subscribe_json(stream, encoding, max_rate);
     char *t = cJSON_PrintUnformatted(o);
     cJSON_Delete(o);
     if (!t) {

@@ -222,6 +222,8 @@ static void usage_watch(FILE *o) {
             "  shgrid-SEQ.json + .bin, objects-SEQ.json + .bin; one JSON line per frame in DIR/frames.jsonl.\n"
             "options:\n"
             "  --encoding rgb9e5|rgba16f|f32  wire encoding (default: the stream's)\n"
+            "  --delta tiles|residual  lightmap delta frames: whole tiles (default) or compressed\n"
+            "                       residuals (smaller; PROTOCOL.md 6.2.1)\n"
             "  --max-rate HZ        ask the server for at most HZ frames per second\n"
             "  --count N            stop after N frames\n"
             "  --duration SECONDS   stop after this long (default: until Ctrl-C)\n"
@@ -252,10 +254,11 @@ static void watch_on_frame(lc_client *c, const lc_client_frame *f, void *user) {
     double age = frame_age_ms(f);
     fprintf(w->index,
             "{\"file\":\"%s\",\"stream\":\"%s\",\"encoding\":\"%s\",\"revision\":%llu,\"sequence\":%llu,"
-            "\"keyframe\":%s,\"tiles\":%u,\"bytes\":%zu,\"server_time_us\":%llu,\"client_time_us\":%llu,"
+            "\"keyframe\":%s,\"residual\":%s,\"tiles\":%u,\"bytes\":%zu,\"server_time_us\":%llu,\"client_time_us\":%llu,"
             "\"age_ms\":%.3f}\n",
             prefix, stream_name(f->stream), encoding_name(f->encoding), (unsigned long long)f->revision,
-            (unsigned long long)f->sequence, f->keyframe ? "true" : "false", f->tile_count, f->raw_len,
+            (unsigned long long)f->sequence, f->keyframe ? "true" : "false", f->residual ? "true" : "false",
+            f->tile_count, f->raw_len,
             (unsigned long long)f->server_time_us, (unsigned long long)f->client_time_us, age);
     fflush(w->index);
     if (ctl_json)
@@ -264,7 +267,8 @@ static void watch_on_frame(lc_client *c, const lc_client_frame *f, void *user) {
                f->keyframe ? "true" : "false", f->raw_len);
     else
         printf("%s revision %llu %s %zu B (%u tiles) -> %s/%s.*\n", stream_name(f->stream),
-               (unsigned long long)f->revision, f->keyframe ? "keyframe" : "delta", f->raw_len, f->tile_count,
+               (unsigned long long)f->revision, f->keyframe ? "keyframe" : f->residual ? "residual delta" : "delta",
+               f->raw_len, f->tile_count,
                w->so.dir, prefix);
     fflush(stdout);
 }
@@ -282,7 +286,7 @@ int ctl_cmd_watch(int argc, char **argv) {
         usage_watch(stdout);
         return CTL_EXIT_OK;
     }
-    int stream = 0, encoding = 0, raw = 0, reconnect = 1;
+    int stream = 0, encoding = 0, raw = 0, reconnect = 1, residual = 0;
     double max_rate = 0, duration = 0, exposure = 0, count = 0;
     const char *dir = NULL;
     for (int i = 1; i < argc; i++) {
@@ -303,6 +307,10 @@ int ctl_cmd_watch(int argc, char **argv) {
         } else if (!strcmp(k, "--encoding")) {
             if (!(encoding = encoding_parse_name(v)))
                 return ctl_usage_error("watch: --encoding '%s' is not rgb9e5, rgba16f or f32", v);
+        } else if (!strcmp(k, "--delta")) {
+            if (strcmp(v, "tiles") && strcmp(v, "residual"))
+                return ctl_usage_error("watch: --delta '%s' is not tiles or residual", v);
+            residual = !strcmp(v, "residual");
         } else if (!strcmp(k, "--out")) dir = v;
         else if (!strcmp(k, "--max-rate") || !strcmp(k, "--duration") || !strcmp(k, "--exposure") ||
                  !strcmp(k, "--count")) {
@@ -318,6 +326,8 @@ int ctl_cmd_watch(int argc, char **argv) {
     if (!dir) return ctl_usage_error("watch: --out DIR is required");
     if (encoding == LC_CLIENT_RGB9E5 && stream != LC_CLIENT_LIGHTMAP)
         return ctl_usage_error("watch: rgb9e5 is for the lightmap only (SH streams: rgba16f or f32)");
+    if (residual && stream != LC_CLIENT_LIGHTMAP)
+        return ctl_usage_error("watch: --delta is for the lightmap only (SH streams send keyframes)");
     if (mkdir_p(dir) != 0) {
         fprintf(stderr, "lucentctl: cannot create %s: %s\n", dir, strerror(errno));
         return CTL_EXIT_USAGE;
@@ -346,7 +356,7 @@ int ctl_cmd_watch(int argc, char **argv) {
     lc_client_callbacks cb = {watch_on_frame, NULL, watch_on_connection, &w};
     lc_client_set_callbacks(c, &cb);
     char err[512];
-    int r = lc_client_subscribe(c, stream, encoding, max_rate, err, sizeof err);
+    int r = lc_client_subscribe(c, stream, encoding | (residual ? LC_CLIENT_RESIDUAL : 0), max_rate, err, sizeof err);
     if (r != 0) {
         fprintf(stderr, "lucentctl: subscribe failed: %s\n", err);
         rc = r == 1 ? CTL_EXIT_REFUSED : CTL_EXIT_CONN;

@@ -37,6 +37,9 @@ typedef struct lc_client lc_client;
 /* Streams and encodings, numbered as in the frame header (PROTOCOL.md §6.1). */
 enum { LC_CLIENT_LIGHTMAP = 1, LC_CLIENT_SHGRID = 2, LC_CLIENT_OBJECTS = 3 };
 enum { LC_CLIENT_RGB9E5 = 1, LC_CLIENT_RGBA16F = 2, LC_CLIENT_F32 = 3 };
+/* OR'd into a lightmap subscription's encoding: delta frames as compressed residuals
+ * (PROTOCOL.md §6.2.1; smaller for small changes, applied to the view's encoded copy). */
+enum { LC_CLIENT_RESIDUAL = 0x100 };
 
 /* Connection events for the on_connection callback. */
 enum { LC_CLIENT_DISCONNECTED = 0, LC_CLIENT_CONNECTED = 1, LC_CLIENT_RECONNECTING = 2 };
@@ -66,6 +69,7 @@ void lc_client_options_init(lc_client_options *o);
  * lists the tiles it replaced (tile_count of them); for keyframes tile_count is 0. */
 typedef struct lc_client_frame {
     int stream, encoding, keyframe;
+    int residual; /* a residual delta (PROTOCOL.md §6.2.1) */
     uint64_t revision, sequence;
     uint64_t server_time_us; /* server clock when the frame was built, µs since the epoch */
     uint64_t client_time_us; /* local clock (CLOCK_REALTIME) when the frame was complete */
@@ -111,8 +115,9 @@ int lc_client_request(lc_client *c, const char *json_request, char **reply_json,
                       size_t errlen);
 
 /* Subscribes to a stream (LC_CLIENT_LIGHTMAP…) in an encoding (LC_CLIENT_RGB9E5…; 0 = the
- * stream's default) with an optional maximum rate in frames/s (0 = unlimited), and waits for
- * the server's ok. The subscription is remembered and renewed after a reconnect. */
+ * stream's default; lightmap: | LC_CLIENT_RESIDUAL for residual deltas) with an optional
+ * maximum rate in frames/s (0 = unlimited), and waits for the server's ok. The subscription
+ * is remembered and renewed after a reconnect. */
 int lc_client_subscribe(lc_client *c, int stream, int encoding, double max_rate, char *err, size_t errlen);
 int lc_client_unsubscribe(lc_client *c, int stream, char *err, size_t errlen);
 

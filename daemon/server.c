@@ -41,11 +41,12 @@ typedef struct lc_session {
     struct {
         int on, force;
         lc_encoding enc;
+        int residual;          /* lightmap deltas as compressed residuals (PROTOCOL.md §6.2.1) */
         uint64_t sequence;     /* frames sent on this stream */
         uint64_t sent_pub_seq; /* publication last sent */
         double max_rate, last_ms;
     } stream[STREAMS];
-    float *lm_sent;      /* lightmap values as last sent (delta frames compare against it) */
+    float *lm_sent;      /* per texel, the value the client's copy was encoded from (deltas compare against it) */
     size_t lm_sent_texels;
     lc_published *frame; /* newest result for this session (a reference) */
     uint64_t frame_seq;
@@ -161,18 +162,79 @@ static uint32_t server_tile_size(int configured, uint32_t w, uint32_t h) {
     return t;
 }
 
+/* 1 when texel i of `now` moved by more than thr (relative to the texel's brightest channel,
+ * at least floor_v) from `sent`: a dim channel (the blue of a warm light) must not make a
+ * texel dirty for changes nobody can see. */
+static int texel_moved(const float *now, const float *sent, size_t i, float thr, float floor_v) {
+    const float *a = now + 3 * i, *b = sent + 3 * i;
+    float ref = fmaxf(fmaxf(fmaxf(a[0], a[1]), fmaxf(a[2], b[0])), fmaxf(fmaxf(b[1], b[2]), floor_v));
+    for (int c = 0; c < 3; c++)
+        if (fabsf(a[c] - b[c]) > thr * ref) return 1;
+    return 0;
+}
+
+/* A residual delta (PROTOCOL.md §6.2.1) of the given tiles into *out (malloc'd, caller frees):
+ * texels that moved get their new value, the others keep the client's (residual 0). Commits
+ * the new values to ss->lm_sent only when the result is smaller than `limit` bytes. Returns
+ * the compressed length, 0 when not smaller (or out of memory): send a keyframe instead. */
+static size_t session_residual(lc_session *ss, lc_encoding enc, uint32_t S, const uint32_t *tiles, uint32_t n_tiles,
+                               size_t delta_texels, float thr, float floor_v, size_t limit, uint8_t **out) {
+    const lc_published *p = ss->frame;
+    const uint32_t W = p->lm_w, H = p->lm_h;
+    const size_t tb = lc_frame_texel_bytes(enc), raw_len = delta_texels * tb;
+    uint8_t *raw = malloc(raw_len), *z = malloc(lc_residual_deflate_bound(raw_len));
+    size_t zlen = 0, k = 0;
+    if (!raw || !z) goto done;
+    for (uint32_t t = 0; t < n_tiles; t++) {
+        uint32_t x0, y0, x1, y1;
+        lc_tile_rect(W, H, S, tiles[t], &x0, &y0, &x1, &y1);
+        for (uint32_t y = y0; y < y1; y++)
+            for (uint32_t x = x0; x < x1; x++, k++) {
+                size_t i = (size_t)y * W + x;
+                uint8_t held[12], now[12];
+                encode_texel(enc, ss->lm_sent + 3 * i, held);
+                if (texel_moved(p->lightmap, ss->lm_sent, i, thr, floor_v)) encode_texel(enc, p->lightmap + 3 * i, now);
+                else memcpy(now, held, tb);
+                lc_residual_make(enc, now, held, 1, raw + k * tb);
+            }
+    }
+    zlen = lc_residual_deflate(raw, raw_len, z, lc_residual_deflate_bound(raw_len));
+    if (zlen == 0 || zlen >= limit) {
+        zlen = 0;
+        goto done;
+    }
+    for (uint32_t t = 0; t < n_tiles; t++) { /* commit: the client will hold these values */
+        uint32_t x0, y0, x1, y1;
+        lc_tile_rect(W, H, S, tiles[t], &x0, &y0, &x1, &y1);
+        for (uint32_t y = y0; y < y1; y++)
+            for (uint32_t x = x0; x < x1; x++) {
+                size_t i = (size_t)y * W + x;
+                if (texel_moved(p->lightmap, ss->lm_sent, i, thr, floor_v))
+                    memcpy(ss->lm_sent + 3 * i, p->lightmap + 3 * i, 3 * sizeof(float));
+            }
+    }
+done:
+    free(raw);
+    if (zlen) *out = z;
+    else free(z);
+    return zlen;
+}
+
 /* Lightmap frame: a keyframe when forced, first, every keyframe_interval frames or when the
  * delta would not be smaller; otherwise a delta of the tiles where some texel moved by more
- * than delta_threshold (relative) from what this client last received. */
+ * than delta_threshold (relative) from what this client last received: whole tiles, or
+ * residuals when the client subscribed to them. */
 static size_t session_encode_lightmap(lc_server *s, lc_session *ss, lc_frame_header *h, int force_key) {
     const lc_published *p = ss->frame;
     const uint32_t W = p->lm_w, H = p->lm_h, S = s->tile;
-    const size_t texels = (size_t)W * H, tb = lc_frame_texel_bytes((lc_encoding)h->encoding);
+    const lc_encoding enc = (lc_encoding)h->encoding;
+    const size_t texels = (size_t)W * H, tb = lc_frame_texel_bytes(enc);
     const uint32_t T = lc_tiles_count(W, H, S);
     int key = force_key || !ss->lm_sent || ss->lm_sent_texels != texels ||
               (h->sequence - 1) % (uint64_t)s->cfg->keyframe_interval == 0;
     uint32_t *tiles = NULL, n_tiles = 0;
-    size_t delta_texels = 0;
+    uint8_t *residual = NULL;
+    size_t delta_texels = 0, payload_len = texels * tb, n = 0;
     if (!key) {
         tiles = malloc((size_t)T * sizeof *tiles);
         if (!tiles) return 0;
@@ -184,31 +246,29 @@ static size_t session_encode_lightmap(lc_server *s, lc_session *ss, lc_frame_hea
             lc_tile_rect(W, H, S, t, &x0, &y0, &x1, &y1);
             int dirty = 0;
             for (uint32_t y = y0; y < y1 && !dirty; y++)
-                for (uint32_t x = x0; x < x1 && !dirty; x++)
-                {
-                    /* relative to the texel's brightest channel: a dim channel (the blue of a
-                     * warm light) must not mark a tile dirty for changes nobody can see */
-                    const float *a = p->lightmap + 3 * ((size_t)y * W + x), *b = ss->lm_sent + 3 * ((size_t)y * W + x);
-                    float ref = fmaxf(fmaxf(fmaxf(a[0], a[1]), fmaxf(a[2], b[0])), fmaxf(fmaxf(b[1], b[2]), floor_v));
-                    for (int c = 0; c < 3; c++)
-                        if (fabsf(a[c] - b[c]) > thr * ref) dirty = 1;
-                }
+                for (uint32_t x = x0; x < x1 && !dirty; x++) dirty = texel_moved(p->lightmap, ss->lm_sent, (size_t)y * W + x, thr, floor_v);
             if (dirty) {
                 tiles[n_tiles++] = t;
                 delta_texels += (size_t)(x1 - x0) * (y1 - y0);
             }
         }
-        if (delta_texels * tb + 4 * (size_t)n_tiles >= texels * tb) key = 1; /* no smaller than a keyframe */
+        const size_t table = 4 * (size_t)n_tiles;
+        if (ss->stream[LC_STREAM_LIGHTMAP].residual && n_tiles) {
+            payload_len = table < texels * tb
+                              ? session_residual(ss, enc, S, tiles, n_tiles, delta_texels, thr, floor_v, texels * tb - table, &residual)
+                              : 0;
+            key = payload_len == 0;
+        } else {
+            payload_len = delta_texels * tb;
+            key = payload_len + table >= texels * tb; /* no smaller than a keyframe */
+        }
+        if (key) payload_len = texels * tb;
     }
-    size_t payload_len = key ? texels * tb : delta_texels * tb;
     size_t table = key ? 0 : 4 * (size_t)n_tiles;
-    if (session_tx_reserve(ss, LWS_PRE + 2 * (LC_FRAME_HEADER_SIZE + table + payload_len) + 64) != 0) {
-        free(tiles);
-        return 0;
-    }
+    if (session_tx_reserve(ss, LWS_PRE + 2 * (LC_FRAME_HEADER_SIZE + table + payload_len) + 64) != 0) goto done;
     uint8_t *stage = ss->tx + LWS_PRE + LC_FRAME_HEADER_SIZE + table + payload_len + 32, *o = stage;
     if (key) {
-        for (size_t i = 0; i < texels; i++, o += tb) encode_texel((lc_encoding)h->encoding, p->lightmap + 3 * i, o);
+        for (size_t i = 0; i < texels; i++, o += tb) encode_texel(enc, p->lightmap + 3 * i, o);
         if (ss->lm_sent_texels != texels) {
             free(ss->lm_sent);
             ss->lm_sent = malloc(texels * 3 * sizeof(float));
@@ -217,6 +277,10 @@ static size_t session_encode_lightmap(lc_server *s, lc_session *ss, lc_frame_hea
         if (ss->lm_sent) memcpy(ss->lm_sent, p->lightmap, texels * 3 * sizeof(float));
         h->flags = LC_FRAME_KEYFRAME;
         h->tile_count = 0;
+    } else if (residual) {
+        memcpy(stage, residual, payload_len);
+        h->flags = LC_FRAME_DELTA | LC_FRAME_RESIDUAL;
+        h->tile_count = n_tiles;
     } else {
         for (uint32_t k = 0; k < n_tiles; k++) {
             uint32_t x0, y0, x1, y1;
@@ -224,7 +288,7 @@ static size_t session_encode_lightmap(lc_server *s, lc_session *ss, lc_frame_hea
             for (uint32_t y = y0; y < y1; y++)
                 for (uint32_t x = x0; x < x1; x++, o += tb) {
                     size_t i = (size_t)y * W + x;
-                    encode_texel((lc_encoding)h->encoding, p->lightmap + 3 * i, o);
+                    encode_texel(enc, p->lightmap + 3 * i, o);
                     memcpy(ss->lm_sent + 3 * i, p->lightmap + 3 * i, 3 * sizeof(float));
                 }
         }
@@ -232,8 +296,10 @@ static size_t session_encode_lightmap(lc_server *s, lc_session *ss, lc_frame_hea
         h->tile_count = n_tiles;
     }
     h->payload_length = (uint32_t)payload_len;
-    size_t n = lc_frame_write(h, key ? NULL : tiles, stage, ss->tx + LWS_PRE, LC_FRAME_HEADER_SIZE + table + payload_len);
+    n = lc_frame_write(h, key ? NULL : tiles, stage, ss->tx + LWS_PRE, LC_FRAME_HEADER_SIZE + table + payload_len);
+done:
     free(tiles);
+    free(residual);
     return n;
 }
 
@@ -427,6 +493,7 @@ static void server_request(lc_server *s, lc_session *ss, const char *text, size_
         ss->stream[req.stream].force = 1;
         ss->stream[req.stream].enc = req.encoding;
         ss->stream[req.stream].max_rate = req.max_rate;
+        ss->stream[req.stream].residual = req.residual;
         session_send(ss, lc_proto_build_ok(&req.id, s->state.revision));
         break;
     }

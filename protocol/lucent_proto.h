@@ -111,6 +111,7 @@ typedef struct lc_proto_request {
     lc_stream stream;
     lc_encoding encoding; /* the stream's default when not given */
     double max_rate;      /* 0 = unlimited */
+    int residual;         /* subscribe "delta": "residual" (lightmap) */
     /* ping */
     double ping_t;
     /* change requests: 1 op, or the batch's ops (malloc'd, owned) */
@@ -205,7 +206,7 @@ void lc_proto_parsed_state_free(lc_proto_parsed_state *s);
 
 /* --- binary frames (PROTOCOL.md §6) ------------------------------------------------------- */
 
-enum { LC_FRAME_KEYFRAME = 1u << 0, LC_FRAME_DELTA = 1u << 1 };
+enum { LC_FRAME_KEYFRAME = 1u << 0, LC_FRAME_DELTA = 1u << 1, LC_FRAME_RESIDUAL = 1u << 2 };
 
 typedef struct lc_frame_header {
     uint16_t version; /* 1 */
@@ -222,11 +223,28 @@ typedef struct lc_frame_header {
  * Returns the frame length, or 0 if it does not fit. */
 size_t lc_frame_write(const lc_frame_header *h, const uint32_t *tiles, const void *payload, uint8_t *out,
                       size_t cap);
-/* Parses and checks a frame: magic, version, header size, flags (exactly one of keyframe /
- * delta), lengths consistent with len, tile indices ascending and inside the image, CRC.
- * Pointers point into data. Returns 0 or -1 with err (code "bad_frame"). */
+/* Parses and checks a frame: magic, version, header size, flags (keyframe, delta, or delta +
+ * residual for the lightmap), lengths consistent with len, tile indices ascending and inside
+ * the image, CRC. A residual delta's payload is compressed: its inflated size is checked by
+ * lc_residual_inflate. Pointers point into data. Returns 0 or -1 with err (code "bad_frame"). */
 int lc_frame_parse(const uint8_t *data, size_t len, lc_frame_header *h, const uint8_t **tile_table,
                    const uint8_t **payload, lc_proto_error *err);
+
+/* Texels covered by the tile table of a parsed lightmap delta. */
+size_t lc_frame_tile_texels(const lc_frame_header *h, const uint8_t *tile_table);
+
+/* Residual deltas (PROTOCOL.md §6.2.1). `now`, `held`: `texels` encoded texels (as on the
+ * wire); out receives their residual (same size): zigzag field differences, so that
+ * lc_residual_apply(e, held, residual) turns `held` into `now` bit for bit. Unknown
+ * encodings do nothing. */
+void lc_residual_make(lc_encoding e, const uint8_t *now, const uint8_t *held, size_t texels, uint8_t *out);
+void lc_residual_apply(lc_encoding e, uint8_t *held, const uint8_t *residual, size_t texels);
+/* zlib (RFC 1950) compression of the residual bytes: the compressed length, 0 when it does
+ * not fit in cap (lc_residual_deflate_bound(n) always fits). Inflate: 0 only when `in` is one
+ * complete zlib stream inflating to exactly `expect` bytes. */
+size_t lc_residual_deflate_bound(size_t n);
+size_t lc_residual_deflate(const uint8_t *in, size_t n, uint8_t *out, size_t cap);
+int lc_residual_inflate(const uint8_t *in, size_t n, uint8_t *out, size_t expect);
 
 /* Bytes per lightmap texel / per SH value for an encoding (0 when not allowed). */
 size_t lc_frame_texel_bytes(lc_encoding e);

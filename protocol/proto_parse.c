@@ -26,6 +26,7 @@ static const char *const proto_type_names[LC_REQ_COUNT] = {
     "batch",           "state.get",    "snapshot",    "ping"};
 static const char *const proto_stream_names[] = {"lightmap", "shgrid", "objects"};
 static const char *const proto_encoding_names[] = {"rgb9e5", "rgba16f", "f32"};
+static const char *const proto_delta_names[] = {"tiles", "residual"};
 static const char *const proto_light_type_names[] = {"point", "spot", "directional", "area"};
 static const char *const proto_shape_names[] = {"quad", "disc"};
 static const char *const proto_env_names[] = {"none", "constant", "sh"};
@@ -682,6 +683,10 @@ static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto
             out->encoding = (lc_encoding)(k + 1);
         }
         if (proto_num(m, "max_rate", "", 0, 0.1, 120, &out->max_rate, err) < 0) return -1;
+        if ((r = proto_enum(m, "delta", "", 0, proto_delta_names, 2, &k, err)) < 0) return -1;
+        if (r && out->stream != LC_STREAM_LIGHTMAP)
+            return proto_fail(err, "invalid", "/delta", "delta is for the lightmap stream only");
+        out->residual = r && k == 1;
         return 0;
     case LC_REQ_BATCH: {
         const cJSON *ops = cJSON_GetObjectItemCaseSensitive(m, "ops");

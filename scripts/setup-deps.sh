@@ -6,7 +6,7 @@ set -euo pipefail
 packages=(
   build-essential cmake pkg-config
   libembree-dev libassimp-dev libopenimageio-dev openimageio-tools
-  libcjson-dev libwebsockets-dev libssl-dev libpng-dev
+  libcjson-dev libwebsockets-dev libssl-dev libpng-dev zlib1g-dev
   libepoxy-dev libegl-dev libegl1-mesa-dev libgl1-mesa-dri libgl-dev
   liblapacke-dev libblas-dev
   python3-websockets python3-pytest python3-jsonschema jq

@@ -81,6 +81,29 @@ assert [r["sequence"] for r in rows] == [1, 2, 3], rows
 assert all(rows[i]["revision"] <= rows[i + 1]["revision"] for i in range(2))
 PY
 [ "$(grep -c '"type":"frame"' "$TMP/watch.out")" = 3 ] || fail "watch --json lines: $(head -c 300 "$TMP/watch.out")"
+# watch with residual deltas (f32): the copy rebuilt from them ends within the server's
+# threshold (1% of the texel's brightest channel) of a fresh snapshot of the settled state
+timeout 30 "$CTL" watch --stream lightmap --encoding f32 --delta residual --raw --duration 5 --out "$TMP/wres" \
+  >"$TMP/wres.out" 2>"$TMP/wres.err" &
+WPID=$!
+sleep 1
+for x in 0.3 0.303 0.306 0.2; do timeout 20 "$CTL" light set key --type point --position $x,0.4,0.28 --intensity 0.5 >/dev/null; sleep 0.4; done
+wait "$WPID" || fail "watch --delta residual exited $?: $(head -c 400 "$TMP/wres.err")"
+expect_exit 0 "" timeout 30 "$CTL" snapshot --out "$TMP/snapres" --stream lightmap --encoding f32 --raw
+"$PY" - "$TMP/wres" "$TMP/snapres/lightmap.f32" <<'PY' || fail "residual watch does not rebuild the lightmap"
+import json, struct, sys
+rows = [json.loads(l) for l in open(sys.argv[1] + "/frames.jsonl")]
+assert rows[0]["keyframe"] and any(r["residual"] for r in rows), rows[:4]
+last = rows[-1]["file"]
+a = struct.unpack("<%df" % (len(open(sys.argv[2], "rb").read()) // 4), open(sys.argv[2], "rb").read())
+b = struct.unpack("<%df" % len(a), open(sys.argv[1] + "/" + last + ".f32", "rb").read())
+peak = max(a)
+worst = max(max(abs(a[i + c] - b[i + c]) for c in range(3)) / max(max(a[i:i + 3]), max(b[i:i + 3]), 1e-3 * peak)
+            for i in range(0, len(a), 3))
+assert worst <= 0.011, "worst texel %.4f of its brightest channel" % worst
+PY
+expect_exit 2 "tiles or residual" timeout 10 "$CTL" watch --stream lightmap --delta xor --out "$TMP/x"
+expect_exit 2 "lightmap only" timeout 10 "$CTL" watch --stream shgrid --delta residual --out "$TMP/x"
 expect_exit 0 "" timeout 30 "$CTL" watch --stream objects --out "$TMP/wobj" --count 1
 json_check "$TMP/wobj/objects-000001.json" "j['objects'][0]['id'] == 'box'"
 expect_exit 0 "" timeout 30 "$CTL" watch --stream shgrid --out "$TMP/wgrid" --duration 1

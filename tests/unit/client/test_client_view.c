@@ -132,6 +132,90 @@ static void test_lightmap_encodings(void) {
     lc_client_view_release(v);
 }
 
+/* A residual delta (PROTOCOL.md §6.2.1) taking the texels of `tiles` from generation
+ * held_gen[i] (tile i) to gen; `cut` bytes are dropped from the inflated residual (to build
+ * a malformed frame). */
+static size_t residual_frame(int enc, uint64_t seq, uint64_t rev, const int *held_gen, int gen, const uint32_t *tiles,
+                             uint32_t nt, size_t cut) {
+    static uint8_t raw[1 << 16];
+    size_t n = 0;
+    float rgb[3];
+    uint8_t held[12], now[12];
+    for (uint32_t i = 0; i < nt; i++) {
+        uint32_t x0, y0, x1, y1;
+        lc_tile_rect(W, H, TILE, tiles[i], &x0, &y0, &x1, &y1);
+        for (uint32_t y = y0; y < y1; y++)
+            for (uint32_t x = x0; x < x1; x++) {
+                texel_value(x, y, held_gen[i], rgb);
+                size_t tb = put_texel(held, enc, rgb);
+                texel_value(x, y, gen, rgb);
+                put_texel(now, enc, rgb);
+                lc_residual_make((lc_encoding)enc, now, held, 1, raw + n);
+                n += tb;
+            }
+    }
+    lc_frame_header h;
+    memset(&h, 0, sizeof h);
+    h.version = 1;
+    h.stream = LC_STREAM_LIGHTMAP;
+    h.encoding = (uint8_t)enc;
+    h.flags = LC_FRAME_DELTA | LC_FRAME_RESIDUAL;
+    h.revision = rev;
+    h.sequence = seq;
+    h.width = W;
+    h.height = H;
+    h.depth = 1;
+    h.tile_size = TILE;
+    h.tile_count = nt;
+    h.payload_length = (uint32_t)lc_residual_deflate(raw, n - cut, payload_buf, sizeof payload_buf);
+    return lc_frame_write(&h, tiles, payload_buf, frame_buf, sizeof frame_buf);
+}
+
+static void test_lightmap_residual(void) {
+    const double tol[4] = {0, 1.0 / 256, 1.0 / 1024, 0};
+    for (int enc = LC_ENC_RGB9E5; enc <= LC_ENC_F32; enc++) {
+        lc_client_view *v = lc_client_view_create();
+        lc_client_frame f;
+        char err[256];
+        const uint32_t t15[2] = {1, 5}, t2[1] = {2}, t125[3] = {1, 2, 5};
+        const int held0[2] = {0, 0}, held_mixed[3] = {3, 5, 3};
+        size_t n = residual_frame(enc, 1, 10, held0, 3, t15, 2, 0);
+        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == -2, "residual before a keyframe: %s", err);
+        n = lightmap_frame(enc, 1, 1, 10, 0, NULL, 0);
+        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == 0, "keyframe enc %d: %s", enc, err);
+        n = residual_frame(enc, 2, 11, held0, 3, t15, 2, 0);
+        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == 0, "residual enc %d: %s", enc, err);
+        CHECK(!f.keyframe && f.residual && f.tile_count == 2 && f.tiles[1] == 5, "residual frame fields");
+        CHECK(lightmap_error(&f, 0, 3, t15, 2) <= tol[enc], "residual applied enc %d err %g", enc,
+              lightmap_error(&f, 0, 3, t15, 2));
+        /* a plain delta in between keeps the encoded copy current */
+        n = lightmap_frame(enc, 0, 3, 12, 5, t2, 1);
+        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == 0 && !f.residual, "plain delta: %s", err);
+        n = residual_frame(enc, 4, 13, held_mixed, 7, t125, 3, 0);
+        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == 0, "second residual: %s", err);
+        CHECK(lightmap_error(&f, 0, 7, t125, 3) <= tol[enc], "residual over mixed history enc %d err %g", enc,
+              lightmap_error(&f, 0, 7, t125, 3));
+        /* an inflated residual one texel short: malformed, and the view is unchanged */
+        const int held7[3] = {7, 7, 7};
+        n = residual_frame(enc, 5, 14, held7, 9, t125, 3, lc_frame_texel_bytes((lc_encoding)enc));
+        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == -1 && strstr(err, "inflate"), "short: %s", err);
+        n = residual_frame(enc, 5, 14, held7, 9, t125, 3, 0);
+        err[0] = 0;
+        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == 0 && lightmap_error(&f, 0, 9, t125, 3) <= tol[enc],
+              "the view was unchanged by the bad frame: %s", err);
+        lc_client_view_release(v);
+    }
+    /* a keyframe in another encoding: the residual (rgb9e5) has no copy to apply to */
+    lc_client_view *v = lc_client_view_create();
+    char err[256];
+    size_t n = lightmap_frame(LC_ENC_F32, 1, 1, 1, 0, NULL, 0);
+    CHECK(lc_client_view_apply(v, frame_buf, n, NULL, err, sizeof err) == 0, "f32 keyframe");
+    const uint32_t t1[1] = {1};
+    n = residual_frame(LC_ENC_RGB9E5, 2, 2, (const int[1]){0}, 1, t1, 1, 0);
+    CHECK(lc_client_view_apply(v, frame_buf, n, NULL, err, sizeof err) == -2 && strstr(err, "copy"), "encoding switch: %s", err);
+    lc_client_view_release(v);
+}
+
 static void test_lightmap_errors(void) {
     lc_client_view *v = lc_client_view_create();
     lc_client_frame f;
@@ -265,6 +349,7 @@ static void test_sh_helpers(void) {
 int main(void) {
     test_lightmap_encodings();
     test_lightmap_errors();
+    test_lightmap_residual();
     test_sh_streams();
     test_sh_helpers();
     CHECK_DONE();

@@ -56,7 +56,13 @@ static void test_valid(void) {
 
     PARSE_OK("{\"type\":\"subscribe\",\"id\":\"s1\",\"stream\":\"lightmap\"}", &r);
     CHECK(r.type == LC_REQ_SUBSCRIBE && r.stream == LC_STREAM_LIGHTMAP && r.encoding == LC_ENC_RGB9E5, "sub lm");
-    CHECK(r.max_rate == 0 && r.id.kind == 1 && !strcmp(r.id.str, "s1"), "sub defaults");
+    CHECK(r.max_rate == 0 && r.id.kind == 1 && !strcmp(r.id.str, "s1") && !r.residual, "sub defaults");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"delta\":\"residual\"}", &r);
+    CHECK(r.residual, "residual deltas");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"delta\":\"tiles\"}", &r);
+    CHECK(!r.residual, "tile deltas");
     lc_proto_request_release(&r);
     PARSE_OK("{\"type\":\"subscribe\",\"stream\":\"shgrid\"}", &r);
     CHECK(r.stream == LC_STREAM_SHGRID && r.encoding == LC_ENC_F32, "shgrid default f32");
@@ -321,6 +327,9 @@ static void test_invalid(void) {
     INVALID("{\"type\":\"subscribe\",\"stream\":\"shgrid\",\"encoding\":\"rgb9e5\"}", "invalid", "/encoding");
     INVALID("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"encoding\":\"png\"}", "invalid", "/encoding");
     INVALID("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"max_rate\":0}", "out_of_range", "/max_rate");
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"delta\":\"xor\"}", "invalid", "/delta");
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"delta\":1}", "invalid", "/delta");
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"shgrid\",\"delta\":\"residual\"}", "invalid", "/delta");
     INVALID("{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"max_rate\":121}", "out_of_range", "/max_rate");
     INVALID("{\"type\":\"unsubscribe\",\"stream\":null}", "invalid", "/stream");
 
@@ -860,6 +869,107 @@ static void test_frames(void) {
               lc_frame_sh_value_bytes(LC_ENC_F32) == 4, "sh bytes");
 }
 
+/* --- residual deltas (§6.2.1) ------------------------------------------------------------- */
+
+static uint32_t pack9e5(uint32_t r, uint32_t g, uint32_t b, uint32_t e) {
+    return r | g << 9 | b << 18 | e << 27;
+}
+
+static void put_u32(uint8_t *p, uint32_t v) {
+    for (int i = 0; i < 4; i++) p[i] = (uint8_t)(v >> (8 * i));
+}
+
+static uint32_t get_u32(const uint8_t *p) {
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static uint64_t rng_state;
+static double rnd(void);
+
+static void test_residual(void) {
+    /* closed forms: zigzag of each field's difference, in the field's own bits */
+    uint8_t held[4 * 4], now[4 * 4], res[4 * 4];
+    const uint32_t cases[][3] = {
+        /* held, now, expected residual */
+        {pack9e5(100, 200, 300, 15), pack9e5(101, 198, 300, 16), pack9e5(2, 3, 0, 2)},
+        {pack9e5(511, 0, 7, 31), pack9e5(0, 511, 7, 0), pack9e5(2, 1, 0, 2)}, /* wraps: +1, -1, 0, +1 */
+        {pack9e5(0, 0, 0, 0), pack9e5(256, 255, 0, 16), pack9e5(511, 510, 0, 31)}, /* -256 -> 511, +255 -> 510 */
+        {pack9e5(5, 6, 7, 8), pack9e5(5, 6, 7, 8), 0},
+    };
+    for (int i = 0; i < 4; i++) {
+        put_u32(held + 4 * i, cases[i][0]);
+        put_u32(now + 4 * i, cases[i][1]);
+    }
+    lc_residual_make(LC_ENC_RGB9E5, now, held, 4, res);
+    for (int i = 0; i < 4; i++)
+        CHECK(get_u32(res + 4 * i) == cases[i][2], "rgb9e5 residual %d: %08x, expected %08x", i, get_u32(res + 4 * i),
+              cases[i][2]);
+    lc_residual_apply(LC_ENC_RGB9E5, held, res, 4);
+    CHECK(!memcmp(held, now, sizeof now), "rgb9e5 residual applies to the new words");
+    /* f32: one 32-bit field per channel (the bit pattern); +1 ulp -> 2, -1 ulp -> 1 */
+    uint8_t hf[12], nf[12], rf[12];
+    put_u32(hf, 0x3F800000u), put_u32(nf, 0x3F800001u);
+    put_u32(hf + 4, 0x3F800000u), put_u32(nf + 4, 0x3F7FFFFFu);
+    put_u32(hf + 8, 0u), put_u32(nf + 8, 0xFFFFFFFFu);
+    lc_residual_make(LC_ENC_F32, nf, hf, 1, rf);
+    CHECK(get_u32(rf) == 2 && get_u32(rf + 4) == 1 && get_u32(rf + 8) == 1, "f32 residual %u %u %u", get_u32(rf),
+          get_u32(rf + 4), get_u32(rf + 8));
+    /* half: one 16-bit field per u16 (A included) */
+    uint8_t hh[8] = {0x00, 0x3C, 0x00, 0x3C, 0xFF, 0xFF, 0x00, 0x3C}, nh[8] = {0x03, 0x3C, 0xFE, 0x3B, 0x00, 0x00, 0x00, 0x3C}, rh[8];
+    lc_residual_make(LC_ENC_RGBA16F, nh, hh, 1, rh);
+    CHECK(rh[0] == 6 && rh[1] == 0 && rh[2] == 3 && rh[3] == 0 && rh[4] == 2 && rh[5] == 0 && rh[6] == 0 && rh[7] == 0,
+          "half residual %u %u %u %u", rh[0] | rh[1] << 8, rh[2] | rh[3] << 8, rh[4] | rh[5] << 8, rh[6] | rh[7] << 8);
+
+    /* random words round trip in every encoding */
+    static uint8_t a[12 * 1000], b[12 * 1000], r[12 * 1000];
+    rng_state = 12345;
+    for (int enc = LC_ENC_RGB9E5; enc <= LC_ENC_F32; enc++) {
+        size_t bytes = lc_frame_texel_bytes((lc_encoding)enc) * 1000;
+        for (size_t i = 0; i < bytes; i++) a[i] = (uint8_t)(rnd() * 256), b[i] = (uint8_t)(rnd() * 256);
+        lc_residual_make((lc_encoding)enc, a, b, 1000, r);
+        lc_residual_apply((lc_encoding)enc, b, r, 1000);
+        CHECK(!memcmp(a, b, bytes), "random round trip, encoding %d", enc);
+    }
+
+    /* zlib: exact length only, one complete stream */
+    static uint8_t raw[4000], z[8000], back[4001];
+    for (size_t i = 0; i < sizeof raw; i++) raw[i] = (uint8_t)(i % 13 == 0 ? i / 13 : 0);
+    size_t zn = lc_residual_deflate(raw, sizeof raw, z, lc_residual_deflate_bound(sizeof raw));
+    CHECK(zn > 0 && zn < sizeof raw / 4, "deflate %zu bytes", zn);
+    CHECK(lc_residual_deflate(raw, sizeof raw, z, 10) == 0, "deflate respects its cap");
+    zn = lc_residual_deflate(raw, sizeof raw, z, lc_residual_deflate_bound(sizeof raw));
+    CHECK(lc_residual_inflate(z, zn, back, sizeof raw) == 0 && !memcmp(back, raw, sizeof raw), "inflate round trip");
+    CHECK(lc_residual_inflate(z, zn, back, sizeof raw - 1) != 0, "inflates to more than expected");
+    CHECK(lc_residual_inflate(z, zn, back, sizeof raw + 1) != 0, "inflates to less than expected");
+    CHECK(lc_residual_inflate(z, zn - 1, back, sizeof raw) != 0, "truncated stream");
+    z[zn] = 0;
+    CHECK(lc_residual_inflate(z, zn + 1, back, sizeof raw) != 0, "bytes after the stream");
+    z[zn / 2] ^= 0x10;
+    CHECK(lc_residual_inflate(z, zn, back, sizeof raw) != 0, "corrupted stream (adler32)");
+    CHECK(lc_residual_inflate(raw, 100, back, 100) != 0, "not a zlib stream");
+
+    /* frames: delta + residual (lightmap only, needs tiles and a payload) */
+    lc_frame_header h;
+    uint32_t tiles[2] = {1, 5};
+    size_t n = make_frame(&h, 1, 1, LC_FRAME_DELTA | LC_FRAME_RESIDUAL, 10, 7, 1, 4, tiles, 2, 37);
+    CHECK(frame_ok(n, &h), "residual delta parses (compressed payload of any length)");
+    const uint8_t *tt = NULL;
+    CHECK(lc_frame_parse(frame_buf, n, &h, &tt, NULL, NULL) == 0 && lc_frame_tile_texels(&h, tt) == 16 + 6, "tile texels");
+    n = make_frame(&h, 1, 1, LC_FRAME_RESIDUAL, 10, 7, 1, 4, tiles, 2, 37);
+    CHECK(frame_bad(n, "flags"), "residual without delta");
+    n = make_frame(&h, 1, 1, LC_FRAME_KEYFRAME | LC_FRAME_RESIDUAL, 10, 7, 1, 4, NULL, 0, 10 * 7 * 4);
+    CHECK(frame_bad(n, "flags"), "residual keyframe");
+    n = make_frame(&h, 1, 1, LC_FRAME_DELTA | LC_FRAME_RESIDUAL, 10, 7, 1, 4, NULL, 0, 37);
+    CHECK(frame_bad(n, "empty"), "residual without tiles");
+    n = make_frame(&h, 1, 1, LC_FRAME_DELTA | LC_FRAME_RESIDUAL, 10, 7, 1, 4, tiles, 2, 0);
+    CHECK(frame_bad(n, "empty"), "residual without payload");
+    n = make_frame(&h, 2, 3, LC_FRAME_DELTA | LC_FRAME_RESIDUAL, 2, 2, 2, 0, NULL, 0, 37);
+    CHECK(frame_bad(n, "lightmap"), "residual shgrid");
+    uint32_t bad_tiles[2] = {5, 1};
+    n = make_frame(&h, 1, 1, LC_FRAME_DELTA | LC_FRAME_RESIDUAL, 10, 7, 1, 4, bad_tiles, 2, 37);
+    CHECK(frame_bad(n, "ascending"), "residual tiles still checked");
+}
+
 /* --- RGB9E5 -------------------------------------------------------------------------------- */
 
 static uint64_t rng_state = 0x9E3779B97F4A7C15ULL;
@@ -936,6 +1046,7 @@ int main(void) {
     test_op_roundtrip();
     test_state_roundtrip();
     test_frames();
+    test_residual();
     test_rgb9e5();
     CHECK_DONE();
 }
