@@ -152,7 +152,13 @@ class Frame:
 
     @property
     def delta(self):
+        """A plain delta (§6.2): the listed tiles' texels as they are."""
         return self.flags == 2
+
+    @property
+    def residual(self):
+        """A residual delta (§6.2.1, lightmap only): delta + residual bits, compressed payload."""
+        return self.flags == 6
 
     def tile_table(self):
         return struct.unpack_from("<%dI" % self.tiles, self.raw, 64)
@@ -173,6 +179,31 @@ def texel_bytes(stream, encoding):
     return 27 * {2: 2, 3: 4}[encoding]
 
 
+def _inflate(data):
+    """(inflated bytes, problem or None) of one zlib stream (RFC 1950) that must fill `data` exactly."""
+    d = zlib.decompressobj()
+    try:
+        out = d.decompress(data)
+    except zlib.error as e:
+        return None, "not a zlib stream (%s)" % e
+    if not d.eof:
+        return out, "the zlib stream is truncated (no end after %d bytes, %d inflated)" % (len(data), len(out))
+    if d.unused_data:
+        return out, "%d bytes after the end of the zlib stream" % len(d.unused_data)
+    return out, None
+
+
+def _residual_stream_problems(payload, expect):
+    """§6.2.1: the payload of a residual delta is one zlib stream inflating to exactly `expect` bytes."""
+    out, err = _inflate(payload)
+    if err:
+        return ["residual delta payload: %s" % err]
+    if len(out) != expect:
+        return ["residual delta inflates to %d bytes != texels of the listed tiles * texel size = %d" %
+                (len(out), expect)]
+    return []
+
+
 def frame_problems(f):
     """§6.1-§6.4 consistency of one frame taken on its own."""
     p = []
@@ -182,8 +213,13 @@ def frame_problems(f):
         p.append("version %d != 1" % f.version)
     if f.header_size != 64:
         p.append("header size %d != 64" % f.header_size)
-    if f.flags not in (1, 2):
-        p.append("flags 0x%x: exactly one of keyframe/delta must be set (and no other bits)" % f.flags)
+    if f.flags == 6:
+        if f.stream != 1:
+            p.append("flags 0x6 (residual delta) on a %s frame: residual deltas are lightmap only (§6.2.1)" %
+                     STREAM_NAMES.get(f.stream, "stream %d" % f.stream))
+    elif f.flags not in (1, 2):
+        p.append("flags 0x%x: exactly one of keyframe/delta must be set (and no other bits; bit 2 residual only "
+                 "with delta, §6.2.1)" % f.flags)
     if f.stream not in (1, 2, 3):
         p.append("stream %d unknown" % f.stream)
         return p
@@ -204,11 +240,13 @@ def frame_problems(f):
             return p
         if f.keyframe and f.payload_len != f.width * f.height * bpt:
             p.append("lightmap keyframe payload %d != W*H*%d = %d" % (f.payload_len, bpt, f.width * f.height * bpt))
-        if f.delta:
+        if f.delta or f.residual:
             tw, th = -(-f.width // f.tile), -(-f.height // f.tile)
             table = f.tile_table()
             if any(b <= a for a, b in zip(table, table[1:])):
                 p.append("delta tile table not strictly ascending: %r" % (table[:20],))
+            if f.residual and not table:
+                p.append("residual delta with no tiles (§6.2.1: a delta with no tiles is a plain delta)")
             if any(t >= tw * th for t in table):
                 p.append("delta tile index out of bounds (%d tiles): %r" % (tw * th, max(table)))
             else:
@@ -216,7 +254,9 @@ def frame_problems(f):
                 for t in table:
                     x0, y0 = (t % tw) * f.tile, (t // tw) * f.tile
                     texels += (min(x0 + f.tile, f.width) - x0) * (min(y0 + f.tile, f.height) - y0)
-                if texels * bpt != f.payload_len:
+                if f.residual:
+                    p.extend(_residual_stream_problems(f.payload(), texels * bpt))
+                elif texels * bpt != f.payload_len:
                     p.append("delta payload %d != %d texels of the listed tiles * %d" % (f.payload_len, texels, bpt))
     else:
         if f.delta:
@@ -273,6 +313,7 @@ def decode_sh(f):
 
 def apply_delta(img, f):
     """Apply a lightmap delta frame onto `img` (flat RGB list) in place."""
+    assert not f.residual, "apply_delta: %r is a residual delta (§6.2.1): use apply_delta_encoded" % f
     vals = decode_lightmap(f)
     if f.encoding == 2:
         vals = vals[0]
@@ -285,6 +326,102 @@ def apply_delta(img, f):
                 i = 3 * (y * f.width + x)
                 img[i:i + 3] = vals[k:k + 3]
                 k += 3
+
+
+# --------------------------------------------------------------------------- encoded copies (§6.2.1)
+
+# Per lightmap encoding: the wire word (struct code), and the (bit offset, width) of the fields a
+# residual adds to, inside each word (§6.2.1).
+RESIDUAL_FIELDS = {
+    1: ("I", ((0, 9), (9, 9), (18, 9), (27, 5))),  # rgb9e5: 3 mantissas, shared exponent
+    2: ("H", ((0, 16),)),                          # rgba16f: each binary16
+    3: ("I", ((0, 32),)),                          # f32: each float's bit pattern
+}
+
+
+def unzigzag(r, width):
+    """§6.2.1 unzigzag on a `width`-bit field: (r >> 1) XOR -(r AND 1), modulo 2^width."""
+    mask = (1 << width) - 1
+    return (r >> 1) ^ (mask if r & 1 else 0)
+
+
+def residual_add(word, res, fields):
+    """One encoded word plus its residual word, field by field modulo the field width."""
+    v = 0
+    for off, w in fields:
+        mask = (1 << w) - 1
+        v |= ((((word >> off) & mask) + unzigzag((res >> off) & mask, w)) & mask) << off
+    return v
+
+
+def tile_texels(f):
+    """Texel indices (y * W + x) of a lightmap delta's tiles, in payload order (§6.2)."""
+    tw = -(-f.width // f.tile)
+    for t in f.tile_table():
+        x0, y0 = (t % tw) * f.tile, (t // tw) * f.tile
+        for y in range(y0, min(y0 + f.tile, f.height)):
+            for x in range(x0, min(x0 + f.tile, f.width)):
+                yield y * f.width + x
+
+
+def residual_bytes(f):
+    """The inflated payload of a residual delta (§6.2.1); AssertionError if it is not one
+    complete zlib stream of exactly (texels of the tiles) x texel size bytes."""
+    expect = sum(1 for _ in tile_texels(f)) * texel_bytes(1, f.encoding)
+    out, err = _inflate(f.payload())
+    assert err is None and len(out) == expect, "§6.2.1 residual payload of %r: %s" % (
+        f, err or "inflates to %d bytes, expected %d" % (len(out), expect))
+    return out
+
+
+def apply_delta_encoded(copy, f):
+    """Apply a lightmap delta frame to `copy`, a bytearray of the ENCODED texels (a keyframe's
+    payload, W*H texels row-major, as received), in place. A plain delta (§6.2) overwrites the
+    listed tiles' texels with its payload; a residual delta (§6.2.1) adds its inflated residuals
+    field by field. Returns the number of texels whose encoded value changed."""
+    assert f.stream == 1 and (f.delta or f.residual), "apply_delta_encoded: not a lightmap delta: %r" % f
+    tb = texel_bytes(1, f.encoding)
+    assert len(copy) == f.width * f.height * tb, "copy of %d bytes for a %dx%d %d-byte lightmap" % (
+        len(copy), f.width, f.height, tb)
+    changed = 0
+    if f.delta:
+        pl = f.payload()
+        for k, i in enumerate(tile_texels(f)):
+            new = pl[k * tb:(k + 1) * tb]
+            if copy[i * tb:(i + 1) * tb] != new:
+                changed += 1
+                copy[i * tb:(i + 1) * tb] = new
+        return changed
+    code, fields = RESIDUAL_FIELDS[f.encoding]
+    per = tb // struct.calcsize(code)  # words per texel
+    raw = residual_bytes(f)
+    res = struct.unpack("<%d%s" % (len(raw) // struct.calcsize(code), code), raw)
+    words = list(struct.unpack("<%d%s" % (len(copy) // struct.calcsize(code), code), copy))
+    for k, i in enumerate(tile_texels(f)):
+        moved = False
+        for j in range(per):
+            r = res[k * per + j]
+            if r:
+                words[i * per + j] = residual_add(words[i * per + j], r, fields)
+                moved = True
+        changed += moved
+    copy[:] = struct.pack("<%d%s" % (len(words), code), *words)
+    return changed
+
+
+def decode_encoded(encoding, data):
+    """Encoded lightmap texels (bytes as on the wire) as a flat list of RGB floats (3 per texel;
+    rgba16f's alpha dropped)."""
+    n = len(data) // texel_bytes(1, encoding)
+    if encoding == 1:
+        out = []
+        for u in struct.unpack("<%dI" % n, data):
+            out.extend(decode_rgb9e5(u))
+        return out
+    if encoding == 2:
+        v = struct.unpack("<%de" % (4 * n), data)
+        return [x for i in range(n) for x in v[4 * i:4 * i + 3]]
+    return list(struct.unpack("<%df" % (3 * n), data))
 
 
 # --------------------------------------------------------------------------- client
@@ -586,13 +723,15 @@ async def nudge(cfg, c=None):
             await c.close()
 
 
-async def subscribe_keyframe(c, stream, encoding=None, grace=3.0):
+async def subscribe_keyframe(c, stream, encoding=None, grace=3.0, extra=None):
     """subscribe and return the keyframe that must follow (§4.1). If none comes within
     `grace` s, nudge the server with a change (so the case can go on checking what it is
-    about; test_semantics.test_subscribe_keyframe_idle checks the keyframe on its own)."""
+    about; test_semantics.test_subscribe_keyframe_idle checks the keyframe on its own).
+    `extra`: more subscribe members (e.g. {"delta": "residual"})."""
     msg = {"type": "subscribe", "stream": stream}
     if encoding:
         msg["encoding"] = encoding
+    msg.update(extra or {})
     await c.expect_ok(msg)
     try:
         return await c.recv_frame(stream, keyframe=True, timeout=grace)

@@ -2,11 +2,13 @@
 (The Client in conftest.py checks every frame's header, lengths, CRC, tile table, sequence
 and revision order on arrival; these cases make the server produce frames of every kind.)"""
 import asyncio
+import struct
 
 import pytest
 
-from conftest import (RecvTimeout, STREAMS, ENCODINGS, aio, controller, open_client, nudge, subscribe_keyframe,
-                      decode_lightmap, decode_sh, apply_delta)
+from conftest import (RecvTimeout, STREAMS, ENCODINGS, VALIDATORS, aio, controller, open_client, nudge,
+                      subscribe_keyframe, decode_lightmap, decode_sh, apply_delta, apply_delta_encoded, decode_encoded,
+                      frame_problems)
 
 section = pytest.mark.section
 
@@ -266,4 +268,129 @@ async def test_deltas_rebuild_keyframe(cfg):
             worst, n_delta)
     finally:
         await remove_lights(c, prefix)
+        await c.close()
+
+
+async def _drain_lightmap(c, take, quiet=1.5, limit=30.0):
+    """Hand every lightmap frame to `take` until none came for `quiet` s; returns the last one."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + limit
+    last = None
+    while loop.time() < end:
+        try:
+            fr = await c.recv_frame("lightmap", timeout=quiet)
+        except RecvTimeout:
+            return last
+        take(fr)
+        last = fr
+    raise AssertionError("lightmap frames kept coming for %.0f s without a change" % limit)
+
+
+def _worst_texel_diff(ref, got):
+    """(worst, texel): the largest |got - ref| of a texel's channels over that texel's brightest
+    channel in `ref` (at least 1e-3 of ref's peak); NaN counts as infinitely wrong."""
+    peak = max(ref) or 1.0
+    worst, at = 0.0, None
+    for i in range(0, len(ref), 3):
+        m = max(ref[i], ref[i + 1], ref[i + 2], 1e-3 * peak)
+        d = max(abs(ref[i + k] - got[i + k]) for k in range(3)) / m
+        if d != d:
+            d = float("inf")
+        if d > worst:
+            worst, at = d, i // 3
+    return worst, at
+
+
+# One light: placed, moved by a few mm three times (the case residual deltas are made for), then
+# moved far (most of the image changes).
+RESIDUAL_MOVES = ([0.2, 0.3, 0.2], [0.203, 0.3, 0.2], [0.206, 0.3, 0.2], [0.206, 0.3, 0.204], [0.35, 0.25, 0.32])
+
+
+@pytest.mark.parametrize("encoding", [pytest.param(e, id=e) for e in ENCODINGS])
+@section("6.2.1")
+@aio
+async def test_residual_deltas_rebuild_keyframe(cfg, encoding):
+    """subscribe "delta": "residual": every lightmap frame applied to the client's ENCODED copy
+    (keyframes replace it, plain deltas overwrite their tiles, residual deltas add their inflated
+    residuals field by field) equals the next keyframe (snapshot) within 1.5% of each texel's
+    brightest channel (floor 1e-3 of the image peak): the server's threshold (1%) plus the
+    encoding's rounding. At least one residual delta (flags 6) must come; each is smaller than a
+    keyframe (§6.5); a plain delta only without tiles; rgba16f alpha stays 1."""
+    sub = {"type": "subscribe", "stream": "lightmap", "encoding": encoding, "delta": "residual"}
+    errs = list(VALIDATORS["subscribe"].iter_errors(sub))
+    assert not errs, "suite bug: the subscribe fails its schema: %r" % errs
+    c = await controller(cfg)
+    lid = cfg.uid("rd")
+    try:
+        f = await subscribe_keyframe(c, "lightmap", encoding, extra={"delta": "residual"})
+        assert f.keyframe and f.encoding == ENCODINGS[encoding], f
+        copy = bytearray(f.payload())
+        key_len = len(f.raw)
+        seen = {"keyframe": 0, "delta": 0, "residual": 0}
+        texels_changed = [0]
+
+        def take(fr):
+            p = frame_problems(fr)
+            assert not p, "frame %r: %s" % (fr, "; ".join(p))
+            assert fr.encoding == ENCODINGS[encoding], fr
+            if fr.keyframe:
+                seen["keyframe"] += 1
+                copy[:] = fr.payload()
+                return
+            seen["residual" if fr.residual else "delta"] += 1
+            assert fr.residual or fr.tiles == 0, "§4.1/§6.2.1 a plain delta with %d tiles on a residual " \
+                "subscription (only a delta with no tiles is sent plain): %r" % (fr.tiles, fr)
+            if fr.residual:
+                assert len(fr.raw) < key_len, "§6.5 residual delta of %d bytes, a keyframe is %d: %r" % (
+                    len(fr.raw), key_len, fr)
+            texels_changed[0] += apply_delta_encoded(copy, fr)
+
+        await add_light(c, lid, RESIDUAL_MOVES[0], 0.2)
+        last = await _drain_lightmap(c, take, quiet=1.0) or f
+        for pos in RESIDUAL_MOVES[1:-1]:
+            await add_light(c, lid, pos, 0.2)
+            await asyncio.sleep(0.3)
+        last = await _drain_lightmap(c, take, quiet=1.0) or last
+        await add_light(c, lid, RESIDUAL_MOVES[-1], 0.2)
+        last = await _drain_lightmap(c, take) or last
+        assert seen["residual"] >= 1, "§6.2.1 no residual delta (flags 6) after subscribing with \"delta\": " \
+            "\"residual\" and %d light moves: %r" % (len(RESIDUAL_MOVES), seen)
+
+        await c.expect_ok({"type": "snapshot"})
+        k = await c.recv_frame("lightmap")
+        assert k.keyframe and k.sequence == last.sequence + 1, k
+        ref, got = decode_encoded(k.encoding, k.payload()), decode_encoded(k.encoding, bytes(copy))
+        worst, at = _worst_texel_diff(ref, got)
+        assert worst <= 0.015, ("residual-applied copy vs keyframe: texel %d (x %d, y %d) differs by %.4f of its "
+                                "brightest channel (allowed 0.015; frames %r, %d texel updates): copy %r, keyframe %r" % (
+                                    at, at % k.width, at // k.width, worst, seen, texels_changed[0],
+                                    got[3 * at:3 * at + 3], ref[3 * at:3 * at + 3]))
+        if encoding == "rgba16f":
+            alpha = struct.unpack("<%de" % (len(copy) // 2), bytes(copy))[3::4]
+            assert all(a == 1.0 for a in alpha), "rgba16f alpha of the residual-applied copy is not 1"
+    finally:
+        await remove_lights(c, lid)
+        await c.close()
+
+
+@pytest.mark.parametrize("msg", [
+    pytest.param({"type": "subscribe", "stream": "lightmap", "delta": "bogus"}, id="lightmap-bogus"),
+    pytest.param({"type": "subscribe", "stream": "lightmap", "delta": 1}, id="lightmap-number"),
+    pytest.param({"type": "subscribe", "stream": "shgrid", "delta": "residual"}, id="shgrid-residual"),
+    pytest.param({"type": "subscribe", "stream": "objects", "delta": "tiles"}, id="objects-tiles"),
+])
+@section("4.1")
+@aio
+async def test_subscribe_delta_invalid(cfg, msg):
+    """"delta" other than "tiles" / "residual", or on a stream other than the lightmap -> error
+    invalid with pointer /delta; nothing is subscribed (no frame of that stream follows) and the
+    connection stays usable."""
+    assert list(VALIDATORS["subscribe"].iter_errors(msg)), "suite bug: the invalid form passes its schema"
+    c = await controller(cfg)
+    try:
+        await c.expect_error(msg, "invalid", "/delta")
+        await c.ping_ok()
+        got = [fr for fr in await c.pump(1.0) if fr.stream == STREAMS[msg["stream"]]]
+        assert not got, "%s frames after a refused subscribe: %r" % (msg["stream"], got[:3])
+    finally:
         await c.close()
