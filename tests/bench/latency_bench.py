@@ -176,6 +176,7 @@ class Client:
         self.revs = []
         self.times = []
         self.stamps = []  # header server timestamp (s since the epoch)
+        self.recorded = []  # (revision, arrival, bytes, flags, tiles, sequence) of recorded frames
         self.key_bytes = []
         self.delta_bytes = []
         self.delta_tiles = []
@@ -230,6 +231,7 @@ class Client:
                     self.revs.append(rev)
                     self.times.append(t)
                     self.stamps.append(_ts / 1e6)
+                    self.recorded.append((rev, t, len(m), flags, tiles, seq))
                     if flags & 1:
                         self.key_bytes.append(len(m))
                     elif flags & 2:  # plain or residual (bit 2) delta
@@ -252,7 +254,8 @@ class Client:
     def wait_revision(self, rev):
         fut = asyncio.get_running_loop().create_future()
         if self.revs and self.revs[-1] >= rev:
-            fut.set_result((self.revs[-1], self.times[-1], None, None, None, None))
+            # the frame came before the ok: the first recorded frame of that revision or later
+            fut.set_result(next(f for f in self.recorded if f[0] >= rev))
         else:
             self.waiters.append((rev, fut))
         return fut
@@ -339,7 +342,7 @@ async def run_n(args, n):
         # Connect the viewers, a few at a time so the hello timeout is never at risk. The
         # observer (residual deltas) joins the first batch; it is in no statistic but the
         # small moves' small_move_residual.
-        clients = [Client(i, args.verify_crc) for i in range(n)]
+        clients = [Client(i, args.verify_crc, delta=None if args.delta == "tiles" else args.delta) for i in range(n)]
         observer = Client("observer", args.verify_crc, delta="residual")
         viewers = [observer] + clients
         t0 = time.monotonic()
@@ -625,6 +628,8 @@ def main():
                     help="seconds the clients get to reach the final revision (default %(default)s)")
     ap.add_argument("--encoding", default="rgb9e5", choices=["rgb9e5", "rgba16f", "f32"])
     ap.add_argument("--max-rate", type=float, default=None, help="subscribe max_rate (default: none)")
+    ap.add_argument("--delta", default="tiles", choices=["tiles", "residual"],
+                    help="delta frames of the measured clients (default %(default)s; the observer always residual)")
     ap.add_argument("--backend", default="cpu", choices=["auto", "cpu", "egl"])
     ap.add_argument("--threads", type=int, default=None, help="lucentd --threads")
     ap.add_argument("--fsync", default=None, choices=["always", "everysec"], help="lucentd --fsync")
@@ -666,7 +671,7 @@ def main():
     print_table(results, args)
     if args.json:
         out = {"scene": args.scene, "bake": args.bake, "lucentd": args.lucentd, "backend": args.backend,
-               "encoding": args.encoding, "rate": args.rate, "duration": args.duration,
+               "encoding": args.encoding, "delta": args.delta, "rate": args.rate, "duration": args.duration,
                "orbit_period": args.orbit_period, "machine": {"arch": platform.machine(), "cores": os.cpu_count(),
                                                                "clients_same_machine": True},
                "targets": TARGETS, "results": results}
