@@ -180,6 +180,12 @@ def latency_section(lat, md):
                     sm.get("move_m"), ok(frac <= TARGETS["delta_small_move_fraction"]), 100 * frac,
                     100 * sm["fraction_max"], len(sm.get("moves", []))))
     md.append("")
+    spread = ["%s %s, %d clients: %s" % (j["scene"], j["backend"], r["clients"],
+                                        ", ".join("%s/%s" % (fmt(x["p50"]), fmt(x["p99"])) for x in r["runs"]))
+              for j in lat for r in j["results"] if len(r.get("runs", [])) > 1]
+    if spread:
+        md.append("Where a client count ran several times, its row is the run with the median p50 (this shared"
+                  " machine's speed drifts between runs); every run's p50/p99 ms: %s.\n" % "; ".join(spread))
     md += ["- " + c for c in checks]
     md.append("\nThe clients are one Python process on the same machine as the daemon: on 2 cores they compete"
               " with it, so these latencies are an upper bound for the daemon.\n")
