@@ -373,6 +373,54 @@ async def test_residual_deltas_rebuild_keyframe(cfg, encoding):
         await c.close()
 
 
+@section("6.2.1")
+@aio
+async def test_residual_deltas_several_clients(cfg):
+    """Three residual subscribers: two subscribed together (their copies stay identical, so a
+    server may share work between them), one joining after the first moves (a different copy).
+    Each one's copy, built from its own frames only, matches its own snapshot keyframe within
+    1.5% of each texel's brightest channel."""
+    c = await controller(cfg)
+    viewers = [await controller(cfg) for _ in range(3)]
+    lid = cfg.uid("rs")
+    try:
+        copies = [None, None, None]
+
+        def taker(j):
+            def take(fr):
+                p = frame_problems(fr)
+                assert not p, "client %d frame %r: %s" % (j, fr, "; ".join(p))
+                if fr.keyframe:
+                    copies[j] = bytearray(fr.payload())
+                else:
+                    apply_delta_encoded(copies[j], fr)
+            return take
+
+        for j in (0, 1):
+            f = await subscribe_keyframe(viewers[j], "lightmap", "rgb9e5", extra={"delta": "residual"})
+            copies[j] = bytearray(f.payload())
+        await add_light(c, lid, RESIDUAL_MOVES[0], 0.2)
+        await asyncio.sleep(0.5)
+        f = await subscribe_keyframe(viewers[2], "lightmap", "rgb9e5", extra={"delta": "residual"})
+        copies[2] = bytearray(f.payload())
+        for pos in RESIDUAL_MOVES[1:]:
+            await add_light(c, lid, pos, 0.2)
+            await asyncio.sleep(0.3)
+        for j, v in enumerate(viewers):
+            await _drain_lightmap(v, taker(j), quiet=1.0)
+        for j, v in enumerate(viewers):
+            await v.expect_ok({"type": "snapshot"})
+            k = await v.recv_frame("lightmap")
+            assert k.keyframe, k
+            worst, at = _worst_texel_diff(decode_encoded(k.encoding, k.payload()), decode_encoded(k.encoding, bytes(copies[j])))
+            assert worst <= 0.015, "client %d: texel %d differs by %.4f of its brightest channel" % (j, at, worst)
+    finally:
+        await remove_lights(c, lid)
+        for v in viewers:
+            await v.close()
+        await c.close()
+
+
 @pytest.mark.parametrize("msg", [
     pytest.param({"type": "subscribe", "stream": "lightmap", "delta": "bogus"}, id="lightmap-bogus"),
     pytest.param({"type": "subscribe", "stream": "lightmap", "delta": 1}, id="lightmap-number"),
