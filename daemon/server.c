@@ -73,7 +73,7 @@ typedef struct lc_residual_memo {
     int valid, keyframe; /* keyframe: not smaller than one; send that instead */
     uint64_t from_state, pub_seq, to_state;
     uint32_t *tiles, n_tiles;
-    uint8_t *moved; /* per texel of the tiles, in payload order: 1 = gets its new value */
+    uint32_t *moved, n_moved; /* the texels (y*W+x) that get their new value */
     uint8_t *payload;
     size_t payload_len;
 } lc_residual_memo;
@@ -259,8 +259,8 @@ static int residual_compute(lc_residual_memo *m, const lc_session *ss, lc_encodi
     size_t delta_texels;
     m->n_tiles = session_dirty_tiles(ss, S, thr, floor_v, m->tiles, &delta_texels);
     const size_t raw_len = delta_texels * tb, table = 4 * (size_t)m->n_tiles;
-    uint8_t *raw = malloc(raw_len ? raw_len : 1), *moved = realloc(m->moved, delta_texels ? delta_texels : 1),
-            *z = realloc(m->payload, lc_residual_deflate_bound(raw_len));
+    uint8_t *raw = malloc(raw_len ? raw_len : 1), *z = realloc(m->payload, lc_residual_deflate_bound(raw_len));
+    uint32_t *moved = realloc(m->moved, (delta_texels ? delta_texels : 1) * sizeof *moved);
     if (moved) m->moved = moved;
     if (z) m->payload = z;
     if (!raw || !moved || !z) {
@@ -268,15 +268,19 @@ static int residual_compute(lc_residual_memo *m, const lc_session *ss, lc_encodi
         return -1;
     }
     size_t k = 0;
+    m->n_moved = 0;
     for (uint32_t t = 0; t < m->n_tiles; t++) {
         uint32_t x0, y0, x1, y1;
         lc_tile_rect(W, H, S, m->tiles[t], &x0, &y0, &x1, &y1);
         for (uint32_t y = y0; y < y1; y++)
             for (uint32_t x = x0; x < x1; x++, k++) {
                 size_t i = (size_t)y * W + x;
-                moved[k] = (uint8_t)texel_moved(p->lightmap, ss->lm_sent, i, thr, floor_v);
-                if (moved[k]) lc_residual_make(enc, words + i * tb, ss->lm_held + i * tb, 1, raw + k * tb);
-                else memset(raw + k * tb, 0, tb);
+                if (texel_moved(p->lightmap, ss->lm_sent, i, thr, floor_v)) {
+                    lc_residual_make(enc, words + i * tb, ss->lm_held + i * tb, 1, raw + k * tb);
+                    moved[m->n_moved++] = (uint32_t)i;
+                } else {
+                    memset(raw + k * tb, 0, tb);
+                }
             }
     }
     m->payload_len = m->n_tiles ? lc_residual_deflate(raw, raw_len, z, lc_residual_deflate_bound(raw_len)) : 0;
@@ -287,21 +291,12 @@ static int residual_compute(lc_residual_memo *m, const lc_session *ss, lc_encodi
 }
 
 /* Commits a residual delta to the session: the client will hold the moved texels' new values. */
-static void session_commit_residual(lc_session *ss, const lc_residual_memo *m, const uint8_t *words, uint32_t S,
-                                    size_t tb) {
-    const lc_published *p = ss->frame;
-    const uint32_t W = p->lm_w, H = p->lm_h;
-    size_t k = 0;
-    for (uint32_t t = 0; t < m->n_tiles; t++) {
-        uint32_t x0, y0, x1, y1;
-        lc_tile_rect(W, H, S, m->tiles[t], &x0, &y0, &x1, &y1);
-        for (uint32_t y = y0; y < y1; y++)
-            for (uint32_t x = x0; x < x1; x++, k++) {
-                size_t i = (size_t)y * W + x;
-                if (!m->moved[k]) continue;
-                memcpy(ss->lm_held + i * tb, words + i * tb, tb);
-                memcpy(ss->lm_sent + 3 * i, p->lightmap + 3 * i, 3 * sizeof(float));
-            }
+static void session_commit_residual(lc_session *ss, const lc_residual_memo *m, const uint8_t *words, size_t tb) {
+    const float *lightmap = ss->frame->lightmap;
+    for (uint32_t k = 0; k < m->n_moved; k++) {
+        size_t i = m->moved[k];
+        memcpy(ss->lm_held + i * tb, words + i * tb, tb);
+        memcpy(ss->lm_sent + 3 * i, lightmap + 3 * i, 3 * sizeof(float));
     }
     ss->lm_held_state = m->to_state;
 }
@@ -340,7 +335,7 @@ static size_t session_encode_lightmap(lc_server *s, lc_session *ss, lc_frame_hea
         }
         key = m->keyframe;
         if (!key) {
-            session_commit_residual(ss, m, words, S, tb);
+            session_commit_residual(ss, m, words, tb);
             tiles = m->tiles;
             n_tiles = m->n_tiles;
             residual = m->payload;
