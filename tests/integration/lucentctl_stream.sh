@@ -83,17 +83,35 @@ PY
 [ "$(grep -c '"type":"frame"' "$TMP/watch.out")" = 3 ] || fail "watch --json lines: $(head -c 300 "$TMP/watch.out")"
 # watch with residual deltas (f32): the copy rebuilt from them ends within the server's
 # threshold (1% of the texel's brightest channel) of a fresh snapshot of the settled state
-timeout 30 "$CTL" watch --stream lightmap --encoding f32 --delta residual --raw --duration 5 --out "$TMP/wres" \
+# (the watch runs until its last frame reflects the last acknowledged move and the idle
+# refinement passes of that revision have stopped sending frames for 3 s: a fixed duration
+# raced the relight under ASan and load)
+timeout 120 "$CTL" watch --stream lightmap --encoding f32 --delta residual --raw --duration 110 --out "$TMP/wres" \
   >"$TMP/wres.out" 2>"$TMP/wres.err" &
 WPID=$!
 sleep 1
-for x in 0.3 0.303 0.306 0.2; do timeout 20 "$CTL" light set key --type point --position $x,0.4,0.28 --intensity 0.5 >/dev/null; sleep 0.4; done
+for x in 0.3 0.303 0.306 0.2; do
+  RESREV="$(timeout 20 "$CTL" light set key --type point --position $x,0.4,0.28 --intensity 0.5 | sed -n 's/.*(revision \([0-9]*\)).*/\1/p')"
+  sleep 0.4
+done
+[ -n "$RESREV" ] || fail "light set printed no revision"
+quiet=0 lines=0
+for _ in $(seq 1 900); do
+  now="$(cat "$TMP/wres/frames.jsonl" 2>/dev/null | wc -l)"
+  if [ "$now" != "$lines" ]; then lines="$now" quiet=0; else quiet=$((quiet + 1)); fi
+  rev="$(tail -n 1 "$TMP/wres/frames.jsonl" 2>/dev/null | sed -n 's/.*"revision":\([0-9]*\).*/\1/p')"
+  [ "${rev:-0}" -ge "$RESREV" ] && [ "$quiet" -ge 30 ] && break
+  sleep 0.1
+done
+kill -TERM "$WPID" 2>/dev/null
 wait "$WPID" || fail "watch --delta residual exited $?: $(head -c 400 "$TMP/wres.err")"
 expect_exit 0 "" timeout 30 "$CTL" snapshot --out "$TMP/snapres" --stream lightmap --encoding f32 --raw
-"$PY" - "$TMP/wres" "$TMP/snapres/lightmap.f32" <<'PY' || fail "residual watch does not rebuild the lightmap"
+json_check "$TMP/snapres/snapshot.json" "j['lightmap']['revision'] == $RESREV"
+"$PY" - "$TMP/wres" "$TMP/snapres/lightmap.f32" "$RESREV" <<'PY' || fail "residual watch does not rebuild the lightmap"
 import json, struct, sys
 rows = [json.loads(l) for l in open(sys.argv[1] + "/frames.jsonl")]
 assert rows[0]["keyframe"] and any(r["residual"] for r in rows), rows[:4]
+assert rows[-1]["revision"] == int(sys.argv[3]), (rows[-1], sys.argv[3])
 last = rows[-1]["file"]
 a = struct.unpack("<%df" % (len(open(sys.argv[2], "rb").read()) // 4), open(sys.argv[2], "rb").read())
 b = struct.unpack("<%df" % len(a), open(sys.argv[1] + "/" + last + ".f32", "rb").read())
