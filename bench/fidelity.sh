@@ -55,7 +55,7 @@ bake "$tmp/cornell.lcb" "$cornell_obj" "${cornell_flags[@]}"
 f="$(fidelity cornell-moderate "$tmp/cornell.lcb" "$work/cornell-reference")"
 results+=("$(jq -c '{name: "cornell-moderate", scene: "cornell-box (embedded)", state: "daemon initial state (ceiling lamp, emissive 17/12/4 nits)",
   preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands,
-  lightmap, grid, reference, relights, b0_power_engine, b0_power_reference}' "$f")")
+  lightmap, grid, bound, reference, relights, b0_power_engine, b0_power_reference}' "$f")")
 jq -r '"  lightmap mean \(.lightmap.mean*100)% p95 \(.lightmap.p95*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
 
 # Bounce-by-bounce (diagnostics): only the lamp seen directly (0) and one reflection (1).
@@ -63,7 +63,7 @@ for b in 0 1; do
   "$bin/lucent-ref" render "$tmp/cornell.lcb" --out "$work/cornell-reference-b$b" --spp 4096 --batch 1024 \
       --bounce-limit "$b" --quiet --threads "$threads" 2>/dev/null
   f="$(fidelity "cornell-moderate-b$b" "$tmp/cornell.lcb" "$work/cornell-reference-b$b" --bounce-limit "$b")"
-  results+=("$(jq -c --arg b "$b" '{name: ("cornell-moderate-bounces" + $b), bounce_limit: ($b|tonumber), lightmap, grid}' "$f")")
+  results+=("$(jq -c --arg b "$b" '{name: ("cornell-moderate-bounces" + $b), bounce_limit: ($b|tonumber), lightmap, grid, bound}' "$f")")
 done
 
 # --- 2. Trade-off: links, surfels, bands (the paper's Figure 10, measured here) -----------------
@@ -80,7 +80,7 @@ if [ "${TRADEOFF:-1}" != 0 ]; then
     bake "$tmp/cornell-v.lcb" "$cornell_obj" "${cornell_flags[@]}" $flags
     f="$(fidelity "cornell-$name" "$tmp/cornell-v.lcb" "$work/cornell-reference")" || continue
     results+=("$(jq -c --arg n "cornell-$name" --arg fl "$flags" '{name: $n, bake_flags: $fl, links: .links_per_cache,
-      surfels: .surfels, bands: .bands, ms_first_relight, lightmap, grid}' "$f")")
+      surfels: .surfels, bands: .bands, ms_first_relight, lightmap, grid, bound}' "$f")")
   done
 fi
 
@@ -103,14 +103,15 @@ EOF
     preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, reference,
     relights, b0_power_engine, b0_power_reference}' "$f")")
   jq -r '"  lightmap mean \(.lightmap.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
-  for v in "surfels=131072:--surfels 131072" "links=512:--links 512" "exposure:--exposure" "links=256:--links 256"; do
+  for v in "surfels=65536:--surfels 65536" "surfels=131072:--surfels 131072" "links=512:--links 512" "exposure:--exposure" \
+           "links=256:--links 256" "surfels=131072,links=512,exposure:--surfels 131072 --links 512 --exposure"; do
     name="${v%%:*}"; flags="${v#*:}"
     echo "fidelity: sponza $name..." >&2
     # shellcheck disable=SC2086
     bake "$tmp/sponza-v.lcb" "$sponza" --quality moderate --quiet --no-write-glb --threads "$threads" $flags
     f="$(fidelity "sponza-$name" "$tmp/sponza-v.lcb" "$work/sponza-reference" --state "$tmp/sun.json")" || continue
     results+=("$(jq -c --arg n "sponza-$name" --arg fl "$flags" '{name: $n, bake_flags: $fl, links: .links_per_cache,
-      surfels: .surfels, bands: .bands, lightmap, grid}' "$f")")
+      surfels: .surfels, bands: .bands, lightmap, grid, bound}' "$f")")
   done
 else
   echo "fidelity: skip sponza-dabrovic: $sponza absent" >&2

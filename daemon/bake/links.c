@@ -27,6 +27,9 @@
  * 61%, grid p95 53% -> 44%. */
 #define LINKS_SPREAD_K 1.0
 
+/* Ray-origin lift off a texel cache's surface (plus 1e-6 x the largest coordinate). */
+#define LINKS_EPS_BASE 1e-4f
+
 /* Stream salts: refinement and the final estimate use independent jitter. */
 #define LINKS_PASS_REFINE 0x5EF1E5ull
 #define LINKS_PASS_FINAL 0xF17A1ull
@@ -478,6 +481,24 @@ static int links_by_node(const void *a, const void *b) {
     return (x > y) - (x < y);
 }
 
+/* Position, unit normal (zero for grid caches) and ray origin of cache ci. Returns 1 for a
+ * texel cache (a normal: hemisphere rays), 0 for a grid cache. */
+static int links_cache_setup(const links_ctx *ctx, uint32_t ci, links_cache *lc) {
+    const lc_lcb_cache *c = &ctx->caches[ci];
+    memset(lc, 0, sizeof *lc);
+    lc->cache = ci;
+    lc_vec3 p = lc_v3_load(c->position), n = lc_v3_load(c->normal);
+    float nlen = lc_v3_len(n);
+    n = nlen > 1e-6f ? lc_v3_scale(n, 1.0f / nlen) : lc_v3(0, 0, 0);
+    float pm = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
+    /* Texel caches sit on their surface: lift the ray origin off it (float noise grows with |p|). */
+    float lift = ctx->eps_base + 1e-6f * pm;
+    lc_v3_store(lc->p, p);
+    lc_v3_store(lc->n, n);
+    lc_v3_store(lc->org, lc_v3_add(p, lc_v3_scale(n, lift)));
+    return nlen > 1e-6f;
+}
+
 static void links_one_cache(const links_ctx *ctx, links_scratch *sc, uint32_t ci) {
     const lc_link_params *prm = ctx->prm;
     const uint32_t L = prm->links_per_cache;
@@ -493,20 +514,12 @@ static void links_one_cache(const links_ctx *ctx, links_scratch *sc, uint32_t ci
     ctx->rays[ci] = 0;
     if ((c->flags & LC_CACHE_INSIDE) || ctx->h->n_nodes == 0 || ctx->n_surfels == 0) return;
 
-    links_cache lc = {.cache = ci};
-    lc_vec3 p = lc_v3_load(c->position), n = lc_v3_load(c->normal);
-    float nlen = lc_v3_len(n);
-    n = nlen > 1e-6f ? lc_v3_scale(n, 1.0f / nlen) : lc_v3(0, 0, 0);
-    float pm = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
-    /* Texel caches sit on their surface: lift the ray origin off it (float noise grows with |p|). */
-    float lift = ctx->eps_base + 1e-6f * pm;
-    lc_v3_store(lc.p, p);
-    lc_v3_store(lc.n, n);
-    lc_v3_store(lc.org, lc_v3_add(p, lc_v3_scale(n, lift)));
+    links_cache lc;
+    int texel = links_cache_setup(ctx, ci, &lc);
 
     sc->n_heap = sc->n_done = 0;
     sc->n_hits = 0;
-    if (prm->probe_rays) links_probe(ctx, sc, &lc, nlen > 1e-6f);
+    if (prm->probe_rays) links_probe(ctx, sc, &lc, texel);
     uint32_t cut = links_consider(ctx, sc, &lc, 0);
     while (sc->n_heap > 0 && cut < L) {
         links_item it = links_heap_pop(sc);
@@ -631,7 +644,7 @@ int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_sur
     }
     const uint32_t L = params->links_per_cache;
     const size_t nsh = link_sh ? (size_t)params->sh_bands * params->sh_bands : 0;
-    ctx = (links_ctx){rt, surfels, n_surfels, h, caches, params, links, link_sh, NULL, NULL, NULL, NULL, 1e-4f, NULL,
+    ctx = (links_ctx){rt, surfels, n_surfels, h, caches, params, links, link_sh, NULL, NULL, NULL, NULL, LINKS_EPS_BASE, NULL,
                       {{0, 0, 0}, 0, 0, NULL, NULL, NULL, NULL}};
     ctx.scratch = calloc((size_t)threads, sizeof *ctx.scratch);
     ctx.used = calloc(n_caches ? n_caches : 1, sizeof *ctx.used);
@@ -690,5 +703,71 @@ err: /* also the success path: scratch is freed either way */
     free(ctx.used);
     free(ctx.omega);
     free(ctx.rays);
+    return rc;
+}
+
+/* --- the lossless-transport bound ------------------------------------------------------------ */
+
+typedef struct {
+    links_ctx *ctx;
+    const float *radiosity;
+    float *irradiance;
+} links_gather_job;
+
+static void links_gather_range(void *arg, size_t begin, size_t end, int thread) {
+    const links_gather_job *job = arg;
+    const links_ctx *ctx = job->ctx;
+    links_scratch *sc = &ctx->scratch[thread];
+    for (size_t i = begin; i < end; i++) {
+        float *out = job->irradiance + 3 * i;
+        out[0] = out[1] = out[2] = 0;
+        links_cache lc;
+        if ((ctx->caches[i].flags & LC_CACHE_INSIDE) || !links_cache_setup(ctx, (uint32_t)i, &lc)) continue;
+        links_probe(ctx, sc, &lc, 1);
+        double e[3] = {0, 0, 0};
+        for (uint32_t h = 0; h < sc->n_hits; h++) {
+            const float *b = job->radiosity + 3 * (size_t)sc->hits[h].surfel, *d = sc->hits[h].dir;
+            double cosn = d[0] * lc.n[0] + d[1] * lc.n[1] + d[2] * lc.n[2];
+            for (int k = 0; k < 3; k++) e[k] += b[k] * cosn; /* L = B / pi, times cos dw */
+        }
+        for (int k = 0; k < 3; k++) out[k] = (float)(e[k] * sc->ray_omega / M_PI);
+    }
+}
+
+int lc_links_gather_bound(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_surfels, const lc_lcb_cache *caches,
+                          uint32_t n_caches, uint32_t probe_rays, uint64_t seed, const float *radiosity,
+                          float *irradiance) {
+    if (!rt || !surfels || !n_surfels || (n_caches && (!caches || !irradiance)) || !radiosity || !probe_rays) {
+        lc_error("links", "lc_links_gather_bound: NULL argument, no surfels or no probe rays");
+        return -1;
+    }
+    int threads = lc_parallel_threads(), rc = -1;
+    lc_link_params prm = {.links_per_cache = 1, .node_samples = 1, .final_samples = 1, .seed = seed,
+                          .probe_rays = probe_rays};
+    links_ctx ctx = {0};
+    ctx.rt = rt, ctx.surfels = surfels, ctx.n_surfels = n_surfels, ctx.caches = caches, ctx.prm = &prm;
+    ctx.eps_base = LINKS_EPS_BASE;
+    ctx.scratch = calloc((size_t)threads, sizeof *ctx.scratch);
+    if (!ctx.scratch) goto oom;
+    for (int t = 0; t < threads; t++) {
+        ctx.scratch[t].hits = malloc(((size_t)probe_rays + 1) * sizeof *ctx.scratch[t].hits);
+        ctx.scratch[t].cum = malloc(3 * ((size_t)probe_rays + 1) * sizeof *ctx.scratch[t].cum);
+        if (!ctx.scratch[t].hits || !ctx.scratch[t].cum) goto oom;
+    }
+    if (links_hash_build(&ctx.hash, surfels, n_surfels) != 0) goto oom;
+    links_gather_job job = {&ctx, radiosity, irradiance};
+    lc_parallel_for(n_caches, 16, links_gather_range, &job);
+    rc = 0;
+    goto done;
+oom:
+    lc_error("links", "out of memory for the gather bound (%u probe rays, %u surfels)", probe_rays, n_surfels);
+done:
+    if (ctx.scratch)
+        for (int t = 0; t < threads; t++) {
+            free(ctx.scratch[t].hits);
+            free(ctx.scratch[t].cum);
+        }
+    free(ctx.scratch);
+    links_hash_free(&ctx.hash);
     return rc;
 }

@@ -49,6 +49,17 @@ int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_sur
                    const lc_lcb_cache *caches, uint32_t n_caches, const lc_link_params *params, lc_lcb_link *links,
                    uint16_t *link_sh, lc_link_stats *stats);
 
+/* The lossless-transport bound, a diagnostic: each texel cache's irradiance (W/m^2, RGB, for
+ * its normal) gathered straight from the surfels its probe rays hit,
+ *   E = sum over hits of B(hit surfel) / pi * cos * (solid angle per ray),
+ * with the bake's ray pattern and hit attribution — the quantity the links compress, without
+ * the compression. An engine solution can get no closer to the truth than this through its
+ * surfels; lucent-ref fidelity reports it beside the engine. radiosity: n_surfels x 3;
+ * irradiance: n_caches x 3 (grid and inside caches get 0). Returns 0, or -1 (logged). */
+int lc_links_gather_bound(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_surfels, const lc_lcb_cache *caches,
+                          uint32_t n_caches, uint32_t probe_rays, uint64_t seed, const float *radiosity,
+                          float *irradiance);
+
 /* Visible solid angle of surfel s seen from point p (disc approximation, no visibility):
  * cos(theta_s) * 2 pi (1 - d / sqrt(d^2 + A / pi)); 0 when the surfel faces away.
  * For texel caches (normal n != 0) also 0 when the surfel lies behind the cache's plane. */

@@ -210,6 +210,7 @@ void lc_ref_engine_run_free(lc_ref_engine_run *run) {
     if (!run) return;
     free(run->lightmap);
     free(run->grid_sh);
+    free(run->surfel_radiosity);
     memset(run, 0, sizeof *run);
 }
 
@@ -224,7 +225,8 @@ int lc_ref_engine_converge(const lc_lcb *bake, const lc_engine_state *state, lc_
     if (!e) return -1;
     out->lightmap = calloc(texels * 3 + 1, sizeof(float));
     out->grid_sh = calloc(cells * 27 + 1, sizeof(float));
-    if (!out->lightmap || !out->grid_sh) {
+    out->surfel_radiosity = calloc((size_t)v->n_surfels * 3 + 1, sizeof(float));
+    if (!out->lightmap || !out->grid_sh || !out->surfel_radiosity) {
         lc_set_err(err, errlen, "out of memory");
         goto err;
     }
@@ -255,6 +257,7 @@ int lc_ref_engine_converge(const lc_lcb *bake, const lc_engine_state *state, lc_
         if (bounce_limit >= 0 || (i > 0 && change < tol)) break;
     }
     memcpy(out->grid_sh, fr->grid_sh, cells * 27 * sizeof(float));
+    memcpy(out->surfel_radiosity, fr->surfel_radiosity, (size_t)v->n_surfels * 3 * sizeof(float));
     out->ms_total = t0;
     /* B0 alone: one pass, no feedback (the radiosity of the first pass is B0). */
     st.settings.progressive = 0;

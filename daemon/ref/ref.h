@@ -194,6 +194,7 @@ typedef struct lc_ref_engine_run {
     double last_change;  /* max relative texel change of the last relight */
     double ms_first, ms_total;
     double b0_power[3];  /* sum of B0 x area over the surfels (one extra relight, bounces 0) */
+    float *surfel_radiosity; /* n_surfels*3: the converged B, for the gather bound */
     char backend[16];
 } lc_ref_engine_run;
 
@@ -206,5 +207,14 @@ int lc_ref_engine_converge(const lc_lcb *bake, const lc_engine_state *state, lc_
                            double tol, uint32_t max_relights, int bounce_limit, lc_ref_engine_run *out, char *err,
                            size_t errlen);
 void lc_ref_engine_run_free(lc_ref_engine_run *run);
+
+/* The lossless-transport bound of a solution (lc_links_gather_bound over the bake's static
+ * mesh): fills lightmap (W*H*3; texels read their cache, as the engine's do) with each texel
+ * cache's irradiance gathered from the surfels its probe_rays hemisphere rays hit, with surfel
+ * radiosity B (n_surfels*3). Comparing it with the reference says how much of the engine's
+ * error is the surfels (what no link budget can remove) and how much is the links.
+ * Returns 0 or -1 with err set. */
+int lc_ref_gather_bound(const lc_lcb *bake, const float *radiosity, uint32_t probe_rays, uint64_t seed, int threads,
+                        float *lightmap, char *err, size_t errlen);
 
 #endif

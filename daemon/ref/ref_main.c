@@ -25,7 +25,7 @@ typedef struct ref_opts {
     char state[REF_PATH_MAX], out[REF_PATH_MAX], reference[REF_PATH_MAX], lightmap[REF_PATH_MAX], grid[REF_PATH_MAX];
     int spp, batch, max_bounces, rr_depth, seed, threads, texels, grid_on, quiet;
     double target_stderr, floor_frac, threshold, max_err, tol;
-    int zoom, max_relights, backend, bounce_limit;
+    int zoom, max_relights, backend, bounce_limit, bound_rays;
 } ref_opts;
 
 #define OFF(f) offsetof(ref_opts, f)
@@ -73,6 +73,9 @@ static const lc_opt ref_options[] = {
     {"bounce-limit", LC_OPT_INT, OFF(bounce_limit), -1, 16, "-1", NULL,
      "[render, fidelity] diagnostics: truncate both solutions at N reflections (reference paths; the engine runs one "
      "non-progressive relight with N bounces); -1 = off (converged)", "N", NULL},
+    {"bound-rays", LC_OPT_INT, OFF(bound_rays), 0, 1 << 20, "4096", NULL,
+     "[fidelity] also report the lossless-transport bound: each texel gathered from the surfels its N probe rays "
+     "hit (the engine's B, no links); 0 = off", "N", NULL},
     {"quiet", LC_OPT_BOOL, OFF(quiet), 0, 1, "false", NULL, "no progress output", NULL, NULL},
     {NULL, 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL},
 };
@@ -441,7 +444,45 @@ static int cmd_fidelity(int argc, char **argv) {
     cJSON_AddNumberToObject(extra, "b0_power_engine", eng_y);
     cJSON_AddNumberToObject(extra, "b0_power_reference", pw_y);
     cJSON_AddNumberToObject(extra, "b0_power_reference_stderr", pw_se_y);
+    lc_ref_errstats bs = {0};
+    int have_bound = 0;
+    if (o.bound_rays > 0 && ref.lightmap) {
+        /* How close any link budget could get with these surfels (see lc_ref_gather_bound). */
+        size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
+        float *bound = malloc(texels * 3 * sizeof(float) + 1);
+        if (!bound) {
+            lc_set_err(err, sizeof err, "out of memory for the gather bound");
+            cJSON_Delete(extra);
+            goto done;
+        }
+        if (lc_ref_gather_bound(bake, run.surfel_radiosity, (uint32_t)o.bound_rays, (uint64_t)o.seed, o.threads, bound,
+                                err, sizeof err) != 0) {
+            free(bound);
+            cJSON_Delete(extra);
+            goto done;
+        }
+        snprintf(path, sizeof path, "%s/bound_lightmap.exr", dir);
+        int wrote = lc_image_write_float(path, v->lightmap_width, v->lightmap_height, 3, bound, err, sizeof err);
+        int cmp = lc_ref_compare_lightmap(bound, ref.lightmap, ref.lightmap_stderr, ref.texel_mask, ref.width,
+                                          ref.height, o.threshold, &bs, NULL);
+        free(bound);
+        if (wrote != 0) {
+            cJSON_Delete(extra);
+            goto done;
+        }
+        if (cmp == 0) {
+            have_bound = 1;
+            char *t = lc_ref_errstats_json(&bs);
+            cJSON *b = t ? cJSON_Parse(t) : NULL;
+            free(t);
+            if (b) {
+                cJSON_AddNumberToObject(b, "rays", o.bound_rays);
+                cJSON_AddItemToObject(extra, "bound", b);
+            }
+        }
+    }
     if (do_compare(&ref, run.lightmap, run.grid_sh, &o, dir, extra, err, sizeof err) != 0) goto done;
+    if (have_bound) print_row("bound", &bs); /* the same texels gathered from the surfels, no links */
     snprintf(path, sizeof path, "%s/compare.json", dir);
     char dst[REF_PATH_MAX + 64];
     snprintf(dst, sizeof dst, "%s/fidelity.json", dir);

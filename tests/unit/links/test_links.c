@@ -630,6 +630,45 @@ done:
     world_free(&w);
 }
 
+
+/* The lossless-transport bound gathers B straight from the probe rays' surfels: radiosity 1
+ * on every wall of a closed box gives E = 1 at every texel cache (L = 1/pi over the whole
+ * hemisphere); radiosity on the floor only gives B x the point-to-rectangle form factor at
+ * the ceiling's centre. Grid and inside caches get 0. */
+static void test_gather_bound(void) {
+    world w = {0};
+    build_closed_box(&w, 16);
+    lc_rt *rt = make_rt(&w);
+    if (!rt) return;
+    lc_lcb_cache caches[6];
+    caches[0] = texel_cache(lc_v3(0.5f, 1, 0.5f), lc_v3(0, -1, 0)); /* ceiling centre */
+    caches[1] = texel_cache(lc_v3(0.3f, 0.7f, 1), lc_v3(0, 0, -1));
+    caches[2] = texel_cache(lc_v3(1, 0.25f, 0.6f), lc_v3(-1, 0, 0));
+    caches[3] = texel_cache(lc_v3(0.1f, 0, 0.9f), lc_v3(0, 1, 0));
+    caches[4] = grid_cache(lc_v3(0.5f, 0.5f, 0.5f));
+    caches[5] = texel_cache(lc_v3(0.5f, 0, 0.5f), lc_v3(0, 1, 0));
+    caches[5].flags |= LC_CACHE_INSIDE;
+    float *b = malloc((size_t)w.n_surfels * 3 * sizeof *b), e[6 * 3];
+    for (uint32_t i = 0; i < 3 * w.n_surfels; i++) b[i] = 1.0f;
+    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 6, 1024, 7, b, e) == 0, "gather");
+    for (int c = 0; c < 4; c++)
+        for (int k = 0; k < 3; k++) CHECK(fabsf(e[3 * c + k] - 1.0f) < 0.01f, "uniform box: cache %d E %.4f", c, e[3 * c + k]);
+    for (int k = 0; k < 6; k++) CHECK(e[12 + k] == 0.0f, "grid and inside caches get 0 (%d: %g)", k, e[12 + k]);
+    for (uint32_t i = 0; i < w.n_surfels; i++) {
+        int floor = w.surfels[i].normal[1] > 0.5f;
+        b[3 * i] = floor ? 2.0f : 0.0f, b[3 * i + 1] = floor ? 1.0f : 0.0f, b[3 * i + 2] = 0.0f;
+    }
+    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 1, 4096, 7, b, e) == 0, "gather floor");
+    double ff = rect_form_factor(1, 1, 1);
+    CHECK(fabs(e[0] / (2 * ff) - 1) < 0.02 && fabs(e[1] / ff - 1) < 0.02 && e[2] == 0.0f,
+          "lit floor seen from the ceiling: E (%.4f %.4f %.4f) vs B x F = (%.4f %.4f 0)", e[0], e[1], e[2], 2 * ff, ff);
+    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 1, 0, 7, b, e) == -1, "no probe rays: error");
+    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 1, 64, 7, NULL, e) == -1, "no radiosity: error");
+    free(b);
+    lc_rt_release(rt);
+    world_free(&w);
+}
+
 int main(void) {
     lc_progress_set_enabled(0);
     test_pack_roundtrip();
@@ -640,5 +679,6 @@ int main(void) {
     test_determinism();
     test_bad_params();
     test_closed_box_real();
+    test_gather_bound();
     CHECK_DONE();
 }
