@@ -72,7 +72,8 @@ if [ "${TRADEOFF:-1}" != 0 ]; then
             "surfels=8192:--surfels 8192" "surfels=16384:--surfels 16384" "surfels=65536:--surfels 65536"
             "surfels=131072:--surfels 131072"
             "bands=1:--bands 1" "bands=2:--bands 2" "bands=4:--bands 4"
-            "high:--quality high --atlas-size 64 --grid-max-samples 1024")
+            "high:--quality high --atlas-size 64 --grid-max-samples 1024"
+            "ultra:--quality ultra --atlas-size 64 --grid-max-samples 1024")
   for v in "${variants[@]}"; do
     name="${v%%:*}"; flags="${v#*:}"
     echo "fidelity: Cornell trade-off $name..." >&2
@@ -104,7 +105,7 @@ EOF
     relights, b0_power_engine, b0_power_reference}' "$f")")
   jq -r '"  lightmap mean \(.lightmap.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
   for v in "surfels=65536:--surfels 65536" "surfels=131072:--surfels 131072" "links=512:--links 512" "exposure:--exposure" \
-           "links=256:--links 256" "surfels=131072,links=512,exposure:--surfels 131072 --links 512 --exposure"; do
+           "links=256:--links 256" "high:--quality high" "ultra:--quality ultra"; do
     name="${v%%:*}"; flags="${v#*:}"
     echo "fidelity: sponza $name..." >&2
     # shellcheck disable=SC2086

@@ -79,7 +79,7 @@ static const lc_opt bake_options[] = {
      "PATH", NULL},
     {"write-glb", LC_OPT_BOOL, OFF(write_glb), 0, 1, "true", NULL, "write the .glb (--no-write-glb to skip)", NULL,
      NULL},
-    {"quality", LC_OPT_ENUM, OFF(quality), 0, 0, "moderate", "draft|moderate|high",
+    {"quality", LC_OPT_ENUM, OFF(quality), 0, 0, "moderate", "draft|moderate|high|ultra",
      "preset for every parameter below (flags given explicitly win)", NULL, NULL},
     {"scale", LC_OPT_FLOAT, OFF(scale), 1e-9, 1e6, "1", NULL, "multiply positions (scene units -> metres)", NULL,
      NULL},
@@ -139,17 +139,21 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
      * high ~ its high setting (128k surfels, 254 links, 4 bands). Caches stay the same, as
      * in the paper, so the two presets differ in transport detail, not lightmap resolution.
      * 16/32 visibility samples per node: with 8/16 the per-cache visible solid angle on
-     * Sponza was off by 20-24% on average (vs 8% at 16/32) for 1.35x the link time. */
+     * Sponza was off by 20-24% on average (vs 8% at 16/32) for 1.35x the link time.
+     * ultra (not in the paper): 128k surfels, 512 links, 3 bands, exposure weights — the
+     * cheapest measured setting that meets 15% mean error on sunlit Sponza (14.6%; moderate
+     * 24.0%, high 17.7%; bench/fidelity.md), at ~4x moderate's link memory and relight time. */
     typedef struct {
         int atlas, surfels, links, bands, node_samples, final_samples, probe_rays, grid_max_dim, grid_max_samples,
-            relax, reloc_rays;
+            relax, reloc_rays, exposure;
     } bake_preset;
     /* Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
      * so a cube-shaped room does not get 24^3 grid caches (more than its texel caches). */
     static const bake_preset presets[] = {
-        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16},
-        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32},
-        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32},
+        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0},
+        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 0},
+        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 0},
+        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1},
     };
     const bake_preset *p = &presets[q];
     s->quality = (int)q;
@@ -164,6 +168,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     s->grid_max_samples = p->grid_max_samples;
     s->relax = p->relax;
     s->reloc_rays = p->reloc_rays;
+    s->exposure = p->exposure;
 }
 
 int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, char **positional, int max_pos,
@@ -865,7 +870,7 @@ int lc_bake_report_write_json(const lc_bake_report *r, const lc_bake_settings *s
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "input", s->input);
     cJSON_AddStringToObject(o, "output", s->output);
-    static const char *qualities[] = {"draft", "moderate", "high"};
+    static const char *qualities[] = {"draft", "moderate", "high", "ultra"};
     cJSON_AddStringToObject(o, "quality", qualities[s->quality]);
     cJSON *st = cJSON_AddObjectToObject(o, "stages_s");
     for (int i = 0; i < r->n_stages; i++) cJSON_AddNumberToObject(st, r->stages[i].name, r->stages[i].seconds);

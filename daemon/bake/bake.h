@@ -11,7 +11,7 @@
 #define LC_BAKE_MAX_ASSETS 64
 #define LC_BAKE_PATH_MAX 1024
 
-typedef enum { LC_QUALITY_DRAFT = 0, LC_QUALITY_MODERATE, LC_QUALITY_HIGH } lc_bake_quality;
+typedef enum { LC_QUALITY_DRAFT = 0, LC_QUALITY_MODERATE, LC_QUALITY_HIGH, LC_QUALITY_ULTRA } lc_bake_quality;
 
 typedef struct lc_bake_asset_arg {
     char name[64];

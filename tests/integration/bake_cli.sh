@@ -11,7 +11,7 @@ expect_exit 2 "exactly one SCENE" "$BAKE" bake
 expect_exit 2 "unknown option --frob" "$BAKE" bake "$CORNELL" --frob 3
 expect_exit 2 "--surfels.*out of range" "$BAKE" bake "$CORNELL" --surfels 2
 expect_exit 2 "--scale.*finite" "$BAKE" bake "$CORNELL" --scale nan
-expect_exit 2 "--quality.*draft\|moderate\|high" "$BAKE" bake "$CORNELL" --quality ultra
+expect_exit 2 "--quality.*draft\|moderate\|high\|ultra" "$BAKE" bake "$CORNELL" --quality extreme
 expect_exit 2 "--links.*needs a value" "$BAKE" bake "$CORNELL" --links
 expect_exit 2 "--links 1000 exceeds" "$BAKE" bake "$CORNELL" --surfels 64 --links 1000
 expect_exit 2 "--asset: expected NAME=PATH" "$BAKE" bake "$CORNELL" --asset chair
