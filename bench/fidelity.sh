@@ -101,7 +101,7 @@ EOF
       --spp "$sponza_spp" --batch 1024 --quiet --threads "$threads" 2>"$work/sponza-reference.txt"
   f="$(fidelity sponza-moderate "$tmp/sponza.lcb" "$work/sponza-reference" --state "$tmp/sun.json")"
   results+=("$(jq -c '{name: "sponza-moderate-sun", scene: "sponza-dabrovic", state: "directional (0.3,-1,0.2), 100000 lux, colour (1,0.95,0.9)",
-    preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, reference,
+    preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, bound, reference,
     relights, b0_power_engine, b0_power_reference}' "$f")")
   jq -r '"  lightmap mean \(.lightmap.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
   for v in "surfels=65536:--surfels 65536" "surfels=131072:--surfels 131072" "links=512:--links 512" "exposure:--exposure" \

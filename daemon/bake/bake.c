@@ -142,7 +142,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
      * Sponza was off by 20-24% on average (vs 8% at 16/32) for 1.35x the link time.
      * ultra (not in the paper): 128k surfels, 512 links, 3 bands, exposure weights — the
      * cheapest measured setting that meets 15% mean error on sunlit Sponza (14.6%; moderate
-     * 24.0%, high 17.7%; bench/fidelity.md), at ~4x moderate's link memory and relight time. */
+     * 24.0%, high 17.7%; bench/fidelity.md), at 4x moderate's link memory and ~3x its relight time. */
     typedef struct {
         int atlas, surfels, links, bands, node_samples, final_samples, probe_rays, grid_max_dim, grid_max_samples,
             relax, reloc_rays, exposure;

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Relight benchmark across presets: bakes the embedded Cornell box and sponza-dabrovic (when
-# ../shared/scenes has it) at the moderate and high presets, sibenik and the conference room
+# ../shared/scenes has it) at the moderate, high and ultra presets, sibenik and the conference room
 # (when present) at moderate, then runs lucent-bench on both
 # backends. Prints lucent-bench's tables (per-stage ms, where the time goes, the paper's
 # figures) and writes JSON (default bench/relight-results.json).
@@ -22,7 +22,7 @@ bin="${LUCENT_BUILD_DIR:-$root/build}/bin"
 tmp="$(mktemp -d)"; trap 'rm -rf "$tmp"' EXIT
 mkdir -p "$(dirname "$out")"
 bakes=()
-for preset in moderate high; do
+for preset in moderate high ultra; do
   echo "baking cornell ($preset)..." >&2
   "$bin/lucent-bake" bake "$root/scenes/cornell-box/cornell-box.obj" -o "$tmp/cornell-$preset.lcb" \
       --quality "$preset" --quiet --no-write-glb
