@@ -52,7 +52,7 @@ int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_sur
 /* The lossless-transport bound, a diagnostic: each texel cache's irradiance (W/m^2, RGB, for
  * its normal) gathered straight from the surfels its probe rays hit,
  *   E = sum over hits of B(hit surfel) / pi * cos * (solid angle per ray),
- * with the bake's ray pattern and hit attribution — the quantity the links compress, without
+ * with the bake's ray stratification and hit attribution — the quantity the links compress, without
  * the compression. An engine solution can get no closer to the truth than this through its
  * surfels; lucent-ref fidelity reports it beside the engine. radiosity: n_surfels x 3;
  * irradiance: n_caches x 3 (grid and inside caches get 0). Returns 0, or -1 (logged). */
