@@ -3,13 +3,15 @@
 #   1. the embedded Cornell box, moderate preset (the build's bake), its own ceiling lamp
 #      (emissive material, the daemon's initial state): mean / p95 / max relative error;
 #   2. the trade-off on the Cornell box: error vs links per cache, surfels and SH bands;
-#   3. sponza-dabrovic, moderate, under a sun-like directional light (skipped when
-#      ../shared/scenes is absent).
+#   3. sponza-dabrovic, moderate, under a sun-like directional light, and its variants;
+#   4. sibenik and the conference room, moderate, under point lights (neither has emitters).
+# Steps 3 and 4 skip the scenes that ../shared/scenes lacks.
 # Usage: bench/fidelity.sh BUILD_DIR [OUT_JSON]   (default OUT_JSON: bench/out/fidelity.json)
-# Environment: CORNELL_SPP (8192), SPONZA_SPP (8192), THREADS (0 = all cores),
-#              TRADEOFF=0 to skip step 2, SHARED (../shared).
+# Environment: CORNELL_SPP (8192), SPONZA_SPP (8192), OTHER_SPP (4096: sibenik, conference),
+#              THREADS (0 = all cores), TRADEOFF=0 to skip step 2, SHARED (../shared).
 # Each step's lucent-ref output (reference EXR, error heat maps, per-texel CSV) stays in
-# bench/out/fidelity/. Runtime on 2 cores: ~4 min (Cornell + trade-off) + ~6 min (Sponza).
+# bench/out/fidelity/. Runtime on 2 cores: ~4 min (Cornell + trade-off) + ~10 min (Sponza)
+# + ~12 min (sibenik, conference room).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${1:?usage: bench/fidelity.sh BUILD_DIR [OUT_JSON]}"
@@ -20,6 +22,7 @@ bin="$build/bin"
 threads="${THREADS:-0}"
 cornell_spp="${CORNELL_SPP:-8192}"
 sponza_spp="${SPONZA_SPP:-8192}"
+other_spp="${OTHER_SPP:-4096}"
 for tool in lucent-bake lucent-ref; do
   [ -x "$bin/$tool" ] || { echo "fidelity: $bin/$tool missing (build first)" >&2; exit 1; }
 done
@@ -117,6 +120,34 @@ EOF
 else
   echo "fidelity: skip sponza-dabrovic: $sponza absent" >&2
 fi
+
+# --- 4. Sibenik and the conference room: interiors under point lights ---------------------------
+# name | scene | bake flags | lights (state JSON "lights" array; positions in metres after --scale)
+others=(
+  'sibenik|sibenik/sibenik.obj||[{"id": "nave-a", "type": "point", "position": [-10, -9, 0], "color": [1, 0.9, 0.75], "intensity": 3000}, {"id": "nave-b", "type": "point", "position": [0, -9, 0], "color": [1, 0.9, 0.75], "intensity": 3000}, {"id": "nave-c", "type": "point", "position": [10, -9, 0], "color": [1, 0.9, 0.75], "intensity": 3000}]'
+  'conference-room|conference-room/conference.obj|--scale 0.003|[{"id": "ceiling-a", "type": "point", "position": [0, 1.6, -0.6], "color": [1, 0.95, 0.85], "intensity": 50}, {"id": "ceiling-b", "type": "point", "position": [2.5, 1.6, -0.6], "color": [1, 0.95, 0.85], "intensity": 50}]'
+)
+for entry in "${others[@]}"; do
+  IFS='|' read -r name scene flags lights <<<"$entry"
+  file="$shared/scenes/$scene"
+  if [ ! -f "$file" ]; then
+    echo "fidelity: skip $name: $file absent" >&2
+    continue
+  fi
+  echo "fidelity: $name: bake + reference ($other_spp spp)..." >&2
+  printf '{"type": "state", "revision": 1, "lights": %s, "objects": [], "materials": [], "environment": {"type": "none"}, "settings": {}}\n' \
+    "$lights" >"$work/$name-points-state.json"
+  # shellcheck disable=SC2086
+  bake "$tmp/$name.lcb" "$file" --quality moderate --quiet --no-write-glb --threads "$threads" $flags
+  "$bin/lucent-ref" render "$tmp/$name.lcb" --state "$work/$name-points-state.json" --out "$work/$name-reference" \
+      --spp "$other_spp" --batch 1024 --quiet --threads "$threads" 2>"$work/$name-reference.txt"
+  f="$(fidelity "$name-moderate" "$tmp/$name.lcb" "$work/$name-reference" --state "$work/$name-points-state.json")" || continue
+  results+=("$(jq -c --arg n "$name-moderate-points" --arg sc "$name" '{name: $n, scene: $sc, state: "point lights (bench/fidelity.sh)",
+    preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, bound, reference,
+    relights}' "$f")")
+  jq -r '"  lightmap mean \(.lightmap.mean*100)% bound \(.bound.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
+  rm -f "$tmp/$name.lcb"
+done
 
 printf '%s\n' "${results[@]}" | jq -s --arg date "$(date -u +%FT%TZ)" --arg host "$(uname -n)" \
   '{bench: "fidelity", date: $date, host: $host,
