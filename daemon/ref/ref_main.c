@@ -342,6 +342,31 @@ done:
     return rc;
 }
 
+/* The gather bound of the engine's solution: writes DIR/bound_lightmap.exr and, when any texel
+ * is compared, its error statistics (*have = 1). Returns 0 or -1 with err set. */
+static int fidelity_bound(const lc_lcb *bake, const lc_ref_engine_run *run, const lc_ref_result *ref, const ref_opts *o,
+                          const char *dir, lc_ref_errstats *stats, int *have, char *err, size_t errlen) {
+    const lc_lcb_view *v = lc_lcb_get(bake);
+    float *bound = malloc((size_t)v->lightmap_width * v->lightmap_height * 3 * sizeof(float) + 1);
+    char path[REF_PATH_MAX + 64];
+    int rc = -1;
+    if (!bound) {
+        lc_set_err(err, errlen, "out of memory for the gather bound");
+        return -1;
+    }
+    if (lc_ref_gather_bound(bake, run->surfel_radiosity, (uint32_t)o->bound_rays, (uint64_t)o->seed, o->threads, bound,
+                            err, errlen) != 0)
+        goto done;
+    snprintf(path, sizeof path, "%s/bound_lightmap.exr", dir);
+    if (lc_image_write_float(path, v->lightmap_width, v->lightmap_height, 3, bound, err, errlen) != 0) goto done;
+    *have = lc_ref_compare_lightmap(bound, ref->lightmap, ref->lightmap_stderr, ref->texel_mask, ref->width,
+                                    ref->height, o->threshold, stats, NULL) == 0;
+    rc = 0;
+done:
+    free(bound);
+    return rc;
+}
+
 static int cmd_fidelity(int argc, char **argv) {
     static ref_opts o;
     char *pos[2];
@@ -428,6 +453,12 @@ static int cmd_fidelity(int argc, char **argv) {
         fclose(csv);
     }
     fflush(stdout);
+    /* How close any link budget could get with these surfels (see lc_ref_gather_bound). */
+    lc_ref_errstats bs = {0};
+    int have_bound = 0;
+    if (o.bound_rays > 0 && ref.lightmap &&
+        fidelity_bound(bake, &run, &ref, &o, dir, &bs, &have_bound, err, sizeof err) != 0)
+        goto done;
     cJSON *extra = cJSON_CreateObject();
     cJSON_AddStringToObject(extra, "bake", pos[0]);
     cJSON_AddStringToObject(extra, "state", o.state[0] ? o.state : "(daemon initial state)");
@@ -444,41 +475,13 @@ static int cmd_fidelity(int argc, char **argv) {
     cJSON_AddNumberToObject(extra, "b0_power_engine", eng_y);
     cJSON_AddNumberToObject(extra, "b0_power_reference", pw_y);
     cJSON_AddNumberToObject(extra, "b0_power_reference_stderr", pw_se_y);
-    lc_ref_errstats bs = {0};
-    int have_bound = 0;
-    if (o.bound_rays > 0 && ref.lightmap) {
-        /* How close any link budget could get with these surfels (see lc_ref_gather_bound). */
-        size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
-        float *bound = malloc(texels * 3 * sizeof(float) + 1);
-        if (!bound) {
-            lc_set_err(err, sizeof err, "out of memory for the gather bound");
-            cJSON_Delete(extra);
-            goto done;
-        }
-        if (lc_ref_gather_bound(bake, run.surfel_radiosity, (uint32_t)o.bound_rays, (uint64_t)o.seed, o.threads, bound,
-                                err, sizeof err) != 0) {
-            free(bound);
-            cJSON_Delete(extra);
-            goto done;
-        }
-        snprintf(path, sizeof path, "%s/bound_lightmap.exr", dir);
-        int wrote = lc_image_write_float(path, v->lightmap_width, v->lightmap_height, 3, bound, err, sizeof err);
-        int cmp = lc_ref_compare_lightmap(bound, ref.lightmap, ref.lightmap_stderr, ref.texel_mask, ref.width,
-                                          ref.height, o.threshold, &bs, NULL);
-        free(bound);
-        if (wrote != 0) {
-            cJSON_Delete(extra);
-            goto done;
-        }
-        if (cmp == 0) {
-            have_bound = 1;
-            char *t = lc_ref_errstats_json(&bs);
-            cJSON *b = t ? cJSON_Parse(t) : NULL;
-            free(t);
-            if (b) {
-                cJSON_AddNumberToObject(b, "rays", o.bound_rays);
-                cJSON_AddItemToObject(extra, "bound", b);
-            }
+    if (have_bound) {
+        char *t = lc_ref_errstats_json(&bs);
+        cJSON *b = t ? cJSON_Parse(t) : NULL;
+        free(t);
+        if (b) {
+            cJSON_AddNumberToObject(b, "rays", o.bound_rays);
+            cJSON_AddItemToObject(extra, "bound", b);
         }
     }
     if (do_compare(&ref, run.lightmap, run.grid_sh, &o, dir, extra, err, sizeof err) != 0) goto done;
