@@ -207,7 +207,10 @@ static int test_basic(const char *url) {
     uint64_t last_lm = 0;
     if (lc_client_latest_frame(view, LC_CLIENT_LIGHTMAP, &f) == 0) last_lm = f.sequence;
     EXPECT(set_light(ctl, 0.2, 1.0, &rev) == 0, "move after unsubscribe");
-    lc_client_poll(view, 500);
+    /* wait for the move's shgrid frame (a fixed 500 ms poll raced the relight under load), then
+     * no lightmap frame may have come with it */
+    EXPECT(lc_client_wait_frame(view, LC_CLIENT_SHGRID, rev, 0, 10000, &f, err, sizeof err) == 0,
+           "shgrid frame of the move: %s", err);
     EXPECT(lc_client_latest_frame(view, LC_CLIENT_LIGHTMAP, &f) == 0 && f.sequence == last_lm,
            "no lightmap frames after unsubscribe");
     EXPECT(b.frames > frames_before, "shgrid/objects frames still arrive (%d -> %d)", frames_before, b.frames);
