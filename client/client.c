@@ -1162,3 +1162,38 @@ void lc_sh9_irradiance_to_radiance(const float irradiance[27], float radiance[27
         for (int ch = 0; ch < 3; ch++) radiance[3 * i + ch] = (float)(irradiance[3 * i + ch] / band_scale[l]);
     }
 }
+
+/* Basis constants of lc_sh9_irradiance (y_i = sh9_k[i] * polynomial_i, polynomials 1, y, z, x, xy,
+ * yz, 3z^2-1, xz, x^2-y^2) and the clamped-cosine factor A_l of each coefficient. */
+static const double sh9_k[9] = {0.28209479177387814, 0.48860251190291992, 0.48860251190291992,
+                                0.48860251190291992, 1.09254843059207907, 1.09254843059207907,
+                                0.31539156525252001, 1.09254843059207907, 0.54627421529603954};
+static const double sh9_a[9] = {3.14159265358979323846, 2.09439510239319549, 2.09439510239319549,
+                                2.09439510239319549, 0.78539816339744831, 0.78539816339744831,
+                                0.78539816339744831, 0.78539816339744831, 0.78539816339744831};
+
+void lc_sh9_to_unity(const float irradiance[27], float unity[27]) {
+    /* Unity's SphericalHarmonicsL2 is premultiplied (HDRP SphericalHarmonicMath.UndoCosineRescaling:
+     * A_l * y_lm constant / pi), so ShadeSH9 sums sh[c, i] * polynomial_i(n_unity) = E / pi. glTF
+     * (x, y, z) is Unity (-x, y, z): the polynomials odd in x (x, xy, xz) change sign. */
+    static const double mirror_x[9] = {1, 1, 1, -1, -1, 1, 1, -1, 1};
+    for (int i = 0; i < 9; i++)
+        for (int ch = 0; ch < 3; ch++)
+            unity[9 * ch + i] = (float)(irradiance[3 * i + ch] * sh9_k[i] * mirror_x[i] / 3.14159265358979323846);
+}
+
+void lc_sh9_to_arcore(const float irradiance[27], float arcore[27]) {
+    /* Radiance SH (divided by A_l) in ARCore's basis, whose y, x, yz, xz functions carry a minus
+     * sign (hello_ar's sphericalHarmonicFactors: -0.325735 for 1 and 3, -0.273137 for 5 and 7).
+     * Without the signs the lighting comes out turned by pi about +Z (x and y mirrored). Same axes
+     * as glTF (right-handed, +Y up): no axis change. */
+    static const double sign[9] = {1, -1, 1, -1, 1, -1, 1, -1, 1};
+    for (int i = 0; i < 9; i++)
+        for (int ch = 0; ch < 3; ch++) arcore[3 * i + ch] = (float)(irradiance[3 * i + ch] * sign[i] / sh9_a[i]);
+}
+
+void lc_sh9_to_threejs(const float irradiance[27], float threejs[27]) {
+    lc_sh9_irradiance_to_radiance(irradiance, threejs);
+}
+
+void lc_sh9_to_arkit(const float irradiance[27], float arkit[27]) { lc_sh9_to_planar(irradiance, arkit); }

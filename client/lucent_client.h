@@ -172,14 +172,52 @@ int lc_client_view_apply(lc_client_view *v, const uint8_t *frame, size_t len, lc
  * coefficient (c0.r c0.g c0.b c1.r …) as the shgrid and objects streams carry them. n need
  * not be normalised (it is). Negative results (ringing) are clamped to 0. */
 void lc_sh9_irradiance(const float sh[27], const float normal[3], float rgb_out[3]);
-/* Interleaved (ARCore, three.js) <-> planar (Unity SphericalHarmonicsL2 [rgb][coef], ARKit:
- * all red, then green, then blue). Same basis and scale; only the order changes. in and out
- * must not overlap. */
+/* Interleaved <-> planar (all red, then green, then blue). Same basis and scale; only the
+ * order changes (for Unity and ARCore use lc_sh9_to_unity / lc_sh9_to_arcore, which also
+ * change basis, scale and axes). in and out must not overlap. */
 void lc_sh9_to_planar(const float interleaved[27], float planar[27]);
 void lc_sh9_to_interleaved(const float planar[27], float interleaved[27]);
-/* Cosine-convolved irradiance SH -> radiance SH (divides band l by pi, 2pi/3, pi/4), for
- * engines whose probes hold radiance SH and convolve it themselves (three.js LightProbe). */
+/* Cosine-convolved irradiance SH -> radiance SH (divides band l by pi, 2pi/3, pi/4), same
+ * basis, order and axes. */
 void lc_sh9_irradiance_to_radiance(const float irradiance[27], float radiance[27]);
+
+/* Engine layouts. Each takes the 27 values of the shgrid / objects streams (cosine-convolved
+ * irradiance, interleaved, glTF axes: right-handed, +Y up) and writes what the platform's own
+ * SH evaluation takes, so that it gives the irradiance lc_sh9_irradiance() gives at the same
+ * physical normal (times 1/pi where the platform folds the Lambert 1/pi into its SH, as noted).
+ * tests/unit/client/test_sh_layouts.c checks each one against the platform's published
+ * formula. in and out must not overlap. Grid sample positions map by the same axis change. */
+
+/* Unity: `SphericalHarmonicsL2` (`LightProbes`, `RenderSettings.ambientProbe`), planar:
+ * `sh[c, i] = unity[9 * c + i]`. Matches Unity's premultiplied convention (HDRP
+ * `SphericalHarmonicMath.UndoCosineRescaling` / `PremultiplyCoefficients`: each coefficient
+ * carries A_l, its basis constant and 1/pi) and its evaluation, `ShadeSH9` =
+ * `SHEvalLinearL0L1` + `SHEvalLinearL2` over `unity_SHAr`..`unity_SHC` packed as in HDRP
+ * `SphericalHarmonicMath.PackCoefficients`, which returns E/pi (Unity multiplies it by the
+ * albedo). Handedness: Unity is left-handed, +Y up, +Z forward; glTF importers (UnityGLTF
+ * `CoordinateSpaceConversionScale` (-1, 1, 1), glTFast) map glTF (x, y, z) to Unity
+ * (-x, y, z), so the coefficients odd in x (x, xy, xz) change sign. */
+void lc_sh9_to_unity(const float irradiance[27], float unity[27]);
+/* ARCore: the convention of `LightEstimate.getEnvironmentalHdrAmbientSphericalHarmonics()`
+ * (`ArLightEstimate_getEnvironmentalHdrAmbientSphericalHarmonics`), interleaved: radiance SH
+ * (band l divided by A_l) in a basis whose y, x, yz, xz functions carry a minus sign
+ * (coefficients 1, 3, 5, 7 negated). For shaders written for ARCore's SH, e.g. hello_ar_java
+ * (`updateSphericalHarmonicsCoefficients` with `sphericalHarmonicFactors`, then
+ * `environmental_hdr.frag` `Pbr_CalculateDiffuseEnvironmentalRadiance`), which return E/pi.
+ * Axes: ARCore's world space is right-handed, +Y up, like glTF: no axis change (a scene placed
+ * at a rotated anchor needs its SH rotated too). */
+void lc_sh9_to_arcore(const float irradiance[27], float arcore[27]);
+/* three.js: `LightProbe.sh` / `SphericalHarmonics3`, interleaved (`sh.fromArray(out)`):
+ * radiance SH (= lc_sh9_irradiance_to_radiance); three.js convolves it back in
+ * `SphericalHarmonics3.getIrradianceAt` and the light-probe shader (`shGetIrradianceAt`),
+ * which return E. Axes: three.js is right-handed, +Y up, like glTF: no axis change. */
+void lc_sh9_to_threejs(const float irradiance[27], float threejs[27]);
+/* ARKit: the layout of `ARDirectionalLightEstimate.sphericalHarmonicsCoefficients` (27 floats,
+ * separate red, green and blue planes of 9) = lc_sh9_to_planar: lucent's basis and scale
+ * (Apple publishes the layout, not a basis or an evaluation formula). Axes: ARKit's world
+ * (`ARConfiguration.WorldAlignment.gravity`) is right-handed, +Y up, like glTF: no axis
+ * change. */
+void lc_sh9_to_arkit(const float irradiance[27], float arkit[27]);
 
 #ifdef __cplusplus
 }
