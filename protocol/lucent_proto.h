@@ -2,6 +2,8 @@
  * Parses and validates client requests into C structs (every field checked, errors carry a
  * stable code and an RFC 6901 pointer), builds server messages as JSON text, encodes and
  * decodes binary frame headers, RGB9E5 and tiles. No I/O, no globals: thread-safe.
+ * Builders write valid UTF-8 whatever their input: an ill-formed string (a truncated name,
+ * a hand-filled error) is written with U+FFFD in place of the bad bytes.
  * Ownership: builders return malloc'd NUL-terminated text (caller frees with free());
  * parsed requests own their op array (lc_proto_request_release). */
 #ifndef LC_PROTO_H
@@ -134,10 +136,29 @@ typedef struct lc_proto_error {
 
 void lc_proto_default_limits(lc_proto_limits *lim);
 
+/* --- UTF-8 (every string lucent sends is valid UTF-8; RFC 6455 closes with 1007 otherwise) - */
+
+/* 1 when s[0, len) is well-formed UTF-8: no overlong forms, no surrogates (U+D800..U+DFFF),
+ * nothing above U+10FFFF, no truncated sequence. NUL bytes count as characters. */
+int lc_proto_utf8_valid(const char *s, size_t len);
+/* Length of the longest prefix of s[0, len), at most `max` bytes, that ends on a character
+ * boundary: never inside a multi-byte sequence, nor inside one that `len` cuts short. For
+ * valid input the prefix is valid. */
+size_t lc_proto_utf8_cut(const char *s, size_t len, size_t max);
+/* Copies s[0, len) into dst (cap bytes, always NUL-terminated when cap > 0) as valid
+ * UTF-8: each maximal ill-formed subsequence becomes U+FFFD, and with
+ * LC_PROTO_UTF8_NO_CONTROLS so does each control character (U+0000..U+001F, U+007F..U+009F);
+ * stops before the first character that does not fit. Returns the input bytes consumed
+ * (len when all of s fit). */
+enum { LC_PROTO_UTF8_NO_CONTROLS = 1u << 0 };
+size_t lc_proto_utf8_sanitize(char *dst, size_t cap, const char *s, size_t len, unsigned flags);
+
 /* Parses one text message (len bytes, need not be NUL-terminated). Checks size, nesting
  * depth (before building any tree), JSON syntax, type, every field's type and range. On
- * failure returns -1 with err filled (and out->id set when the message had a readable id,
- * so the error can echo it). On success returns 0; release with lc_proto_request_release. */
+ * failure returns -1 with err filled, and out->id set whenever the message is a JSON object
+ * whose own "id" is valid, whatever else failed (so the error can echo it). err->message
+ * quotes client text only cut on a character boundary, so it is valid UTF-8. On success
+ * returns 0; release with lc_proto_request_release. */
 int lc_proto_parse_request(const char *text, size_t len, const lc_proto_limits *lim, lc_proto_request *out,
                            lc_proto_error *err);
 void lc_proto_request_release(lc_proto_request *r);

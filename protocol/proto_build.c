@@ -1,7 +1,8 @@
 /* proto_build: server messages (PROTOCOL.md §3.4, §5) and journal ops as JSON text.
  * Numbers are written as raw text: floats in the shortest form that reads back to the same
  * float, 64-bit integers exactly (cJSON would go through double). Non-finite values cannot
- * be JSON and are written as 0. */
+ * be JSON and are written as 0. Strings are written as valid UTF-8 whatever they hold (cJSON
+ * copies bytes as they are; a WebSocket peer closes on a text frame that is not UTF-8). */
 #include <cjson/cJSON.h>
 #include <inttypes.h>
 #include <math.h>
@@ -71,8 +72,22 @@ static void proto_add_u64(proto_b *b, cJSON *obj, const char *key, uint64_t v) {
     proto_add(b, obj, key, cJSON_CreateRaw(buf));
 }
 
+/* A JSON string of s with each ill-formed UTF-8 subsequence replaced by U+FFFD. */
+static cJSON *proto_string(const char *s) {
+    if (!s) s = "";
+    size_t n = strlen(s);
+    if (lc_proto_utf8_valid(s, n)) return cJSON_CreateString(s);
+    if (n > (SIZE_MAX - 1) / 3) return NULL;
+    char *buf = malloc(3 * n + 1); /* a replaced subsequence is >= 1 byte in, 3 out */
+    if (!buf) return NULL;
+    lc_proto_utf8_sanitize(buf, 3 * n + 1, s, n, 0);
+    cJSON *it = cJSON_CreateString(buf);
+    free(buf);
+    return it;
+}
+
 static void proto_add_str(proto_b *b, cJSON *obj, const char *key, const char *s) {
-    proto_add(b, obj, key, cJSON_CreateString(s ? s : ""));
+    proto_add(b, obj, key, proto_string(s));
 }
 
 static void proto_add_bool(proto_b *b, cJSON *obj, const char *key, int v) {
@@ -102,7 +117,7 @@ static void proto_add_u32s(proto_b *b, cJSON *obj, const char *key, const uint32
 static void proto_add_strs(proto_b *b, cJSON *obj, const char *key, const char *const *v, uint32_t n) {
     cJSON *arr = proto_chk(b, cJSON_CreateArray());
     for (uint32_t i = 0; arr && i < n; i++) {
-        cJSON *it = proto_chk(b, cJSON_CreateString(v && v[i] ? v[i] : ""));
+        cJSON *it = proto_chk(b, proto_string(v ? v[i] : NULL));
         if (it) cJSON_AddItemToArray(arr, it);
     }
     proto_add(b, obj, key, arr);
@@ -288,6 +303,8 @@ char *lc_proto_build_error(const lc_proto_id *id, const lc_proto_error *e) {
     ptr[sizeof e->pointer] = 0;
     memcpy(msg, e->message, sizeof e->message);
     msg[sizeof e->message] = 0;
+    /* a message cut by its buffer loses the cut character rather than showing U+FFFD */
+    msg[lc_proto_utf8_cut(msg, strlen(msg), sizeof msg)] = 0;
     cJSON *m = proto_msg(&b, "error", id);
     proto_add_str(&b, m, "code", code[0] ? code : "internal");
     proto_add_str(&b, m, "message", msg);
@@ -306,7 +323,7 @@ char *lc_proto_build_changed(uint64_t revision, const char *by, const lc_proto_o
         char key[LC_PROTO_ID_MAX + 1];
         proto_idcpy(key, proto_op_key(&ops[i]));
         cJSON *t = proto_chk(&b, cJSON_CreateString(lc_proto_type_name(ops[i].type)));
-        cJSON *k = proto_chk(&b, cJSON_CreateString(key));
+        cJSON *k = proto_chk(&b, proto_string(key));
         if (t) cJSON_AddItemToArray(types, t);
         if (k) cJSON_AddItemToArray(ids, k);
     }

@@ -10,15 +10,19 @@
 #include <string.h>
 
 #include "lucent_proto.h"
+#include "util/utf8.h"
 
 #define PROTO_STR_MAX 256     /* §1.3: string length */
 #define PROTO_DEPTH_CAP 512   /* below cJSON's own nesting limit (1000) */
 #define PROTO_PTR_MAX 160     /* sizeof lc_proto_error.pointer */
+#define PROTO_QUOTE_MAX 64    /* bytes of client text quoted in an error message */
 #define PROTO_TWO_53 9007199254740992.0
 #define PROTO_HALF_PI 1.5707963267948966
 #define PROTO_ANGLE_SLACK 1e-6 /* float(π/2) printed by a builder is a little above π/2 */
 
-enum { PROTO_SCAN_BAD_UTF8 = 1, PROTO_SCAN_NUL_ESCAPE = 2 };
+/* proto_scan_json flags: a string with ill-formed UTF-8; a \u0000 in any string; a \u0000
+ * in the request id (the root's first member named "id", in its name or string value). */
+enum { PROTO_SCAN_BAD_UTF8 = 1, PROTO_SCAN_NUL_ESCAPE = 2, PROTO_SCAN_NUL_IN_ID = 4 };
 
 static const char *const proto_type_names[LC_REQ_COUNT] = {
     "hello",           "subscribe",    "unsubscribe", "light.set", "light.remove",
@@ -55,17 +59,23 @@ void lc_proto_default_limits(lc_proto_limits *lim) {
 
 /* --- errors and pointers ---------------------------------------------------------------- */
 
-static int proto_fail(lc_proto_error *err, const char *code, const char *ptr, const char *fmt, ...)
+/* Fills err. Messages quote client text only through proto_quote(). */
+static void proto_error(lc_proto_error *err, const char *code, const char *ptr, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
-static int proto_fail(lc_proto_error *err, const char *code, const char *ptr, const char *fmt, ...) {
+static void proto_error(lc_proto_error *err, const char *code, const char *ptr, const char *fmt, ...) {
     if (snprintf(err->code, sizeof err->code, "%s", code) < 0) err->code[0] = 0;
     if (snprintf(err->pointer, sizeof err->pointer, "%s", ptr) < 0) err->pointer[0] = 0;
     va_list ap;
     va_start(ap, fmt);
     if (vsnprintf(err->message, sizeof err->message, fmt, ap) < 0) err->message[0] = 0;
     va_end(ap);
-    return -1;
 }
+
+/* proto_error(), then -1. A macro so the -1 is visible where it is returned: a variadic
+ * function is never inlined, and with an opaque return value the optimiser must assume
+ * that a failed required field (proto_missing) can return 0 without writing the output
+ * (GCC -O3: -Wmaybe-uninitialized on the callers' outputs). */
+#define proto_fail(...) (proto_error(__VA_ARGS__), -1)
 
 /* dst = base "/" key (keys are our own ASCII names: no RFC 6901 escaping needed). */
 static void proto_ptr(char dst[PROTO_PTR_MAX], const char *base, const char *key) {
@@ -78,39 +88,29 @@ static void proto_ptr_index(char dst[PROTO_PTR_MAX], const char *base, int i) {
 
 /* --- byte-level checks ------------------------------------------------------------------ */
 
-/* Length of the valid UTF-8 sequence at s (n bytes left), or 0 when invalid (overlongs,
- * surrogates and code points above U+10FFFF are invalid). */
-static size_t proto_utf8_seq(const unsigned char *s, size_t n) {
-    unsigned c = s[0];
-    if (c < 0x80) return 1;
-    size_t len;
-    unsigned lo = 0x80, hi = 0xBF;
-    if (c >= 0xC2 && c <= 0xDF) len = 2;
-    else if (c >= 0xE0 && c <= 0xEF) {
-        len = 3;
-        if (c == 0xE0) lo = 0xA0;
-        if (c == 0xED) hi = 0x9F;
-    } else if (c >= 0xF0 && c <= 0xF4) {
-        len = 4;
-        if (c == 0xF0) lo = 0x90;
-        if (c == 0xF4) hi = 0x8F;
-    } else
-        return 0;
-    if (n < len) return 0;
-    if (s[1] < lo || s[1] > hi) return 0;
-    for (size_t k = 2; k < len; k++)
-        if (s[k] < 0x80 || s[k] > 0xBF) return 0;
-    return len;
+int lc_proto_utf8_valid(const char *s, size_t len) {
+    return (s || !len) && lc_utf8_valid(s, len);
 }
 
-static int proto_utf8_valid(const char *str, size_t n) {
-    const unsigned char *s = (const unsigned char *)str;
-    for (size_t i = 0; i < n;) {
-        size_t k = proto_utf8_seq(s + i, n - i);
-        if (!k) return 0;
-        i += k;
-    }
-    return 1;
+size_t lc_proto_utf8_cut(const char *s, size_t len, size_t max) {
+    return s ? lc_utf8_cut(s, len, max) : 0;
+}
+
+size_t lc_proto_utf8_sanitize(char *dst, size_t cap, const char *s, size_t len, unsigned flags) {
+    if (!dst || !cap) return 0;
+    if (!s) len = 0;
+    return lc_utf8_sanitize(dst, cap, s ? s : "", len, flags & LC_PROTO_UTF8_NO_CONTROLS ? LC_UTF8_NO_CONTROLS : 0);
+}
+
+/* Client text quoted into an error message: at most PROTO_QUOTE_MAX bytes, cut on a
+ * character boundary, ill-formed bytes and control characters shown as U+FFFD (the message
+ * must be valid UTF-8 for the client's WebSocket, and one line for the server's log), "..."
+ * when it was cut. */
+static const char *proto_quote(char dst[PROTO_QUOTE_MAX + 4], const char *s) {
+    size_t n = strlen(s);
+    size_t used = lc_utf8_sanitize(dst, PROTO_QUOTE_MAX + 1, s, n, LC_UTF8_NO_CONTROLS);
+    if (used < n) strcat(dst, "...");
+    return dst;
 }
 
 /* Nesting depth of containers, ignoring brackets inside strings; > max -> 1. Runs before
@@ -166,7 +166,7 @@ static size_t proto_scan_string(const unsigned char *s, size_t n, size_t i, int 
         } else if (c < 0x80) {
             i++;
         } else {
-            size_t k = proto_utf8_seq(s + i, n - i);
+            size_t k = lc_utf8_seq(s + i, n - i);
             if (!k) {
                 *flags |= PROTO_SCAN_BAD_UTF8; /* reported as `invalid`, with the field if known */
                 k = 1;
@@ -202,12 +202,64 @@ static size_t proto_scan_number(const unsigned char *s, size_t n, size_t i) {
     return i;
 }
 
+/* Whether the member name s[i0, i1) (quotes included, grammar already checked) is "id" as
+ * cJSON sees it: escapes decoded, up to its first NUL (where cJSON's copy ends); *nul = 1
+ * when it holds a \u0000 there. */
+static int proto_key_is_id(const unsigned char *s, size_t i0, size_t i1, int *nul) {
+    static const char lit[] = "id";
+    size_t pos = 0;
+    *nul = 0;
+    for (size_t j = i0 + 1; j + 1 < i1;) {
+        unsigned ch = s[j];
+        if (ch == '\\') {
+            unsigned char e = s[j + 1];
+            if (e == 'u') {
+                ch = 0;
+                for (int k = 2; k < 6; k++) {
+                    unsigned h = s[j + k];
+                    ch = ch * 16 + (h <= '9' ? h - '0' : (h | 0x20) - 'a' + 10);
+                }
+                j += 6;
+            } else {
+                ch = e == 'b' ? '\b' : e == 'f' ? '\f' : e == 'n' ? '\n' : e == 'r' ? '\r' : e == 't' ? '\t' : e;
+                j += 2;
+            }
+        } else {
+            j++;
+        }
+        if (ch == 0) {
+            *nul = 1;
+            break;
+        }
+        if (pos >= sizeof lit - 1 || (unsigned char)lit[pos] != ch) return 0;
+        pos++;
+    }
+    return pos == sizeof lit - 1;
+}
+
+/* A member name at s[i] (depth: of the object it is in); returns the index after it or 0.
+ * For the root object, tracks whether this member is the request id (*id_member). */
+static size_t proto_scan_key(const unsigned char *s, size_t n, size_t i, int depth, int *flags, int *id_member,
+                             int *id_seen) {
+    size_t i0 = i;
+    if (i >= n || s[i] != '"' || !(i = proto_scan_string(s, n, i, flags))) return 0;
+    if (depth == 1) {
+        int nul = 0;
+        *id_member = !*id_seen && proto_key_is_id(s, i0, i, &nul);
+        if (*id_member) {
+            *id_seen = 1; /* cJSON finds the first member of that name */
+            if (nul) *flags |= PROTO_SCAN_NUL_IN_ID;
+        }
+    }
+    return i;
+}
+
 /* Strict RFC 8259 check of the whole text (one value, whitespace around). Iterative; the
  * depth was bounded by proto_too_deep. Returns 0 or -1. */
 static int proto_scan_json(const char *text, size_t len, int *flags) {
     const unsigned char *s = (const unsigned char *)text;
     unsigned char stack[PROTO_DEPTH_CAP + 1];
-    int depth = 0;
+    int depth = 0, id_member = 0, id_seen = 0;
     size_t i = proto_ws(s, len, 0);
     int want_value = 1;
     for (;;) {
@@ -225,7 +277,7 @@ static int proto_scan_json(const char *text, size_t len, int *flags) {
                     continue;
                 }
                 if (c == '{') {
-                    if (i >= len || s[i] != '"' || !(i = proto_scan_string(s, len, i, flags))) return -1;
+                    if (!(i = proto_scan_key(s, len, i, depth, flags, &id_member, &id_seen))) return -1;
                     i = proto_ws(s, len, i);
                     if (i >= len || s[i] != ':') return -1;
                     i = proto_ws(s, len, i + 1);
@@ -233,7 +285,10 @@ static int proto_scan_json(const char *text, size_t len, int *flags) {
                 continue;
             }
             if (c == '"') {
-                if (!(i = proto_scan_string(s, len, i, flags))) return -1;
+                int f = 0;
+                if (!(i = proto_scan_string(s, len, i, &f))) return -1;
+                if (depth == 1 && id_member && (f & PROTO_SCAN_NUL_ESCAPE)) f |= PROTO_SCAN_NUL_IN_ID;
+                *flags |= f;
             } else if (c == '-' || (c >= '0' && c <= '9')) {
                 if (!(i = proto_scan_number(s, len, i))) return -1;
             } else if (len - i >= 4 && !memcmp(s + i, "true", 4)) {
@@ -255,7 +310,7 @@ static int proto_scan_json(const char *text, size_t len, int *flags) {
         if (s[i] == ',') {
             i = proto_ws(s, len, i + 1);
             if (top == '{') {
-                if (i >= len || s[i] != '"' || !(i = proto_scan_string(s, len, i, flags))) return -1;
+                if (!(i = proto_scan_key(s, len, i, depth, flags, &id_member, &id_seen))) return -1;
                 i = proto_ws(s, len, i);
                 if (i >= len || s[i] != ':') return -1;
                 i = proto_ws(s, len, i + 1);
@@ -284,8 +339,6 @@ static int proto_load(const char *text, size_t len, int max_depth, cJSON **root,
     *root = cJSON_ParseWithLength(text, len);
     if (!*root) return proto_fail(err, "bad_json", "", "not valid JSON");
     if (!cJSON_IsObject(*root)) return proto_fail(err, "bad_json", "", "message is not a JSON object");
-    if (*flags & PROTO_SCAN_NUL_ESCAPE)
-        return proto_fail(err, "invalid", "", "strings must not contain \\u0000");
     return 0;
 }
 
@@ -344,7 +397,7 @@ static int proto_str_item(const cJSON *it, const char *p, size_t minlen, size_t 
                           lc_proto_error *err) {
     if (!cJSON_IsString(it) || !it->valuestring) return proto_fail(err, "invalid", p, "%s must be a string", p);
     size_t n = strlen(it->valuestring);
-    if (!proto_utf8_valid(it->valuestring, n)) return proto_fail(err, "invalid", p, "%s is not valid UTF-8", p);
+    if (!lc_utf8_valid(it->valuestring, n)) return proto_fail(err, "invalid", p, "%s is not valid UTF-8", p);
     if (n < minlen || n > maxlen)
         return proto_fail(err, "invalid", p, "%s must be %zu..%zu bytes long", p, minlen, maxlen);
     if (out) {
@@ -623,8 +676,10 @@ static int proto_read_type(const cJSON *m, const char *base, lc_req_type *t, lc_
     proto_ptr(p, base, "type");
     const cJSON *it = cJSON_GetObjectItemCaseSensitive(m, "type");
     if (!cJSON_IsString(it) || !it->valuestring) return proto_fail(err, "unknown_type", p, "missing type");
-    if (proto_type_of(it->valuestring, t) < 0)
-        return proto_fail(err, "unknown_type", p, "unknown type \"%.64s\"", it->valuestring);
+    if (proto_type_of(it->valuestring, t) < 0) {
+        char q[PROTO_QUOTE_MAX + 4];
+        return proto_fail(err, "unknown_type", p, "unknown type \"%s\"", proto_quote(q, it->valuestring));
+    }
     return 0;
 }
 
@@ -742,15 +797,24 @@ int lc_proto_parse_request(const char *text, size_t len, const lc_proto_limits *
         lim = &deflim;
     }
     if (len > lim->max_message) {
-        proto_fail(err, "too_large", "", "message of %zu bytes, at most %zu", len, lim->max_message);
+        proto_error(err, "too_large", "", "message of %zu bytes, at most %zu", len, lim->max_message);
         goto err;
     }
     if (proto_load(text, len, lim->max_depth, &root, &flags, err) < 0) goto err;
+    /* cJSON ends a string at its first NUL: an id with a \u0000 would be echoed cut short */
+    if (flags & PROTO_SCAN_NUL_IN_ID) {
+        proto_error(err, "invalid", "/id", "/id must not contain \\u0000");
+        goto err;
+    }
     if (proto_read_id(root, &out->id, err) < 0) goto err;
+    if (flags & PROTO_SCAN_NUL_ESCAPE) { /* after the id, so the error echoes it */
+        proto_error(err, "invalid", "", "strings must not contain \\u0000");
+        goto err;
+    }
     if (proto_read_type(root, "", &out->type, err) < 0) goto err;
     if (proto_parse_body(root, lim, out, err) < 0) goto err;
     if (flags & PROTO_SCAN_BAD_UTF8) {
-        proto_fail(err, "invalid", "", "a string is not valid UTF-8");
+        proto_error(err, "invalid", "", "a string is not valid UTF-8");
         goto err;
     }
     cJSON_Delete(root);
@@ -790,14 +854,18 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
     memset(err, 0, sizeof *err);
     memset(out, 0, sizeof *out);
     if (proto_load(text, len, 16, &root, &flags, err) < 0) goto err;
+    if (flags & PROTO_SCAN_NUL_ESCAPE) {
+        proto_error(err, "invalid", "", "strings must not contain \\u0000");
+        goto err;
+    }
     it = cJSON_GetObjectItemCaseSensitive(root, "type");
     if (!cJSON_IsString(it) || strcmp(it->valuestring, "state")) {
-        proto_fail(err, "unknown_type", "/type", "not a state message");
+        proto_error(err, "unknown_type", "/type", "not a state message");
         goto err;
     }
     if (proto_num(root, "revision", "", 1, 0, PROTO_TWO_53 - 1, &rev, err) < 0) goto err;
     if (rev != floor(rev)) {
-        proto_fail(err, "invalid", "/revision", "/revision must be an integer");
+        proto_error(err, "invalid", "/revision", "/revision must be an integer");
         goto err;
     }
     out->revision = (uint64_t)rev;
@@ -808,13 +876,13 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
     for (it = arr->child; it; it = it->next, i++) {
         proto_ptr_index(p, "/lights", i);
         if (!cJSON_IsObject(it)) {
-            proto_fail(err, "invalid", p, "%s must be an object", p);
+            proto_error(err, "invalid", p, "%s must be an object", p);
             goto err;
         }
         if (proto_parse_light(it, p, &out->lights[i], err) < 0) goto err;
         if (i && strcmp(out->lights[i - 1].id, out->lights[i].id) >= 0) { /* sorted, unique */
             proto_ptr(q, p, "id");
-            proto_fail(err, "invalid", q, "lights must be sorted by id without duplicates");
+            proto_error(err, "invalid", q, "lights must be sorted by id without duplicates");
             goto err;
         }
         out->n_lights = (uint32_t)i + 1;
@@ -826,13 +894,13 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
     for (it = arr->child; it; it = it->next, i++) {
         proto_ptr_index(p, "/objects", i);
         if (!cJSON_IsObject(it)) {
-            proto_fail(err, "invalid", p, "%s must be an object", p);
+            proto_error(err, "invalid", p, "%s must be an object", p);
             goto err;
         }
         if (proto_parse_object(it, p, &out->objects[i], err) < 0) goto err;
         if (i && strcmp(out->objects[i - 1].id, out->objects[i].id) >= 0) {
             proto_ptr(q, p, "id");
-            proto_fail(err, "invalid", q, "objects must be sorted by id without duplicates");
+            proto_error(err, "invalid", q, "objects must be sorted by id without duplicates");
             goto err;
         }
         out->n_objects = (uint32_t)i + 1;
@@ -846,7 +914,7 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
         double v[3];
         proto_ptr_index(p, "/materials", i);
         if (!cJSON_IsObject(it)) {
-            proto_fail(err, "invalid", p, "%s must be an object", p);
+            proto_error(err, "invalid", p, "%s must be an object", p);
             goto err;
         }
         if (proto_str(it, "name", p, 1, 1, LC_PROTO_ID_MAX, out->material_names[i], LC_PROTO_ID_MAX + 1, err) < 0)
@@ -861,13 +929,13 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
     if (proto_object(root, "settings", "", 1, &sub, p, err) < 0) goto err;
     if (proto_parse_settings(sub, p, &out->settings, err) < 0) goto err;
     if (flags & PROTO_SCAN_BAD_UTF8) {
-        proto_fail(err, "invalid", "", "a string is not valid UTF-8");
+        proto_error(err, "invalid", "", "a string is not valid UTF-8");
         goto err;
     }
     cJSON_Delete(root);
     return 0;
 oom:
-    proto_fail(err, "internal", "", "out of memory");
+    proto_error(err, "internal", "", "out of memory");
 err:
     cJSON_Delete(root);
     lc_proto_parsed_state_free(out);

@@ -116,6 +116,9 @@ int main(void) {
     emit("valid", lc_proto_build_error(&nid, &e));
     lc_proto_error e2 = {"bad_json", "", "not valid JSON"};
     emit("valid", lc_proto_build_error(NULL, &e2));
+    /* §1.2: sent before the 1007 close, never with an id */
+    lc_proto_error e3 = {"bad_utf8", "", "text frame is not valid UTF-8"};
+    emit("valid", lc_proto_build_error(NULL, &e3));
     emit("valid", lc_proto_build_pong(&nid, 12345.678, 1700000000000000ULL));
 
     /* state and changed from parsed requests, so every light kind appears */

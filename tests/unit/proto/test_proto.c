@@ -566,8 +566,8 @@ static void test_builders(void) {
 /* Journal: build_op -> parse_request gives the op back, for every op type. */
 static void test_op_roundtrip(void) {
     const char *msgs[] = {
-        "{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0.1,3,-7.25],\"direction\":[0.3,-2,0.1],"
-        "\"color\":[1,0.3,0.1],\"intensity\":812.7,\"range\":20,\"innerConeAngle\":0.2,\"outerConeAngle\":1.5707963267948966}}",
+        ("{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0.1,3,-7.25],\"direction\":[0.3,-2,0.1],"
+         "\"color\":[1,0.3,0.1],\"intensity\":812.7,\"range\":20,\"innerConeAngle\":0.2,\"outerConeAngle\":1.5707963267948966}}"),
         "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\",\"position\":[0,2,0],\"direction\":[0,-1,0],\"size\":[0.5,2],\"tangent\":[1,0,1]}}",
         "{\"type\":\"light.set\",\"light\":{\"id\":\"d\",\"type\":\"area\",\"shape\":\"disc\",\"position\":[0,2,0],\"direction\":[0,-1,0],\"size\":[0.3]}}",
         "{\"type\":\"light.set\",\"light\":{\"id\":\"sun\",\"type\":\"directional\",\"direction\":[1,-3,0.5],\"intensity\":1e5}}",
@@ -1038,6 +1038,272 @@ static void test_rgb9e5(void) {
     fprintf(stderr, "rgb9e5: worst relative error %.3g (bound %.3g)\n", worst, 0x1p-9);
 }
 
+
+/* --- UTF-8: the helpers, and every reply built from client text --------------------------- */
+
+typedef struct {
+    const char *s;
+    size_t n;
+    int ok;
+} utf8_case;
+#define U8(lit, ok) {lit, sizeof lit - 1, ok}
+
+static void test_utf8_valid(void) {
+    static const utf8_case cases[] = {
+        U8("", 1), U8("abc", 1), U8("a\0b", 1), /* NUL is a character; the length decides */
+        U8("\xc2\x80", 1), U8("\xc3\xa9", 1), U8("\xdf\xbf", 1),                    /* 2 bytes: U+0080, é, U+07FF */
+        U8("\xe0\xa0\x80", 1), U8("\xe2\x82\xac", 1), U8("\xef\xbf\xbf", 1),        /* 3 bytes: U+0800, €, U+FFFF */
+        U8("\xed\x9f\xbf", 1), U8("\xee\x80\x80", 1),                               /* around the surrogates */
+        U8("\xf0\x90\x80\x80", 1), U8("\xf0\x9f\x92\xa1", 1), U8("\xf4\x8f\xbf\xbf", 1), /* 4 bytes .. U+10FFFF */
+        U8("l\xc3\xa9\xe2\x82\xac\xf0\x9f\x92\xa1!", 1),
+        /* overlong forms */
+        U8("\xc0\x80", 0), U8("\xc0\xaf", 0), U8("\xc1\xbf", 0), U8("\xe0\x80\xaf", 0), U8("\xe0\x9f\xbf", 0),
+        U8("\xf0\x80\x80\xaf", 0), U8("\xf0\x8f\xbf\xbf", 0),
+        /* surrogates, alone and paired (CESU-8) */
+        U8("\xed\xa0\x80", 0), U8("\xed\xad\xbf", 0), U8("\xed\xb0\x80", 0), U8("\xed\xbf\xbf", 0),
+        U8("\xed\xa0\xbd\xed\xb2\xa1", 0),
+        /* above U+10FFFF, 5/6-byte forms, bytes never used */
+        U8("\xf4\x90\x80\x80", 0), U8("\xf5\x80\x80\x80", 0), U8("\xf7\xbf\xbf\xbf", 0), U8("\xf8\x88\x80\x80\x80", 0),
+        U8("\xfc\x84\x80\x80\x80\x80", 0), U8("\xfe", 0), U8("\xff", 0),
+        /* lone continuation bytes */
+        U8("\x80", 0), U8("\xbf", 0), U8("a\x80z", 0),
+        /* truncated sequences */
+        U8("\xc3", 0), U8("\xe2\x82", 0), U8("\xf0\x9f\x92", 0), U8("ab\xe2", 0), U8("caf\xe9", 0),
+        /* a bad continuation */
+        U8("\xc3\x28", 0), U8("\xe2\x28\xa1", 0), U8("\xe2\x82\x28", 0), U8("\xf0\x9f\x28\xa1", 0), U8("\xf0\x9f\x92\x28", 0),
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        CHECK(lc_proto_utf8_valid(cases[i].s, cases[i].n) == cases[i].ok, "utf8_valid case %zu (%zu bytes): want %d", i,
+              cases[i].n, cases[i].ok);
+    CHECK(!lc_proto_utf8_valid("\xc3\xa9", 1), "the length cuts a sequence");
+    CHECK(lc_proto_utf8_valid(NULL, 0), "NULL, 0 is the empty string");
+}
+
+static void test_utf8_cut(void) {
+    static const struct {
+        const char *s;
+        size_t len, max, want;
+    } cases[] = {
+        {"abc", 3, 0, 0}, {"abc", 3, 2, 2}, {"abc", 3, 3, 3}, {"abc", 3, 99, 3},
+        /* a 2-, 3- and 4-byte character across the cut */
+        {"a\xc3\xa9", 3, 1, 1}, {"a\xc3\xa9", 3, 2, 1}, {"a\xc3\xa9", 3, 3, 3},
+        {"a\xe2\x82\xac", 4, 2, 1}, {"a\xe2\x82\xac", 4, 3, 1}, {"a\xe2\x82\xac", 4, 4, 4},
+        {"a\xf0\x9f\x92\xa1", 5, 2, 1}, {"a\xf0\x9f\x92\xa1", 5, 3, 1}, {"a\xf0\x9f\x92\xa1", 5, 4, 1},
+        {"a\xf0\x9f\x92\xa1", 5, 5, 5}, {"\xf0\x9f\x92\xa1\xf0\x9f\x92\xa1", 8, 7, 4}, {"\xc3\xa9", 2, 1, 0},
+        /* a sequence the length cuts short is not a character either */
+        {"ab\xe2\x82", 4, 10, 2}, {"ab\xf0\x9f\x92", 5, 5, 2}, {"\xc3", 1, 1, 0}, {"a\xc3\xa9", 2, 9, 1},
+        /* ill-formed bytes elsewhere are units of their own (not repaired by a cut) */
+        {"a\xffz", 3, 3, 3}, {"a\xffz", 3, 2, 2}, {"a\xc0\xafz", 4, 3, 3},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        size_t got = lc_proto_utf8_cut(cases[i].s, cases[i].len, cases[i].max);
+        CHECK(got == cases[i].want, "utf8_cut case %zu: max %zu -> %zu, want %zu", i, cases[i].max, got, cases[i].want);
+    }
+    /* every max over a mixed string: the longest valid prefix that fits */
+    static const char mixed[] = "a\xc3\xa9\xe2\x82\xac\xf0\x9f\x92\xa1z"; /* a é € 💡 z */
+    static const size_t ends[] = {0, 1, 3, 6, 10, 11};
+    for (size_t max = 0; max <= sizeof mixed; max++) {
+        size_t want = 0;
+        for (size_t k = 0; k < sizeof ends / sizeof ends[0]; k++)
+            if (ends[k] <= max) want = ends[k];
+        size_t got = lc_proto_utf8_cut(mixed, sizeof mixed - 1, max);
+        CHECK(got == want && lc_proto_utf8_valid(mixed, got), "mixed: max %zu -> %zu, want %zu", max, got, want);
+    }
+}
+
+static void test_utf8_sanitize(void) {
+    static const struct {
+        const char *s;
+        size_t n;
+        unsigned flags;
+        const char *want;
+    } cases[] = {
+        {"caf\xe9", 4, 0, "caf\xef\xbf\xbd"},                              /* Latin-1 é */
+        {"\xe2\x82x", 3, 0, "\xef\xbf\xbdx"},                              /* one U+FFFD per truncated sequence */
+        {"\xed\xa0\x80", 3, 0, "\xef\xbf\xbd\xef\xbf\xbd\xef\xbf\xbd"},    /* surrogate: ED, A0, 80 */
+        {"\xc0\xaf", 2, 0, "\xef\xbf\xbd\xef\xbf\xbd"},                    /* overlong */
+        {"\xf4\x90\x80\x80", 4, 0, "\xef\xbf\xbd\xef\xbf\xbd\xef\xbf\xbd\xef\xbf\xbd"},
+        {"l\xc3\xa9\xe2\x82\xac\xf0\x9f\x92\xa1", 10, 0, "l\xc3\xa9\xe2\x82\xac\xf0\x9f\x92\xa1"}, /* valid: as is */
+        {"a\nb\x7f\xc2\x85z", 7, 0, "a\nb\x7f\xc2\x85z"},
+        {"a\nb\x7f\xc2\x85\xc2\xa0z", 9, LC_PROTO_UTF8_NO_CONTROLS,
+         "a\xef\xbf\xbd" "b\xef\xbf\xbd\xef\xbf\xbd\xc2\xa0z"}, /* C0, DEL, C1 go; U+00A0 stays */
+    };
+    char out[64];
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        size_t used = lc_proto_utf8_sanitize(out, sizeof out, cases[i].s, cases[i].n, cases[i].flags);
+        CHECK(used == cases[i].n && !strcmp(out, cases[i].want), "sanitize case %zu: used %zu, '%s'", i, used, out);
+    }
+    /* the output stops before a character that does not fit */
+    CHECK(lc_proto_utf8_sanitize(out, 4, "ab\xe2\x82\xac", 5, 0) == 2 && !strcmp(out, "ab"), "cap 4: '%s'", out);
+    CHECK(lc_proto_utf8_sanitize(out, 6, "ab\xe2\x82\xac", 5, 0) == 5 && !strcmp(out, "ab\xe2\x82\xac"), "cap 6");
+    CHECK(lc_proto_utf8_sanitize(out, 5, "ab\xff", 3, 0) == 2 && !strcmp(out, "ab"), "no room for U+FFFD");
+    CHECK(lc_proto_utf8_sanitize(out, 1, "ab", 2, 0) == 0 && out[0] == 0, "cap 1");
+    out[0] = 'x';
+    CHECK(lc_proto_utf8_sanitize(out, 0, "ab", 2, 0) == 0 && out[0] == 'x', "cap 0 writes nothing");
+    /* random bytes: the output is always valid, and valid input comes back unchanged */
+    static const unsigned char pool[] = {'a', 0x00, 0x0a, 0x7f, 0x80, 0x9f, 0xa0, 0xbf, 0xc0, 0xc2, 0xc3, 0xdf, 0xe0,
+                                         0xe2, 0xed, 0xef, 0xf0, 0xf4, 0xf5, 0xff, 0x82, 0xac, 0x90, 0x8f};
+    uint64_t x = 0x2545F4914F6CDD1DULL;
+    int bad = 0;
+    for (int it = 0; it < 20000; it++) {
+        char in[12], big[12 * 3 + 1], small[9];
+        size_t n = (size_t)(it % 12);
+        for (size_t k = 0; k < n; k++) {
+            x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+            in[k] = (char)pool[x % sizeof pool];
+        }
+        size_t used = lc_proto_utf8_sanitize(big, sizeof big, in, n, (unsigned)(it & 1));
+        if (used != n || !lc_proto_utf8_valid(big, strlen(big))) bad++;
+        if (!(it & 1) && lc_proto_utf8_valid(in, n) && !memchr(in, 0, n) && (strlen(big) != n || memcmp(big, in, n)))
+            bad++;
+        lc_proto_utf8_sanitize(small, sizeof small, in, n, (unsigned)(it & 1));
+        if (!lc_proto_utf8_valid(small, strlen(small))) bad++;
+        if (lc_proto_utf8_valid(in, n) && !lc_proto_utf8_valid(in, lc_proto_utf8_cut(in, n, (size_t)it % 7))) bad++;
+    }
+    CHECK(bad == 0, "%d random inputs broke a UTF-8 property", bad);
+}
+
+/* Error replies quote the client's `type`: cut on a character boundary, no control characters. */
+static void test_utf8_replies(void) {
+    lc_proto_request r;
+    lc_proto_error e;
+    char msg[256];
+    /* 63 ASCII bytes, then é across the 64-byte cut */
+    char type[64 + 16];
+    memset(type, 'x', 63);
+    strcpy(type + 63, "\xc3\xa9tail");
+    snprintf(msg, sizeof msg, "{\"type\":\"%s\",\"id\":3}", type);
+    CHECK(parse(msg, &r, &e) == -1 && !strcmp(e.code, "unknown_type") && r.id.kind == 2, "long type");
+    CHECK(lc_proto_utf8_valid(e.message, strlen(e.message)), "unknown_type message is not UTF-8: %s", e.message);
+    CHECK(strstr(e.message, "xxx\"") == NULL && strstr(e.message, "xxx...\"") != NULL, "cut shown: %s", e.message);
+    char *reply = lc_proto_build_error(&r.id, &e);
+    CHECK(reply && lc_proto_utf8_valid(reply, strlen(reply)), "error reply is not UTF-8: %s", reply ? reply : "NULL");
+    free(reply);
+    lc_proto_request_release(&r);
+    /* a 2-byte é entirely within the cut stays */
+    memset(type, 'x', 62);
+    strcpy(type + 62, "\xc3\xa9");
+    snprintf(msg, sizeof msg, "{\"type\":\"%s\"}", type);
+    CHECK(parse(msg, &r, &e) == -1 && strstr(e.message, "xx\xc3\xa9\"") != NULL, "whole é kept: %s", e.message);
+    lc_proto_request_release(&r);
+    /* 3- and 4-byte characters across the cut */
+    const char *wide[] = {"\xe2\x82\xac", "\xf0\x9f\x92\xa1"};
+    for (int w = 0; w < 2; w++)
+        for (int lead = 61; lead <= 63; lead++) {
+            memset(type, 'x', (size_t)lead);
+            strcpy(type + lead, wide[w]);
+            snprintf(msg, sizeof msg, "{\"type\":\"%s\"}", type);
+            CHECK(parse(msg, &r, &e) == -1 && lc_proto_utf8_valid(e.message, strlen(e.message)),
+                  "%d-byte character after %d bytes: %s", 3 + w, lead, e.message);
+            lc_proto_request_release(&r);
+        }
+    /* ill-formed bytes and control characters in the type are not copied */
+    CHECK(parse("{\"type\":\"caf\xe9\",\"id\":\"q\"}", &r, &e) == -1 && !strcmp(e.code, "unknown_type") &&
+              lc_proto_utf8_valid(e.message, strlen(e.message)) && strstr(e.message, "caf\xef\xbf\xbd") &&
+              r.id.kind == 1, "Latin-1 type: %s", e.message);
+    lc_proto_request_release(&r);
+    CHECK(parse("{\"type\":\"a\\nb\\u001b[2J\"}", &r, &e) == -1 && !strpbrk(e.message, "\n\x1b"),
+          "control characters in the message: %s", e.message);
+    lc_proto_request_release(&r);
+}
+
+/* Builders write valid UTF-8 whatever strings they are handed. */
+static void test_utf8_builders(void) {
+    lc_proto_id sid = {1, "r", 0};
+    const char *mats[] = {"caf\xe9", "ok"}, *assets[] = {"\xff"};
+    lc_proto_welcome w = {0};
+    w.server = "lucentd/0.1.0";
+    w.role = "controller";
+    w.materials = mats;
+    w.n_materials = 2;
+    w.assets = assets;
+    w.n_assets = 1;
+    lc_proto_default_limits(&w.limits);
+    char *s = lc_proto_build_welcome(&sid, &w);
+    CHECK(s && lc_proto_utf8_valid(s, strlen(s)) && strstr(s, "\"caf\xef\xbf\xbd\""), "welcome: %s", s ? s : "NULL");
+    free(s);
+    /* a message cut by its buffer inside é: the cut character is dropped */
+    lc_proto_error e;
+    memset(&e, 0, sizeof e);
+    strcpy(e.code, "invalid");
+    memset(e.message, 'm', sizeof e.message - 2);
+    e.message[sizeof e.message - 2] = (char)0xc3;
+    s = lc_proto_build_error(&sid, &e);
+    CHECK(s && lc_proto_utf8_valid(s, strlen(s)), "error with a cut message: %.40s", s ? s : "NULL");
+    cJSON *j = s ? cJSON_Parse(s) : NULL;
+    CHECK(j && strlen(str(j, "message")) == sizeof e.message - 2, "cut character dropped");
+    cJSON_Delete(j);
+    free(s);
+    strcpy(e.message, "bad \xed\xa0\x80 surrogate");
+    strcpy(e.pointer, "/x\xff");
+    s = lc_proto_build_error(NULL, &e);
+    CHECK(s && lc_proto_utf8_valid(s, strlen(s)), "error with ill-formed message and pointer: %s", s ? s : "NULL");
+    free(s);
+    lc_proto_op op;
+    memset(&op, 0, sizeof op);
+    op.type = LC_REQ_MATERIAL_SET;
+    strcpy(op.target, "caf\xe9");
+    s = lc_proto_build_changed(1, "client\xc0\xaf", &op, 1);
+    CHECK(s && lc_proto_utf8_valid(s, strlen(s)), "changed: %s", s ? s : "NULL");
+    free(s);
+    s = lc_proto_build_op(&op);
+    CHECK(s && lc_proto_utf8_valid(s, strlen(s)), "op: %s", s ? s : "NULL");
+    free(s);
+    lc_proto_material_state ms = {"caf\xe9", {0, 0, 0}};
+    lc_proto_state st;
+    memset(&st, 0, sizeof st);
+    st.materials = &ms;
+    st.n_materials = 1;
+    s = lc_proto_build_state(&sid, &st);
+    CHECK(s && lc_proto_utf8_valid(s, strlen(s)), "state: %s", s ? s : "NULL");
+    free(s);
+}
+
+/* A \u0000 anywhere but in the id itself keeps the id in the error (issue 13). */
+static void test_nul_escape(void) {
+    lc_proto_request r;
+    lc_proto_error e;
+    CHECK(parse("{\"id\":\"abc\",\"type\":\"light.remove\",\"light_id\":\"a\\u0000b\"}", &r, &e) == -1 &&
+              !strcmp(e.code, "invalid") && r.id.kind == 1 && !strcmp(r.id.str, "abc"),
+          "string id kept: kind %d '%s' (%s)", r.id.kind, r.id.str, e.message);
+    lc_proto_request_release(&r);
+    CHECK(parse("{\"type\":\"light.remove\",\"light_id\":\"\\u0000\",\"id\":7}", &r, &e) == -1 && r.id.kind == 2 &&
+              r.id.num == 7, "integer id after the NUL kept");
+    lc_proto_request_release(&r);
+    CHECK(parse("{\"id\":5,\"type\":\"light.set\",\"light\":{\"id\":\"a\\u0000\",\"type\":\"point\"," LIGHT_PT "}}", &r,
+                &e) == -1 && r.id.kind == 2 && r.id.num == 5, "a nested \"id\" is not the request id");
+    lc_proto_request_release(&r);
+    CHECK(parse("{\"id\":\"q\",\"type\":\"snapshot\",\"x\\u0000\":1}", &r, &e) == -1 && r.id.kind == 1 &&
+              !strcmp(r.id.str, "q"), "NUL in another key");
+    lc_proto_request_release(&r);
+    /* the id itself: not echoed (cJSON would cut it at the NUL), pointer /id */
+    CHECK(parse("{\"id\":\"ab\\u0000c\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 0 &&
+              !strcmp(e.code, "invalid") && !strcmp(e.pointer, "/id"), "NUL in the id: kind %d, %s", r.id.kind, e.pointer);
+    lc_proto_request_release(&r);
+    CHECK(parse("{\"\\u0069d\":\"\\u0000\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 0 &&
+              !strcmp(e.pointer, "/id"), "escaped member name");
+    lc_proto_request_release(&r);
+    CHECK(parse("{\"id\\u0000\":\"x\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 0 &&
+              !strcmp(e.pointer, "/id"), "NUL in the id's member name");
+    lc_proto_request_release(&r);
+    /* the first "id" member is the one cJSON reads */
+    CHECK(parse("{\"id\":\"one\",\"id\":\"t\\u0000\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 1 &&
+              !strcmp(r.id.str, "one"), "duplicate id: the first counts");
+    lc_proto_request_release(&r);
+    CHECK(parse("{\"id\":\"o\\u0000\",\"id\":\"two\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 0,
+          "duplicate id with the NUL in the first");
+    lc_proto_request_release(&r);
+    /* an invalid id is still not echoed */
+    CHECK(parse("{\"id\":-1,\"type\":\"snapshot\",\"s\":\"\\u0000\"}", &r, &e) == -1 && r.id.kind == 0 &&
+              !strcmp(e.pointer, "/id"), "invalid id");
+    lc_proto_request_release(&r);
+    /* snapshot files still refuse it */
+    lc_proto_parsed_state ps;
+    const char *st = "{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[],\"materials\":[{\"name\":\"a\\u0000\","
+                     "\"emission\":[0,0,0]}],\"environment\":{\"type\":\"none\"},\"settings\":{}}";
+    CHECK(lc_proto_parse_state(st, strlen(st), &ps, &e) == -1 && !strcmp(e.code, "invalid"), "state with NUL");
+}
+
 int main(void) {
     test_valid();
     test_limits();
@@ -1048,5 +1314,11 @@ int main(void) {
     test_frames();
     test_residual();
     test_rgb9e5();
+    test_utf8_valid();
+    test_utf8_cut();
+    test_utf8_sanitize();
+    test_utf8_replies();
+    test_utf8_builders();
+    test_nul_escape();
     CHECK_DONE();
 }
