@@ -27,6 +27,7 @@
 #include "lcb/lcb.h"
 #include "util/crc32.h"
 #include "util/log.h"
+#include "util/utf8.h"
 
 #define LCB_CORRUPT " — the file is corrupted; re-run lucent-bake"
 #define LCB_INCONSISTENT " — the bake is inconsistent; re-run lucent-bake"
@@ -108,6 +109,23 @@ static const char *lcb_idstr(const char id[4], char buf[5]) {
     buf[4] = 0;
     return buf;
 }
+
+/* A name from the file for a message: printable ASCII as is, other bytes as \xNN, at most
+ * 64 bytes of it (buf: 4 x 64 + 1). */
+static const char *lcb_namestr(const char *name, size_t cap, char buf[257]) {
+    size_t o = 0;
+    for (size_t i = 0; i < cap && i < 64 && name[i]; i++) {
+        unsigned char ch = (unsigned char)name[i];
+        if (ch >= 0x20 && ch < 0x7f && ch != '\\') buf[o++] = (char)ch;
+        else o += (size_t)snprintf(buf + o, 5, "\\x%02x", ch);
+    }
+    buf[o] = 0;
+    return buf;
+}
+
+/* Names reach every client (`welcome`, `state`, the snapshot file): they must be UTF-8.
+ * name is NUL-terminated within cap (checked first). */
+static int lcb_name_ok(const char *name, size_t cap) { return lc_utf8_valid(name, strnlen(name, cap)); }
 
 static const void *lcb_data(const lcb_ctx *c, int k) { return c->base + c->sec[k]->offset; }
 static uint64_t lcb_count(const lcb_ctx *c, int k) { return c->sec[k] ? c->sec[k]->count : 0; }
@@ -345,6 +363,17 @@ static int lcb_meta_fields(lcb_ctx *c, const cJSON *root) {
     if (lcb_meta_uint(c, root, "/caches/texel", 0, m->caches, &m->texel)) return -1;
     if (lcb_meta_uint(c, root, "/links/per_cache", 1, 1024, &m->per_cache)) return -1;
     if (lcb_meta_uint(c, root, "/links/sh_bands", 0, 8, &m->link_sh)) return -1;
+    /* the scene's lights (optional): their ids become protocol light ids, so UTF-8 */
+    const cJSON *lights = lcb_json_at(root, "/lights");
+    int i = 0;
+    for (const cJSON *l = cJSON_IsArray(lights) ? lights->child : NULL; l; l = l->next, i++) {
+        const cJSON *id = cJSON_GetObjectItemCaseSensitive(l, "id");
+        if (cJSON_IsString(id) && id->valuestring && !lc_utf8_valid(id->valuestring, strlen(id->valuestring))) {
+            char b[257];
+            return lcb_fail(c, "META: /lights/%d/id \"%s\" is not valid UTF-8 — re-run lucent-bake (it replaces "
+                               "invalid bytes with U+FFFD)", i, lcb_namestr(id->valuestring, 64, b));
+        }
+    }
     return 0;
 }
 
@@ -426,6 +455,12 @@ static int lcb_check_geometry(lcb_ctx *c) {
     for (uint64_t i = 0; i < n_mat; i++) {
         if (!memchr(mat[i].name, 0, sizeof mat[i].name))
             return lcb_fail(c, "MATL: material %llu name is not NUL-terminated" LCB_CORRUPT, (unsigned long long)i);
+        if (!lcb_name_ok(mat[i].name, sizeof mat[i].name)) {
+            char b[257];
+            return lcb_fail(c, "MATL: material %llu name \"%s\" is not valid UTF-8 — re-run lucent-bake (it replaces "
+                               "invalid bytes with U+FFFD)", (unsigned long long)i,
+                            lcb_namestr(mat[i].name, sizeof mat[i].name, b));
+        }
         if (!lcb_finite(mat[i].base_color, 3) || !lcb_finite(mat[i].emission, 3))
             return lcb_fail(c, "MATL: material %llu has a non-finite colour" LCB_INCONSISTENT, (unsigned long long)i);
     }
@@ -623,6 +658,11 @@ static int lcb_check_assets(lcb_ctx *c) {
         unsigned long long ui = (unsigned long long)i;
         if (!memchr(a[i].name, 0, sizeof a[i].name))
             return lcb_fail(c, "ASET: asset %llu name is not NUL-terminated" LCB_CORRUPT, ui);
+        if (!lcb_name_ok(a[i].name, sizeof a[i].name)) {
+            char b[257];
+            return lcb_fail(c, "ASET: asset %llu name \"%s\" is not valid UTF-8 — re-run lucent-bake with another "
+                               "--asset name", ui, lcb_namestr(a[i].name, sizeof a[i].name, b));
+        }
         if ((uint64_t)a[i].first_vertex + a[i].vertex_count > n_v)
             return lcb_fail(c, "ASET: asset %llu vertices [%u, +%u) exceed AVRT (%llu)" LCB_INCONSISTENT, ui,
                             a[i].first_vertex, a[i].vertex_count, (unsigned long long)n_v);

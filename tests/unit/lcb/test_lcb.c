@@ -718,6 +718,18 @@ static void test_semantic(void) {
     CASE("asset vertices", b.asset[0].vertex_count = N_AVRT + 1, "ASET", "AVRT");
     CASE("asset triangles", b.asset[0].first_triangle = 1, "ASET", "AIDX");
     CASE("asset name", memset(b.asset[0].name, 'a', sizeof b.asset[0].name), "ASET", "NUL");
+    /* names reach every client (welcome, state, the snapshot file): UTF-8 only (issue 13) */
+    CASE("material name Latin-1", strcpy(b.mat[1].name, "caf\xe9"), "MATL: material 1 name \"caf\\xe9\"",
+         "not valid UTF-8");
+    CASE("material name overlong", strcpy(b.mat[0].name, "a\xc0\xaf"), "MATL: material 0 name", "not valid UTF-8");
+    CASE("material name surrogate", strcpy(b.mat[1].name, "\xed\xa0\x80"), "MATL: material 1 name", "not valid UTF-8");
+    CASE("material name cut", strcpy(b.mat[1].name, "lamp \xe2\x82"), "MATL: material 1 name", "not valid UTF-8");
+    CASE("asset name not UTF-8", strcpy(b.asset[0].name, "chair\xff"), "ASET: asset 0 name", "not valid UTF-8");
+    bake_init(&b);
+    strcpy(b.mat[0].name, "caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x92\xa1");
+    strcpy(b.asset[0].name, "st\xc3\xbchl");
+    expect_bake_ok("UTF-8 names", &b);
+    bake_free(&b);
     CASE("asset vertex NaN", b.avrt[1].normal[0] = NAN, "AVRT", NULL);
     CASE("missing NODE", b.skip = 5, "NODE", "missing");
     CASE("missing META", b.skip = 0, "META", "missing");
@@ -783,6 +795,14 @@ static void test_semantic(void) {
               "LKSH", NULL);
     META_CASE("link sh_bands -1", cJSON_ReplaceItemInObject(meta_at(m, "links"), "sh_bands", cJSON_CreateNumber(-1)),
               "META", "/links/sh_bands");
+    META_CASE("light id not UTF-8", (cJSON_AddItemToObject(m, "lights", cJSON_CreateArray()),
+                                     cJSON_AddItemToArray(cJSON_GetObjectItem(m, "lights"), cJSON_CreateObject()),
+                                     cJSON_AddItemToArray(cJSON_GetObjectItem(m, "lights"), cJSON_CreateObject()),
+                                     cJSON_AddStringToObject(cJSON_GetArrayItem(cJSON_GetObjectItem(m, "lights"), 0),
+                                                             "id", "lamp"),
+                                     cJSON_AddStringToObject(cJSON_GetArrayItem(cJSON_GetObjectItem(m, "lights"), 1),
+                                                             "id", "l\xe9mpara")),
+              "META: /lights/1/id", "not valid UTF-8");
 #undef META_CASE
     /* raw text */
     CASE("not JSON", (free(b.meta), b.meta = strdup("{\"format\": \"lucent-bake\",")), "META", "JSON");
