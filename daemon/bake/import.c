@@ -22,6 +22,7 @@
 #include "bake/image.h"
 #include "bake/scene.h"
 #include "util/log.h"
+#include "util/utf8.h"
 
 #define IMPORT_MAX_TEX_PIXELS (8192ull * 8192ull) /* larger textures are rejected with a warning */
 #define IMPORT_MAX_DEPTH 512                       /* node nesting; deeper means a broken file */
@@ -94,12 +95,34 @@ static void mat_normal_matrix(const imp_mat4 *a, double n[3][3]) {
 
 static int finite3f(const float *v) { return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]); }
 
-/* Truncating copy (names longer than the field are cut, not rejected). */
+/* Truncating byte copy (names longer than the field are cut, not rejected): for matching
+ * against other raw names from the same file. */
 static void copy_name(char *dst, size_t dstlen, const char *src) {
     if (!dstlen) return;
     size_t n = src ? strnlen(src, dstlen - 1) : 0;
     if (n) memcpy(dst, src, n);
     dst[n] = '\0';
+}
+
+/* A material or light name as it goes into the bake (and to every client): UTF-8, cut on a
+ * character boundary. Bytes that are not UTF-8 (a Latin-1 .mtl, say) become U+FFFD, with a
+ * warning naming the material/light and the bytes. */
+static void copy_scene_name(char *dst, size_t dstlen, const char *src, const char *model, const char *what,
+                            uint32_t index) {
+    size_t n = src ? strlen(src) : 0;
+    if (!dstlen) return;
+    lc_utf8_sanitize(dst, dstlen, src ? src : "", n, 0);
+    if (lc_utf8_valid(src, n)) return;
+    char raw[4 * 64 + 1];
+    size_t o = 0;
+    for (size_t i = 0; i < n && i < 64; i++) {
+        unsigned char ch = (unsigned char)src[i];
+        if (ch >= 0x20 && ch < 0x7f && ch != '\\') raw[o++] = (char)ch;
+        else o += (size_t)snprintf(raw + o, 5, "\\x%02x", ch);
+    }
+    raw[o] = 0;
+    lc_warn("import", "%s: %s %u name \"%s\" is not valid UTF-8 (another encoding?); bad bytes replaced with "
+                      "U+FFFD: '%s'", model, what, index, raw, dst);
 }
 
 static const char *path_ext(const char *path) {
@@ -656,10 +679,11 @@ static float gltf_strength_for(const struct aiScene *ai, uint32_t ai_index, cons
     return first;
 }
 
-static void convert_material(imp_tex_ctx *tc, const struct aiMaterial *am, lc_material *m, float gltf_strength) {
+static void convert_material(imp_tex_ctx *tc, const struct aiMaterial *am, uint32_t index, lc_material *m,
+                             float gltf_strength) {
     struct aiString name;
-    if (aiGetMaterialString(am, AI_MATKEY_NAME, &name) == AI_SUCCESS && name.length)
-        copy_name(m->name, sizeof m->name, name.data); /* unnamed keeps "material<i>" */
+    if (aiGetMaterialString(am, AI_MATKEY_NAME, &name) == AI_SUCCESS && name.length) /* unnamed keeps "material<i>" */
+        copy_scene_name(m->name, sizeof m->name, name.data, tc->model, "material", index);
     struct aiColor4D c;
     m->base_color[0] = m->base_color[1] = m->base_color[2] = 0.8f;
     if (aiGetMaterialColor(am, AI_MATKEY_BASE_COLOR, &c) == AI_SUCCESS ||
@@ -743,7 +767,7 @@ static int convert_lights(const struct aiScene *ai, const char *path, double sca
                     (int)al->mType);
             continue;
         }
-        copy_name(l->name, sizeof l->name, al->mName.data);
+        copy_scene_name(l->name, sizeof l->name, al->mName.data, path, "light", i);
         imp_mat4 id = mat_identity(), world = id;
         const struct aiNode *node = find_node(ai->mRootNode, al->mName.data, &id, 0, &world);
         if (!node) lc_warn("import", "%s: light '%s' has no node of that name; placed at the origin", path, al->mName.data);
@@ -879,7 +903,7 @@ int lc_scene_import(const char *path, const lc_import_params *params, lc_scene *
         m->base_color[0] = m->base_color[1] = m->base_color[2] = 0.8f;
         m->base_texture = -1;
         if (i < ai->mNumMaterials && ai->mMaterials && ai->mMaterials[i])
-            convert_material(&tc, ai->mMaterials[i], m, gltf_strength_for(ai, i, strengths, n_strengths));
+            convert_material(&tc, ai->mMaterials[i], i, m, gltf_strength_for(ai, i, strengths, n_strengths));
     }
 
     /* geometry: count, allocate, fill, clean */

@@ -464,6 +464,50 @@ done:
     lc_scene_release(&s);
 }
 
+
+/* Material names go to every client: a Latin-1 .mtl name gets U+FFFD for its bad bytes, a
+ * long name is cut on a character boundary, UTF-8 names stay as they are (issue 13). */
+static void test_names(void) {
+    char path[512], err[512] = "", longname[80];
+    memset(longname, 'a', 62);
+    strcpy(longname + 62, "\xc3\xa9"); /* 64 bytes: é straddles the 63-byte field */
+    char mtl[512];
+    snprintf(mtl, sizeof mtl,
+             "newmtl caf\xe9\nKd 0.5 0.5 0.5\n"
+             "newmtl %s\nKd 0.2 0.2 0.2\n"
+             "newmtl caf\xc3\xa9\nKd 0.7 0.7 0.7\n",
+             longname);
+    CHECK(write_text("names.mtl", mtl) == 0, "write mtl");
+    char obj[1024];
+    snprintf(obj, sizeof obj,
+             "mtllib names.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\n"
+             "usemtl caf\xe9\nf 1 2 3\nusemtl %s\nf 1 3 4\nusemtl caf\xc3\xa9\nf 5 6 7\n",
+             longname);
+    CHECK(write_text("names.obj", obj) == 0, "write obj");
+    lc_import_params prm = {1.0, 0};
+    lc_scene s;
+    int rc = lc_scene_import(tmp_path("names.obj", path, sizeof path), &prm, &s, err, sizeof err);
+    CHECK(rc == 0, "names import failed: %s", err);
+    if (rc) return;
+    CHECK(find_material(&s, "caf\xef\xbf\xbd") != NULL, "Latin-1 name with U+FFFD");
+    CHECK(find_material(&s, "caf\xc3\xa9") != NULL, "UTF-8 name kept");
+    char cut[64];
+    memset(cut, 'a', 62);
+    cut[62] = 0;
+    CHECK(find_material(&s, cut) != NULL, "long name cut before the é");
+    for (uint32_t i = 0; i < s.n_materials; i++) {
+        const unsigned char *n = (const unsigned char *)s.materials[i].name;
+        int ascii_or_known = 1;
+        for (size_t k = 0; n[k]; k++) /* only ASCII, é and U+FFFD here */
+            if (n[k] >= 0x80 && !(n[k] == 0xc3 && n[k + 1] == 0xa9) && !(n[k] == 0xef && n[k + 1] == 0xbf && n[k + 2] == 0xbd))
+                ascii_or_known = 0;
+            else if (n[k] >= 0x80)
+                k += n[k] == 0xc3 ? 1 : 2;
+        CHECK(ascii_or_known, "material %u name '%s' has stray bytes", i, s.materials[i].name);
+    }
+    lc_scene_release(&s);
+}
+
 static void test_sponza(int *skipped) {
     char path[512], mtl[512], err[512] = "";
     if (!check_shared_path("scenes/sponza-dabrovic/sponza.obj", path, sizeof path)) {
@@ -580,6 +624,7 @@ int main(void) {
     test_ply();
     test_texture();
     test_bad_inputs();
+    test_names();
     test_sponza(&sponza_skipped);
     nftw(tmpdir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
     if (sponza_skipped && check_failures == 0) {
