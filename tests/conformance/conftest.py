@@ -9,6 +9,9 @@ by hand when running pytest directly):
   LUCENT_CONF_VIEWER_TOKEN      a viewer token (role cases are skipped without one)
   LUCENT_CONF_TIMEOUT           seconds to wait for any single reply or frame (default 10)
   LUCENT_CONF_INSECURE          1 = do not verify the TLS certificate (wss://)
+  LUCENT_CONF_DELTA_THRESHOLD   the server's lightmap delta threshold (relative; default 0.01,
+                                lucentd's --delta-threshold default): PROTOCOL.md §6.2 leaves it
+                                to the server, the delta cases check deltas against it
 
 Every JSON message a test receives is validated against protocol/schema/ (by its `type`)
 and every binary frame is checked against §6.1 (header, lengths, CRC, tile table,
@@ -56,6 +59,7 @@ class Config:
         self.viewer_token = os.environ.get("LUCENT_CONF_VIEWER_TOKEN", "")
         self.timeout = float(os.environ.get("LUCENT_CONF_TIMEOUT", "10"))
         self.insecure = os.environ.get("LUCENT_CONF_INSECURE", "") not in ("", "0")
+        self.delta_threshold = float(os.environ.get("LUCENT_CONF_DELTA_THRESHOLD") or "0.01")
         u = urlparse(self.url)
         self.secure = u.scheme == "wss"
         self.host = u.hostname or "127.0.0.1"

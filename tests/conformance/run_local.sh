@@ -1,15 +1,17 @@
 #!/bin/bash
 # Run the lucent/1 conformance suite against this repository's lucentd: start it on a free
 # port with a temporary state dir and a config holding a controller and a viewer token, run
-# lucent-conformance, stop the daemon. Exit 77 (skip) when lucentd or the bake is not built.
+# lucent-conformance, stop the daemon. Exit 77 (skip) when lucentd or lucent-bake is not
+# built; exit 1 when the Cornell bake with its asset fails.
 # Extra arguments go to lucent-conformance (e.g. -k frames, --json out.json).
 set -u
 HERE="$(cd "$(dirname "$0")" && pwd)"
 BIN="${LUCENT_BINARY_DIR:-$HERE/../../build}"
 LUCENTD="$BIN/bin/lucentd"
-BAKE="$BIN/cornell.lcb"
-if [ ! -x "$LUCENTD" ] || [ ! -f "$BAKE" ]; then
-  echo "SKIP: $LUCENTD or $BAKE is not built"
+LUCENT_BAKE="$BIN/bin/lucent-bake"
+SCENE="$HERE/../../scenes/cornell-box"
+if [ ! -x "$LUCENTD" ] || [ ! -x "$LUCENT_BAKE" ]; then
+  echo "SKIP: $LUCENTD or $LUCENT_BAKE is not built"
   exit 77
 fi
 
@@ -26,13 +28,16 @@ cleanup() {
 }
 trap cleanup EXIT INT TERM
 
-# Serve the Cornell box with one dynamic-object asset, so object.set/object.remove are
-# testable (the embedded bake has no assets).
-if [ -x "$BIN/bin/lucent-bake" ]; then
-  if "$BIN/bin/lucent-bake" bake "$HERE/../../scenes/cornell-box/cornell-box.obj" -o "$TMP/scene.lcb" \
-       --quality draft --asset cube="$HERE/../../scenes/cornell-box/cube.obj" --quiet --no-write-glb; then
-    BAKE="$TMP/scene.lcb"
-  fi
+# Serve the Cornell box baked here (draft) with one dynamic-object asset, so
+# object.set/object.remove are testable. A failed bake fails the run: a fallback to another
+# bake would hide the failure, and a bake without the asset would only skip the object cases.
+BAKE="$TMP/scene.lcb"
+if ! "$LUCENT_BAKE" bake "$SCENE/cornell-box.obj" -o "$BAKE" --quality draft --asset cube="$SCENE/cube.obj" \
+     --quiet --no-write-glb > "$TMP/bake.log" 2>&1 || [ ! -s "$BAKE" ]; then
+  echo "FAIL: the conformance bake failed (lucent-bake bake $SCENE/cornell-box.obj --asset cube=$SCENE/cube.obj);"
+  echo "      without its asset the object cases (object.set / object.remove) cannot run. lucent-bake said:"
+  sed 's/^/      /' "$TMP/bake.log"
+  exit 1
 fi
 
 CTL="ctl-$RANDOM$RANDOM"

@@ -164,7 +164,22 @@ async def test_rate_limited(cfg):
                 limited += 1
         assert limited >= 1, "%d requests in a burst, none rate_limited (rate %d, burst 2x)" % (n, rate)
         assert pongs >= rate, "only %d of %d answered normally (burst should allow ~%d)" % (pongs, n, 2 * rate)
-        await asyncio.sleep(min(5.0, 2.0 * 2 * rate / rate))
-        await c.ping_ok()
+        # Usable again once the rate drops: pings at the published rate (one per 1/rate s, the
+        # time the server takes to earn a request back) until one is answered with pong; each
+        # rate_limited reply means it has not yet. A server that stays limited fails after the
+        # reply timeout.
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + cfg.timeout
+        tries = 0
+        while True:
+            tries += 1
+            r = await c.request({"type": "ping", "t": 12.5})
+            if r["type"] == "pong":
+                assert r["t"] == 12.5, r
+                break
+            assert r["type"] == "error" and r["code"] == "rate_limited", "ping after the burst: %r" % r
+            assert loop.time() < deadline, ("§1.3 still rate_limited %.0f s after the burst (%d pings at %d/s): the "
+                                            "connection never became usable again" % (cfg.timeout, tries, rate))
+            await asyncio.sleep(1.0 / rate)
     finally:
         await c.close()

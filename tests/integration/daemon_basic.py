@@ -16,6 +16,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import threading
 import urllib.request
 import zlib
 
@@ -33,9 +34,44 @@ def check(cond, msg):
         print("FAIL:", msg, file=sys.stderr)
 
 
-def start(state_dir, *extra):
+class Log:
+    """lucentd's stderr (one line per event), read on a thread so the daemon never blocks on a
+    full pipe, and echoed to ours as before."""
+
+    def __init__(self, stream):
+        self.lines, self.cv = [], threading.Condition()
+        threading.Thread(target=self._read, args=(stream,), daemon=True).start()
+
+    def _read(self, stream):
+        for line in stream:
+            sys.stderr.write(line)
+            with self.cv:
+                self.lines.append(line)
+                self.cv.notify_all()
+
+    def find(self, *parts):
+        """The first line containing every one of `parts`, or None."""
+        with self.cv:
+            return next((l for l in self.lines if all(p in l for p in parts)), None)
+
+    def wait(self, timeout, *parts):
+        """Blocks until a line contains every one of `parts`; None after `timeout` s."""
+        end = time.monotonic() + timeout
+        with self.cv:
+            while True:
+                line = next((l for l in self.lines if all(p in l for p in parts)), None)
+                if line is not None or time.monotonic() >= end:
+                    return line
+                self.cv.wait(end - time.monotonic())
+
+
+def start(state_dir, *extra, log_level=None):
+    """Starts lucentd on a free port. With log_level, its stderr is kept (p.log, a Log) so a
+    case can wait for a log line; otherwise it goes to ours."""
     p = subprocess.Popen([LUCENTD, "--bake", BAKE, "--port", "0", "--state-dir", state_dir, "--backend", "cpu",
-                          "--log-level", "warn", *extra], stdout=subprocess.PIPE, text=True)
+                          "--log-level", log_level or "warn", *extra], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE if log_level else None, text=True)
+    p.log = Log(p.stderr) if log_level else None
     line = p.stdout.readline()
     if "port=" not in line:
         p.kill()
@@ -262,7 +298,7 @@ async def scenario(state_dir):
     cfg = os.path.join(state_dir, "lucentd.json")
     with open(cfg, "w") as fh:
         json.dump({"controller-tokens": ["ctl"], "viewer-tokens": ["view"]}, fh)
-    p, port = start(state_dir, "--config", cfg)
+    p, port = start(state_dir, "--config", cfg, log_level="info")
     try:
         ws, welcome = await hello(port, token="view")
         check(welcome.get("role") == "viewer", "viewer role")
@@ -285,7 +321,10 @@ async def scenario(state_dir):
         with open(cfg, "w") as fh:
             json.dump({"controller-tokens": ["ctl2"], "viewer-tokens": ["view"]}, fh)
         p.send_signal(signal.SIGHUP)
-        time.sleep(1.0)
+        # the reload is done when lucentd says so (server.c server_reload logs it after applying)
+        reloaded = await asyncio.get_running_loop().run_in_executor(
+            None, p.log.wait, 10, "SIGHUP: configuration reloaded")
+        check(reloaded is not None, "no 'SIGHUP: configuration reloaded' log line within 10 s of SIGHUP")
         ws, welcome = await hello(port, token="ctl2")
         check(welcome.get("role") == "controller", "new token after SIGHUP: %r" % welcome)
         await ws.close()
@@ -375,25 +414,38 @@ def raw_ws_client(port, messages):
 
 async def slow_client_scenario(state_dir):
     """A client that never reads is dropped; the others keep getting the latest frames."""
-    p, port = start(state_dir + "-slow", "--slow-timeout", "2")
+    p, port = start(state_dir + "-slow", "--slow-timeout", "2", log_level="warn")
     try:
         slow = raw_ws_client(port, [{"type": "hello", "client": "sloth"},
                                     {"type": "subscribe", "stream": "lightmap", "encoding": "f32"}])
         ws, _ = await hello(port, name="fast")
         await ws.send(json.dumps({"type": "subscribe", "stream": "lightmap", "encoding": "rgb9e5"}))
-        last_ok = 0
-        for i in range(40):  # ~4 s of 10 updates/s
-            await ws.send(json.dumps({"type": "light.set", "light": {
-                "id": "orbit", "type": "point", "position": [0.28 + 0.1 * (i % 5) / 5, 0.4, 0.28], "intensity": 2}}))
-            await asyncio.sleep(0.1)
+        await recv_json(ws, "ok")
+        # Updates, each waiting for its ok and its frame on the fast client, until lucentd logs
+        # that it dropped the slow one (server.c session_drop: "client 'sloth' <why>; dropping
+        # it (1008)"), then one more: the fast client is served all along.
+        i, dropped, rev, frames_ok = 0, None, 0, True
+        end = time.monotonic() + 20
         while True:
-            m = await asyncio.wait_for(ws.recv(), 15)
-            if isinstance(m, str) and json.loads(m).get("type") == "ok":
-                last_ok = json.loads(m)["revision"]
-                if last_ok == 40:
-                    break
-        f, _ = await recv_frame(ws, 40, timeout=15)
-        check(f["revision"] == 40, "the fast client reached the latest revision while a slow one was connected")
+            await ws.send(json.dumps({"type": "light.set", "id": "u%d" % i, "light": {
+                "id": "orbit", "type": "point", "position": [0.28 + 0.1 * (i % 5) / 5, 0.4, 0.28], "intensity": 2}}))
+            ok = await recv_json(ws, "ok", timeout=15)
+            check(ok.get("id") == "u%d" % i, "update %d: %r" % (i, ok))
+            rev = ok.get("revision", rev)
+            try:
+                f, _ = await recv_frame(ws, rev, timeout=15)
+            except asyncio.TimeoutError:
+                frames_ok = False
+                break
+            i += 1
+            if dropped:
+                break
+            dropped = p.log.find("client 'sloth'", "dropping it")
+            if time.monotonic() > end:
+                break
+        check(frames_ok, "the fast client got no frame for revision %d within 15 s while a slow client was "
+              "connected" % rev)
+        check(dropped is not None, "lucentd did not log dropping the slow client within 20 s (%d updates)" % i)
         # The slow client was dropped: its socket reads EOF or a reset once drained.
         slow.settimeout(5)
         closed = False
