@@ -71,6 +71,10 @@ static const lc_opt config_options[] = {
     {"log-level", LC_OPT_ENUM, OFF(log_level), 0, 0, "info", "debug|info|warn|error", "log level", NULL, NULL},
     {"check-config", LC_OPT_BOOL, OFF(check_config), 0, 1, "false", NULL,
      "validate the configuration and the bake file, then exit (0 valid, 2 invalid)", NULL, NULL},
+    {"recover", LC_OPT_BOOL, OFF(recover), 0, 1, "false", NULL,
+     "start even if a journal line is corrupt: restore the snapshot and the lines before it, keep the rest in "
+     "STATE-DIR/journal.dropped.* (logged) and rewrite the state so the next start is clean",
+     NULL, NULL},
     {NULL, 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL},
 };
 #undef OFF
@@ -180,6 +184,7 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
     RESTART_IF(max_lights, "max-lights")
     RESTART_IF(max_objects, "max-objects")
     RESTART_IF(tile, "tile")
+    RESTART_IF(recover, "recover")
 #undef RESTART_IF
     memcpy(dst->controller_tokens, src->controller_tokens, sizeof dst->controller_tokens);
     memcpy(dst->viewer_tokens, src->viewer_tokens, sizeof dst->viewer_tokens);

@@ -43,6 +43,7 @@ typedef struct lc_config {
     int compact_bytes; /* journal size that triggers a snapshot */
     int log_level;
     int check_config;
+    int recover; /* start from the snapshot + the journal's valid prefix, setting the rest aside */
 } lc_config;
 
 const lc_opt *lc_config_options(void);

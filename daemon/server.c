@@ -493,6 +493,14 @@ static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) 
 static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *req) {
     lc_state before;
     lc_proto_error e;
+    char jerr[512];
+    /* After a failed fsync the journal takes nothing until a snapshot succeeds: retry it
+     * now (the tick retries once a second too); logged once by the journal, not per refusal. */
+    if (lc_journal_broken(s->journal) && lc_journal_compact(s->journal, &s->state, jerr, sizeof jerr) != 0) {
+        session_error(s, ss, &req->id, "internal", "",
+                      "changes are refused: the journal's disk failed (the lucentd log says why); retry later");
+        return;
+    }
     if (lc_state_clone(&before, &s->state) != 0) {
         session_error(s, ss, &req->id, "internal", "", "out of memory");
         return;
@@ -503,7 +511,6 @@ static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *
         session_send(ss, lc_proto_build_error(&req->id, &e));
         return;
     }
-    char jerr[256];
     /* Relight while the journal fsyncs (~4 ms on a plain disk): the frames of this change
      * can only be sent after this function returns, i.e. after the change is durable. */
     uint64_t job = 0;
@@ -515,7 +522,11 @@ static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *
         lc_state_release(&s->state);
         s->state = before;
         lc_compute_submit(s->compute, &s->state, NULL);
-        session_error(s, ss, &req->id, "internal", "", "the change could not be stored; try again");
+        session_error(s, ss, &req->id, "internal", "",
+                      lc_journal_broken(s->journal)
+                          ? "the change could not be stored, and the journal refuses changes until it recovers "
+                            "(the lucentd log says why)"
+                          : "the change could not be stored (journal write failed: disk full?); try again");
         return;
     }
     lc_state_release(&before);
@@ -866,7 +877,7 @@ static void server_tick(lws_sorted_usec_list_t *sul) {
             lws_callback_on_writable(ss->wsi);
         }
     }
-    lc_journal_tick(s->journal);
+    lc_journal_tick(s->journal, &s->state);
     lws_sul_schedule(s->ctx, 0, &s->tick, server_tick, 250 * LWS_US_PER_MS);
 }
 
@@ -922,7 +933,10 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     lc_state_limits sl = {(uint32_t)cfg->max_lights, (uint32_t)cfg->max_objects};
     if (lc_state_init(&s.state, bake, &sl) != 0) return 1;
     s.state.settings.bounces = (uint32_t)cfg->bounces; /* a restored snapshot's settings replace this */
-    s.journal = lc_journal_open(cfg->state_dir, (lc_fsync_mode)cfg->fsync_mode, &s.state, err, sizeof err);
+    /* --recover: the snapshot plus the journal's valid prefix; the journal reports what it drops. */
+    s.journal = cfg->recover
+                    ? lc_journal_recover(cfg->state_dir, (lc_fsync_mode)cfg->fsync_mode, &s.state, NULL, err, sizeof err)
+                    : lc_journal_open(cfg->state_dir, (lc_fsync_mode)cfg->fsync_mode, &s.state, err, sizeof err);
     if (!s.journal) {
         lc_error("server", "%s", err);
         goto done;
