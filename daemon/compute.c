@@ -42,6 +42,10 @@ struct lc_compute {
     int ready;              /* guarded by lock: 1 engine up, -1 failed */
     char start_err[512];
     char backend_name[16];
+    int joined;             /* service thread only: lc_compute_stop has joined the thread */
+    uint64_t failures;      /* guarded by lock: relights that failed */
+    uint64_t failed_revision; /* guarded by lock: revision of the last failed relight (0 = the last one succeeded) */
+    char failure[256];      /* guarded by lock: why it failed */
 };
 
 static void compute_job_free(compute_job *j) {
@@ -162,8 +166,19 @@ static void *compute_main(void *arg) {
             refine_left = 0;
         } else {
             p = compute_publish(fr, last);
+            if (!p) snprintf(err, sizeof err, "out of memory publishing the frame");
         }
-        if (!p) continue;
+        if (!p) {
+            /* Clients were told `ok` for this revision: the service thread reports it
+             * (an `error` event and /healthz), so the failure is not only in the log. */
+            pthread_mutex_lock(&c->lock);
+            c->failures++;
+            c->failed_revision = last->st.revision ? last->st.revision : 1;
+            snprintf(c->failure, sizeof c->failure, "%.255s", err);
+            pthread_mutex_unlock(&c->lock);
+            lws_cancel_service(c->ctx);
+            continue;
+        }
         pthread_mutex_lock(&c->lock);
         if (compute_is_discarded(c, p->job)) {
             pthread_mutex_unlock(&c->lock);
@@ -173,6 +188,7 @@ static void *compute_main(void *arg) {
         }
         lc_published *old = c->latest;
         c->latest = p;
+        c->failed_revision = 0;
         c->sequence++;
         c->count++;
         int b = 0;
@@ -331,8 +347,23 @@ void lc_compute_stop(lc_compute *c) {
     pthread_mutex_unlock(&c->lock);
     compute_job_free(pending);
     pthread_join(c->thread, NULL);
-    if (c->latest) published_free(c->latest);
+    c->joined = 1;
+}
+
+void lc_compute_release(lc_compute *c) {
+    if (!c) return;
+    if (!c->joined) lc_compute_stop(c);
+    lc_published_release(c, c->latest); /* sessions released theirs before (lc_compute_stop's contract) */
     pthread_mutex_destroy(&c->lock);
     pthread_cond_destroy(&c->cond);
     free(c);
+}
+
+uint64_t lc_compute_failure(lc_compute *c, uint64_t *failures, char *why, size_t whylen) {
+    pthread_mutex_lock(&c->lock);
+    uint64_t rev = c->failed_revision;
+    if (failures) *failures = c->failures;
+    if (why && whylen) snprintf(why, whylen, "%s", c->failure);
+    pthread_mutex_unlock(&c->lock);
+    return rev;
 }

@@ -61,8 +61,16 @@ uint64_t lc_compute_count(lc_compute *c);
 #define LC_COMPUTE_BUCKETS 11
 extern const double lc_compute_bucket_ms[LC_COMPUTE_BUCKETS];
 void lc_compute_histogram(lc_compute *c, uint64_t counts[LC_COMPUTE_BUCKETS], double *sum_ms);
-/* Finishes the relight in flight and joins the thread. NULL-safe. */
+/* Finishes the relight in flight and joins the thread; after it returns the compute thread
+ * makes no lws call, so the lws context may be destroyed. References to results stay valid
+ * (release them, then lc_compute_release). NULL-safe. */
 void lc_compute_stop(lc_compute *c);
+/* Frees the compute object (stops it first if needed). Every lc_published reference must
+ * have been released. NULL-safe. */
+void lc_compute_release(lc_compute *c);
+/* The revision whose last relight failed (0 when the newest relight succeeded), the total
+ * count of failed relights in *failures and the cause in why. Any thread. */
+uint64_t lc_compute_failure(lc_compute *c, uint64_t *failures, char *why, size_t whylen);
 const char *lc_compute_backend(lc_compute *c);
 
 #endif

@@ -2,11 +2,17 @@
 #include "config.h"
 
 #include <cjson/cJSON.h>
+#include <ctype.h>
+#include <errno.h>
+#include <openssl/err.h>
+#include <openssl/pem.h>
+#include <openssl/x509.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "util/fsutil.h"
+#include "util/limits.h"
 #include "util/log.h"
 
 #ifndef LUCENT_DEFAULT_BAKE
@@ -21,7 +27,7 @@ static const lc_opt config_options[] = {
      "bake file to serve (default: the embedded Cornell box)", "FILE", NULL},
     {"listen", LC_OPT_STRING, OFF(listen), 1, 128, "127.0.0.1", NULL, "interface address to listen on", "ADDR",
      NULL},
-    {"port", LC_OPT_INT, OFF(port), 0, 65535, "7700", NULL, "TCP port (0 = any free port, logged)", NULL, NULL},
+    {"port", LC_OPT_INT, OFF(port), 0, 65535, LC_LIMIT_STR(LC_DEFAULT_PORT), NULL, "TCP port (0 = any free port, logged)", NULL, NULL},
     {"state-dir", LC_OPT_STRING, OFF(state_dir), 1, LC_CONFIG_PATH_MAX, "lucent-state", NULL,
      "directory of the journal and snapshot", "DIR", NULL},
     {"fsync", LC_OPT_ENUM, OFF(fsync_mode), 0, 0, "always", "always|everysec",
@@ -32,26 +38,31 @@ static const lc_opt config_options[] = {
     {"viewer-tokens", LC_OPT_STRING, OFF(viewer_tokens), 0, LC_CONFIG_TOKENS_MAX, NULL, NULL,
      "comma-separated tokens with the viewer role", "LIST", NULL},
     {"origins", LC_OPT_STRING, OFF(origins), 0, LC_CONFIG_TOKENS_MAX, NULL, NULL,
-     "comma-separated Origin allow-list for browsers (none = any; clients without Origin always pass)", "LIST",
-     NULL},
+     "comma-separated Origins (e.g. https://app.example) whose pages may connect; lucentd's own --www pages "
+     "always may. None = only pages served from localhost/127.0.0.1/[::1]; others get HTTP 403. Clients "
+     "without an Origin header (native, lucentctl) always pass",
+     "LIST", NULL},
     {"www", LC_OPT_STRING, OFF(www), 0, LC_CONFIG_PATH_MAX, NULL, NULL, "directory of static files served over HTTP",
      "DIR", NULL},
     {"tls-cert", LC_OPT_STRING, OFF(tls_cert), 0, LC_CONFIG_PATH_MAX, NULL, NULL,
      "TLS certificate (PEM); with --tls-key the port serves wss:// and https://", "FILE", NULL},
     {"tls-key", LC_OPT_STRING, OFF(tls_key), 0, LC_CONFIG_PATH_MAX, NULL, NULL, "TLS private key (PEM)", "FILE", NULL},
-    {"max-message", LC_OPT_INT, OFF(max_message), 1024, 16777216, "65536", NULL, "largest text message (bytes)",
+    {"max-message", LC_OPT_INT, OFF(max_message), 1024, LC_LIMIT_MESSAGE_MAX, LC_LIMIT_STR(LC_LIMIT_MESSAGE), NULL, "largest text message (bytes)",
      NULL, NULL},
-    {"max-depth", LC_OPT_INT, OFF(max_depth), 4, 64, "16", NULL, "deepest JSON nesting", NULL, NULL},
-    {"max-batch", LC_OPT_INT, OFF(max_batch), 1, 4096, "64", NULL, "ops per batch", NULL, NULL},
-    {"max-lights", LC_OPT_INT, OFF(max_lights), 1, 1024, "1024", NULL, "lights held", NULL, NULL},
-    {"max-objects", LC_OPT_INT, OFF(max_objects), 1, 4096, "4096", NULL, "object instances held", NULL, NULL},
-    {"max-clients", LC_OPT_INT, OFF(max_clients), 1, 100000, "1000", NULL, "connected clients", NULL, NULL},
-    {"rate", LC_OPT_INT, OFF(rate), 1, 100000, "100", NULL, "requests per second per connection (burst 2x)", NULL,
+    {"max-depth", LC_OPT_INT, OFF(max_depth), 4, 64, LC_LIMIT_STR(LC_LIMIT_DEPTH), NULL, "deepest JSON nesting", NULL, NULL},
+    {"max-batch", LC_OPT_INT, OFF(max_batch), 1, LC_LIMIT_BATCH_MAX, LC_LIMIT_STR(LC_LIMIT_BATCH), NULL, "ops per batch", NULL, NULL},
+    {"max-lights", LC_OPT_INT, OFF(max_lights), 1, LC_LIMIT_LIGHTS, LC_LIMIT_STR(LC_LIMIT_LIGHTS), NULL, "lights held", NULL, NULL},
+    {"max-objects", LC_OPT_INT, OFF(max_objects), 1, LC_LIMIT_OBJECTS, LC_LIMIT_STR(LC_LIMIT_OBJECTS), NULL, "object instances held", NULL, NULL},
+    {"max-clients", LC_OPT_INT, OFF(max_clients), 1, 100000, "1000", NULL,
+     "connected clients (lowered, with a warning, to what the open-files limit allows)", NULL, NULL},
+    {"max-queue-bytes", LC_OPT_INT, OFF(max_queue_bytes), 65536, 1073741824, "8388608", NULL,
+     "replies queued for one client that does not read; past it the client is dropped (1008)", "BYTES", NULL},
+    {"rate", LC_OPT_INT, OFF(rate), 1, 100000, LC_LIMIT_STR(LC_LIMIT_RATE), NULL, "requests per second per connection (burst 2x)", NULL,
      NULL},
     {"hello-timeout", LC_OPT_INT, OFF(hello_timeout), 1, 600, "5", NULL, "seconds a client has to send hello",
      NULL, NULL},
     {"slow-timeout", LC_OPT_INT, OFF(slow_timeout), 1, 3600, "10", NULL,
-     "seconds a client may stay behind (a frame it cannot take) before it is dropped (1008)", NULL, NULL},
+     "seconds a client may take none of its output (replies or frames) before it is dropped (1008)", NULL, NULL},
     {"backend", LC_OPT_ENUM, OFF(backend), 0, 0, "auto", "auto|cpu|egl", "relight backend", NULL, NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "relight threads (0 = all cores)", NULL, NULL},
     {"refine-delay", LC_OPT_INT, OFF(refine_delay), 0, 10000, "20", NULL,
@@ -150,6 +161,23 @@ int lc_config_load(lc_config *c, int argc, char **argv, char *err, size_t errlen
     return lc_config_validate(c, err, errlen);
 }
 
+int lc_config_token_in(const char *list, const char *token) {
+    /* Constant time in the token's content: every element is compared over its whole length
+     * and nothing returns early, so response timing does not reveal a matching prefix. */
+    const size_t tl = strlen(token);
+    unsigned found = 0;
+    for (const char *p = list; *p;) {
+        const char *comma = strchr(p, ',');
+        size_t len = comma ? (size_t)(comma - p) : strlen(p);
+        unsigned diff = len != tl || len == 0;
+        for (size_t i = 0; i < len; i++) diff |= (unsigned char)p[i] ^ (unsigned char)(i < tl ? token[i] : 0);
+        found |= diff == 0;
+        if (!comma) break;
+        p = comma + 1;
+    }
+    return (int)found;
+}
+
 int lc_config_has_token(const char *list, const char *token) {
     size_t tl = strlen(token);
     for (const char *p = list; *p;) {
@@ -202,15 +230,104 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
     dst->log_level = src->log_level;
 }
 
+/* 1 when a token is a placeholder left from an example config ("CHANGE-ME", "<token>", ...). */
+static int config_is_placeholder(const char *tok, size_t len) {
+    char folded[LC_CONFIG_TOKENS_MAX];
+    size_t n = 0, xs = 0;
+    for (size_t i = 0; i < len; i++) {
+        char ch = (char)tolower((unsigned char)tok[i]);
+        if (ch == '<' || ch == '>' || ch == '{' || ch == '}') return 1;
+        if (ch == '-' || ch == '_' || ch == ' ' || ch == '.') continue;
+        xs += ch == 'x' || ch == '*';
+        folded[n++] = ch;
+    }
+    folded[n] = 0;
+    static const char *const words[] = {"changeme", "replaceme", "placeholder", "yourtoken", "yoursecret", "todo",
+                                        "fixme", "example", NULL};
+    for (int i = 0; words[i]; i++)
+        if (strstr(folded, words[i])) return 1;
+    return n > 0 && xs == n; /* "xxxx" */
+}
+
+/* A comma-separated list: no empty element ("a,,b", ",x" or a trailing comma would be a token
+ * that an absent token matches), no placeholder token (tokens = 1). */
+static int config_check_list(const char *flag, const char *list, int tokens, char *err, size_t errlen) {
+    if (!list[0]) return 0;
+    int index = 0;
+    for (const char *p = list;; index++) {
+        const char *comma = strchr(p, ',');
+        size_t len = comma ? (size_t)(comma - p) : strlen(p);
+        if (len == 0) {
+            lc_set_err(err, errlen, "--%s: element %d of the list is empty (remove the extra comma)", flag, index + 1);
+            return -1;
+        }
+        if (tokens && config_is_placeholder(p, len)) {
+            lc_set_err(err, errlen, "--%s: element %d ('%.*s') is a placeholder; set a real secret", flag, index + 1,
+                       (int)(len > 40 ? 40 : len), p);
+            return -1;
+        }
+        if (!comma) break;
+        p = comma + 1;
+    }
+    return 0;
+}
+
+/* Loads the TLS certificate and key as the server will, so --check-config and start-up name
+ * the file and the cause (missing file, not PEM, key not matching the certificate). */
+static int config_check_tls(const lc_config *c, char *err, size_t errlen) {
+    int rc = -1;
+    X509 *cert = NULL;
+    EVP_PKEY *key = NULL;
+    FILE *f = fopen(c->tls_cert, "r");
+    if (!f) {
+        lc_set_err(err, errlen, "--tls-cert '%s': %s", c->tls_cert, strerror(errno));
+        goto err;
+    }
+    cert = PEM_read_X509(f, NULL, NULL, NULL);
+    fclose(f);
+    if (!cert) {
+        lc_set_err(err, errlen, "--tls-cert '%s': not a PEM certificate (expected -----BEGIN CERTIFICATE-----)",
+                   c->tls_cert);
+        goto err;
+    }
+    f = fopen(c->tls_key, "r");
+    if (!f) {
+        lc_set_err(err, errlen, "--tls-key '%s': %s", c->tls_key, strerror(errno));
+        goto err;
+    }
+    key = PEM_read_PrivateKey(f, NULL, NULL, NULL);
+    fclose(f);
+    if (!key) {
+        lc_set_err(err, errlen, "--tls-key '%s': not a PEM private key (or it needs a passphrase)", c->tls_key);
+        goto err;
+    }
+    if (X509_check_private_key(cert, key) != 1) {
+        lc_set_err(err, errlen, "--tls-key '%s' does not match the certificate --tls-cert '%s'", c->tls_key,
+                   c->tls_cert);
+        goto err;
+    }
+    rc = 0;
+err:
+    ERR_clear_error();
+    X509_free(cert);
+    EVP_PKEY_free(key);
+    return rc;
+}
+
 int lc_config_validate(const lc_config *c, char *err, size_t errlen) {
     if (!c->tls_cert[0] != !c->tls_key[0]) {
         lc_set_err(err, errlen, "--tls-cert and --tls-key go together (give both or neither)");
         return -1;
     }
+    if (c->tls_cert[0] && config_check_tls(c, err, errlen) != 0) return -1;
     if (c->tile > 0 && c->tile < 8) {
         lc_set_err(err, errlen, "--tile %d: give 0 (automatic) or at least 8 texels", c->tile);
         return -1;
     }
+    if (config_check_list("controller-tokens", c->controller_tokens, 1, err, errlen) != 0 ||
+        config_check_list("viewer-tokens", c->viewer_tokens, 1, err, errlen) != 0 ||
+        config_check_list("origins", c->origins, 0, err, errlen) != 0)
+        return -1;
     /* A token in both lists would make the role ambiguous. */
     for (const char *p = c->viewer_tokens; *p;) {
         const char *comma = strchr(p, ',');
@@ -218,10 +335,6 @@ int lc_config_validate(const lc_config *c, char *err, size_t errlen) {
         size_t len = comma ? (size_t)(comma - p) : strlen(p);
         memcpy(tok, p, len);
         tok[len] = 0;
-        if (len == 0) {
-            lc_set_err(err, errlen, "--viewer-tokens: empty token in the list");
-            return -1;
-        }
         if (lc_config_has_token(c->controller_tokens, tok)) {
             lc_set_err(err, errlen, "--viewer-tokens: token '%s' is also a controller token", tok);
             return -1;

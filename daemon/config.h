@@ -29,6 +29,7 @@ typedef struct lc_config {
     int max_lights;
     int max_objects;
     int max_clients;
+    int max_queue_bytes; /* bytes of replies queued per client before it is dropped */
     int rate;          /* requests per second per connection */
     int hello_timeout; /* seconds */
     int slow_timeout;  /* seconds a client may leave a frame unread before it is dropped */
@@ -57,5 +58,7 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
 int lc_config_validate(const lc_config *c, char *err, size_t errlen);
 /* 1 if token is in the comma-separated list. */
 int lc_config_has_token(const char *list, const char *token);
+/* The same for secrets: constant time in the token's content; an empty token matches nothing. */
+int lc_config_token_in(const char *list, const char *token);
 
 #endif

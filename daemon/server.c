@@ -11,6 +11,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <dirent.h>
+#include <errno.h>
+#include <limits.h>
+#include <strings.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
 #include <time.h>
 
 #include "compute.h"
@@ -21,19 +27,29 @@
 #include "util/log.h"
 
 #define SERVER_OUTQ 1024 /* queued text messages per session (replies to a full request burst fit); past this the client is too slow */
+/* What a socket may send before its hello is accepted: a hello is a client name and a token
+ * (lucent_proto.h), so an unauthenticated peer never gets the full --max-message buffer. */
+#define SERVER_HELLO_MAX 4096
 
 enum { STREAMS = 4 }; /* index = lc_stream (1..3) */
 
+typedef struct lc_server lc_server;
+
 typedef struct lc_session {
     struct lws *wsi;
+    lc_server *srv;
     struct lc_session *next;
     int authed, controller;
     char client[LC_PROTO_NAME_MAX + 1];
+    char peer[64]; /* the peer's address, for the failed-hello throttle and the log */
     char *rx;
-    size_t rx_len;
+    size_t rx_len, rx_cap;
+    size_t rx_limit; /* the bound of the message being received, fixed at its first fragment (SIGHUP may change the live one) */
     int rx_binary, rx_oversize;
     char *outq[SERVER_OUTQ];
     int outq_head, outq_n;
+    size_t outq_bytes;         /* bytes in outq: over --max-queue-bytes the client is dropped */
+    double stalled_since_ms;   /* since when output has waited without the client taking any (0 = none) */
     int closing, close_code;
     char close_reason[64];
     double connected_ms;
@@ -53,10 +69,18 @@ typedef struct lc_session {
     uint64_t lm_held_state; /* names lm_held's content (lc_residual_memo) */
     lc_published *frame; /* newest result for this session (a reference) */
     uint64_t frame_seq;
-    double behind_since_ms; /* since when a frame has waited for this client (0 = none) */
     uint8_t *tx;
     size_t tx_cap;
 } lc_session;
+
+/* Failed hellos per peer address (see server_auth_peer_for). */
+#define SERVER_AUTH_PEERS 256
+#define SERVER_AUTH_BURST 10.0
+#define SERVER_AUTH_PER_S 1.0
+typedef struct server_auth_peer {
+    char peer[64];
+    double tokens, last_ms;
+} server_auth_peer;
 
 /* A publication's lightmap in one encoding (see lc_server.lm_encoded). */
 typedef struct lc_encoded_lightmap {
@@ -78,7 +102,7 @@ typedef struct lc_residual_memo {
     size_t payload_len;
 } lc_residual_memo;
 
-typedef struct lc_server {
+struct lc_server {
     lc_config *cfg; /* live copy: SIGHUP reloads its reloadable fields */
     int argc;
     char **argv;
@@ -101,10 +125,22 @@ typedef struct lc_server {
     lc_proto_limits limits;
     lws_sorted_usec_list_t tick;
     int port;
+    uint32_t max_clients; /* --max-clients, lowered to what the descriptor limit allows */
+    unsigned fd_budget;   /* descriptors the sockets may use (0 = unlimited) */
     /* metrics */
     uint64_t frames_sent, bytes_sent, messages_in, errors[32];
     char error_codes[32][32];
-} lc_server;
+    uint64_t dropped_slow;      /* sessions dropped for not taking their output */
+    uint64_t auth_failures;     /* hellos with an unknown token */
+    server_auth_peer auth_peers[SERVER_AUTH_PEERS];
+    uint64_t relight_failures_reported; /* compute failures already told to clients */
+};
+
+/* accept() failures seen in lws's log (server_lws_log); service thread only. */
+static uint64_t server_accept_errors;      /* service thread only */
+static int server_accept_failed;           /* service thread only: since the last loop turn */
+static double server_accept_logged_ms;     /* service thread only */
+static uint64_t server_accept_logged_count; /* service thread only */
 
 static volatile sig_atomic_t server_stop_flag = 0;
 static volatile sig_atomic_t server_reload_flag = 0;
@@ -126,21 +162,49 @@ static void server_count_error(lc_server *s, const char *code) {
     }
 }
 
-/* Queues text (takes ownership). A client whose queue is full is too slow: dropped (1008). */
+/* Asks lws for a WRITEABLE callback; until it comes the session counts as stalled (its
+ * socket is full: the client is not reading). */
+static void session_want_write(lc_session *ss) {
+    if (ss->stalled_since_ms == 0) ss->stalled_since_ms = lc_clock_ms();
+    lws_callback_on_writable(ss->wsi);
+}
+
+/* Drops a session that does not take its output, without a close handshake it would not
+ * read anyway; what it queued is freed at once, so a client that never reads cannot pin
+ * memory. */
+static void session_drop(lc_session *ss, const char *why) {
+    if (ss->closing == 2) return;
+    lc_warn("server", "client '%s' %s; dropping it (1008)", ss->client, why);
+    for (int i = 0; i < ss->outq_n; i++) free(ss->outq[(ss->outq_head + i) % SERVER_OUTQ]);
+    ss->outq_n = 0;
+    ss->outq_bytes = 0;
+    ss->closing = 2; /* 2: dropped, nothing more is queued or sent */
+    ss->stalled_since_ms = 0;
+    ss->srv->dropped_slow++;
+    lws_close_reason(ss->wsi, LWS_CLOSE_STATUS_POLICY_VIOLATION, (unsigned char *)"too slow", 8);
+    lws_set_timeout(ss->wsi, PENDING_TIMEOUT_USER_OK, LWS_TO_KILL_ASYNC);
+}
+
+/* Queues text (takes ownership). Past SERVER_OUTQ messages or --max-queue-bytes (one
+ * message always fits) the client is too slow: dropped. */
 static void session_send(lc_session *ss, char *text) {
     if (!text) return;
-    if (ss->outq_n >= SERVER_OUTQ) {
+    if (ss->closing == 2) {
         free(text);
-        if (!ss->closing) {
-            lc_warn("server", "client '%s' fell %d messages behind; closing (1008)", ss->client, SERVER_OUTQ);
-            ss->closing = 1;
-            ss->close_code = LWS_CLOSE_STATUS_POLICY_VIOLATION;
-            snprintf(ss->close_reason, sizeof ss->close_reason, "too slow");
-        }
-    } else {
-        ss->outq[(ss->outq_head + ss->outq_n++) % SERVER_OUTQ] = text;
+        return;
     }
-    lws_callback_on_writable(ss->wsi);
+    size_t n = strlen(text);
+    if (ss->outq_n >= SERVER_OUTQ ||
+        (ss->outq_n > 0 && ss->outq_bytes + n > (size_t)ss->srv->cfg->max_queue_bytes)) {
+        free(text);
+        char why[96];
+        snprintf(why, sizeof why, "left %d messages (%zu bytes) unread", ss->outq_n, ss->outq_bytes);
+        session_drop(ss, why);
+        return;
+    }
+    ss->outq[(ss->outq_head + ss->outq_n++) % SERVER_OUTQ] = text;
+    ss->outq_bytes += n;
+    session_want_write(ss);
 }
 
 static void session_error(lc_server *s, lc_session *ss, const lc_proto_id *id, const char *code, const char *pointer,
@@ -154,10 +218,11 @@ static void session_error(lc_server *s, lc_session *ss, const lc_proto_id *id, c
 }
 
 static void session_close(lc_session *ss, int code, const char *reason) {
+    if (ss->closing) return;
     ss->closing = 1;
     ss->close_code = code;
     snprintf(ss->close_reason, sizeof ss->close_reason, "%s", reason);
-    lws_callback_on_writable(ss->wsi);
+    session_want_write(ss);
 }
 
 static void encode_texel(lc_encoding enc, const float *t, uint8_t *o) {
@@ -170,6 +235,27 @@ static void encode_texel(lc_encoding enc, const float *t, uint8_t *o) {
     } else {
         memcpy(o, t, 12);
     }
+}
+
+/* Grows the receive buffer to hold need bytes (need <= rx_limit + 1): a message gets the
+ * memory it uses, not --max-message up front. */
+static int session_rx_reserve(lc_session *ss, size_t need) {
+    if (need <= ss->rx_cap) return 0;
+    size_t cap = ss->rx_cap ? ss->rx_cap : 1024;
+    while (cap < need) cap *= 2;
+    if (cap > ss->rx_limit + 1) cap = ss->rx_limit + 1;
+    if (cap < need) cap = need;
+    char *nb = realloc(ss->rx, cap);
+    if (!nb) return -1;
+    ss->rx = nb;
+    ss->rx_cap = cap;
+    return 0;
+}
+
+static void session_rx_shrink(lc_session *ss) {
+    free(ss->rx);
+    ss->rx = NULL;
+    ss->rx_cap = 0;
 }
 
 static int session_tx_reserve(lc_session *ss, size_t need) {
@@ -457,6 +543,26 @@ static size_t session_encode(lc_server *s, lc_session *ss, int stream, int force
 
 /* --- requests ------------------------------------------------------------------------------------ */
 
+/* The failed-hello budget of the peer address (a token bucket of SERVER_AUTH_BURST, refilled
+ * SERVER_AUTH_PER_S a second), kept for the SERVER_AUTH_PEERS most recent addresses. */
+static server_auth_peer *server_auth_peer_for(lc_server *s, const char *peer) {
+    double now = lc_clock_ms();
+    server_auth_peer *oldest = &s->auth_peers[0];
+    for (int i = 0; i < SERVER_AUTH_PEERS; i++) {
+        server_auth_peer *a = &s->auth_peers[i];
+        if (a->peer[0] && !strcmp(a->peer, peer)) {
+            a->tokens = fmin(SERVER_AUTH_BURST, a->tokens + (now - a->last_ms) * 1e-3 * SERVER_AUTH_PER_S);
+            a->last_ms = now;
+            return a;
+        }
+        if (a->last_ms < oldest->last_ms) oldest = a;
+    }
+    snprintf(oldest->peer, sizeof oldest->peer, "%s", peer);
+    oldest->tokens = SERVER_AUTH_BURST;
+    oldest->last_ms = now;
+    return oldest;
+}
+
 /* A session that joined after the last publication has no frame yet: give it the newest
  * result so subscribe/snapshot can send a keyframe on an idle server (PROTOCOL.md §4.1). */
 static void session_take_latest(lc_server *s, lc_session *ss) {
@@ -555,13 +661,22 @@ static void server_request(lc_server *s, lc_session *ss, const char *text, size_
             goto done;
         }
         const lc_config *c = s->cfg;
+        server_auth_peer *ap = c->controller_tokens[0] ? server_auth_peer_for(s, ss->peer) : NULL;
+        if (ap && ap->tokens < 1) {
+            /* Refused before the token is looked at, so guessing from this address is useless. */
+            session_error(s, ss, &req.id, "rate_limited", "/token", "too many failed hellos from this address; wait and retry");
+            session_close(ss, LWS_CLOSE_STATUS_POLICY_VIOLATION, "rate limited");
+            goto done;
+        }
         if (!c->controller_tokens[0]) ss->controller = 1; /* no tokens configured: local, open server */
-        else if (lc_config_has_token(c->controller_tokens, req.token)) ss->controller = 1;
-        else if (lc_config_has_token(c->viewer_tokens, req.token)) ss->controller = 0;
+        else if (lc_config_token_in(c->controller_tokens, req.token)) ss->controller = 1;
+        else if (lc_config_token_in(c->viewer_tokens, req.token)) ss->controller = 0;
         else {
+            ap->tokens -= 1;
+            s->auth_failures++;
             session_error(s, ss, &req.id, "unauthorized", "/token", "unknown token");
             session_close(ss, LWS_CLOSE_STATUS_POLICY_VIOLATION, "unauthorized");
-            lc_info("server", "refused client '%s': unknown token", req.client);
+            lc_info("server", "refused client '%s' from %s: unknown token", req.client, ss->peer);
             goto done;
         }
         ss->authed = 1;
@@ -643,30 +758,132 @@ static int session_wants_frame(const lc_session *ss) {
     return 0;
 }
 
+/* 1 when some stream has a frame to send now (its max_rate allows it). */
+static int session_frame_due(const lc_session *ss, double now) {
+    if (!ss->frame) return 0;
+    for (int k = 1; k < STREAMS; k++) {
+        if (!ss->stream[k].on || !(ss->stream[k].force || ss->stream[k].sent_pub_seq < ss->frame_seq)) continue;
+        if (ss->stream[k].force || ss->stream[k].max_rate <= 0 ||
+            now - ss->stream[k].last_ms >= 1000.0 / ss->stream[k].max_rate)
+            return 1;
+    }
+    return 0;
+}
+
+/* Answers a WebSocket handshake with an HTTP error instead of a silent close, so a browser
+ * or a script sees why (403 for a refused Origin). Returns 1: lws then drops the connection. */
+static int server_refuse_http(struct lws *wsi, unsigned status, const char *body) {
+    unsigned char buf[LWS_PRE + 512], *start = buf + LWS_PRE, *p = start, *end = buf + sizeof buf;
+    size_t n = strlen(body);
+    if (lws_add_http_common_headers(wsi, status, "text/plain", (lws_filepos_t)n, &p, end) == 0 &&
+        lws_finalize_write_http_header(wsi, start, &p, end) == 0 && (size_t)(end - p) >= n) {
+        memcpy(p, body, n);
+        lws_write(wsi, p, n, LWS_WRITE_HTTP_FINAL);
+    }
+    return 1;
+}
+
+/* The host[:port] part of an Origin ("https://h:1" -> "h:1"); NULL when it has no scheme. */
+static const char *origin_authority(const char *origin, int *https) {
+    if (!strncmp(origin, "http://", 7)) {
+        *https = 0;
+        return origin + 7;
+    }
+    if (!strncmp(origin, "https://", 8)) {
+        *https = 1;
+        return origin + 8;
+    }
+    return NULL;
+}
+
+/* 1 when authority (host[:port]) names this machine's loopback: localhost, 127.x, [::1]. */
+static int authority_is_loopback(const char *a) {
+    size_t host_len = strlen(a);
+    if (a[0] == '[') {
+        const char *rb = strchr(a, ']');
+        if (!rb) return 0;
+        return (size_t)(rb - a) == 4 && !strncmp(a, "[::1]", 5) && (rb[1] == 0 || rb[1] == ':');
+    }
+    const char *colon = strchr(a, ':');
+    if (colon) host_len = (size_t)(colon - a);
+    if (host_len == 9 && !strncmp(a, "localhost", 9)) return 1;
+    if (host_len >= 4 && !strncmp(a, "127.", 4)) {
+        for (size_t i = 4; i < host_len; i++)
+            if (!(a[i] == '.' || (a[i] >= '0' && a[i] <= '9'))) return 0;
+        return 1;
+    }
+    return 0;
+}
+
+/* Which browser pages may open a session (PROTOCOL.md §1.1). Clients without an Origin
+ * header (native clients, lucentctl) always pass; tokens are their gate. A page passes when
+ * it is lucentd's own (its origin is the Host it connected to: the --www pages), when it is
+ * in --origins, or — with no --origins — when it is served from this machine's loopback.
+ * Anything else (a site the local user happens to open) is refused with 403. */
+static int server_origin_allowed(const lc_server *s, struct lws *wsi, char *why, size_t whylen) {
+    char origin[256], host[256];
+    int olen = lws_hdr_copy(wsi, origin, sizeof origin, WSI_TOKEN_ORIGIN);
+    if (olen <= 0) {
+        if (lws_hdr_total_length(wsi, WSI_TOKEN_ORIGIN) > 0) {
+            snprintf(why, whylen, "Origin header too long");
+            return 0;
+        }
+        return 1;
+    }
+    if (s->cfg->origins[0] && lc_config_has_token(s->cfg->origins, origin)) return 1;
+    int https = 0;
+    const char *auth = origin_authority(origin, &https);
+    if (auth && lws_hdr_copy(wsi, host, sizeof host, WSI_TOKEN_HOST) > 0 && https == (s->cfg->tls_cert[0] != 0) &&
+        !strcasecmp(auth, host))
+        return 1; /* same origin: a page lucentd served itself */
+    if (!s->cfg->origins[0] && auth && authority_is_loopback(auth)) return 1;
+    snprintf(why, whylen, "Origin '%.160s' is %s", origin,
+             s->cfg->origins[0] ? "not in --origins" : "not this server's nor a localhost page (see --origins)");
+    return 0;
+}
+
+/* The compute thread could not relight a state that clients were told `ok` about: say so
+ * once per failure to every client (an `error` event, no id) and in /healthz. */
+static void server_report_relight_failure(lc_server *s) {
+    uint64_t failures = 0;
+    char why[256];
+    uint64_t rev = lc_compute_failure(s->compute, &failures, why, sizeof why);
+    if (!rev || failures == s->relight_failures_reported) return;
+    s->relight_failures_reported = failures;
+    char msg[256];
+    snprintf(msg, sizeof msg, "relight of revision %llu failed: %.200s", (unsigned long long)rev, why);
+    lc_proto_id none = {0};
+    for (lc_session *o = s->sessions; o; o = o->next)
+        if (o->authed) session_error(s, o, &none, "internal", "", msg);
+}
+
 static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len) {
     struct lws_vhost *vh = lws_get_vhost(wsi);
     lc_server *s = vh ? lws_get_vhost_user(vh) : NULL;
     lc_session *ss = user;
     switch (reason) {
     case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION: {
-        if (s && s->n_sessions >= (uint32_t)s->cfg->max_clients) {
+        if (!s) return 1;
+        if (s->n_sessions >= (uint32_t)s->max_clients) {
             lc_warn("server", "refusing a connection: %u clients is the limit", s->n_sessions);
-            return 1;
+            return server_refuse_http(wsi, HTTP_STATUS_SERVICE_UNAVAILABLE, "too many clients\n");
         }
-        char origin[256];
-        if (s && s->cfg->origins[0] && lws_hdr_copy(wsi, origin, sizeof origin, WSI_TOKEN_ORIGIN) > 0 &&
-            !lc_config_has_token(s->cfg->origins, origin)) {
-            lc_warn("server", "refusing Origin '%s' (not in --origins)", origin);
-            return 1;
+        char why[320];
+        if (!server_origin_allowed(s, wsi, why, sizeof why)) {
+            lc_warn("server", "refusing a WebSocket handshake: %s", why);
+            server_count_error(s, "origin_refused");
+            return server_refuse_http(wsi, HTTP_STATUS_FORBIDDEN, "origin not allowed (see lucentd --help, --origins)\n");
         }
         return 0;
     }
     case LWS_CALLBACK_ESTABLISHED:
         memset(ss, 0, sizeof *ss);
         ss->wsi = wsi;
+        ss->srv = s;
         ss->connected_ms = ss->refill_ms = lc_clock_ms();
         ss->tokens = 2.0 * s->cfg->rate;
         snprintf(ss->client, sizeof ss->client, "(before hello)");
+        lws_get_peer_simple(wsi, ss->peer, sizeof ss->peer);
         ss->next = s->sessions;
         s->sessions = ss;
         s->n_sessions++;
@@ -690,17 +907,21 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         return 0;
     }
     case LWS_CALLBACK_RECEIVE: {
+        if (ss->closing) return 0; /* a closing session's requests are not served */
         if (lws_is_first_fragment(wsi)) {
             ss->rx_len = 0;
             ss->rx_oversize = 0;
             ss->rx_binary = lws_frame_is_binary(wsi);
+            /* The bound is fixed for the whole message: a SIGHUP that raises --max-message
+             * mid-message must not outgrow the buffer. Before hello only a hello fits. */
+            size_t live = (size_t)s->cfg->max_message;
+            ss->rx_limit = ss->authed || live < SERVER_HELLO_MAX ? live : SERVER_HELLO_MAX;
         }
         if (!ss->rx_binary && !ss->rx_oversize) {
-            if (ss->rx_len + len > (size_t)s->cfg->max_message) {
+            if (len > ss->rx_limit - ss->rx_len) {
                 ss->rx_oversize = 1;
             } else {
-                if (!ss->rx) ss->rx = malloc((size_t)s->cfg->max_message + 1);
-                if (!ss->rx) return -1;
+                if (session_rx_reserve(ss, ss->rx_len + len + 1) != 0) return -1;
                 if (len) memcpy(ss->rx + ss->rx_len, in, len);
                 ss->rx_len += len;
             }
@@ -710,27 +931,34 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         if (ss->rx_binary) {
             session_error(s, ss, &none, "binary_not_allowed", "", "clients send text (JSON) messages only");
         } else if (ss->rx_oversize) {
-            session_error(s, ss, &none, "too_large", "", "message over the size limit");
+            char msg[96];
+            snprintf(msg, sizeof msg, "message over the size limit (%zu bytes%s)", ss->rx_limit,
+                     ss->authed ? "" : " before hello");
+            session_error(s, ss, &none, "too_large", "", msg);
             session_close(ss, LWS_CLOSE_STATUS_MESSAGE_TOO_LARGE, "too large");
+        } else if (!lc_proto_utf8_valid(ss->rx, ss->rx_len)) {
+            /* lws's own check would close with 1007 before saying why (PROTOCOL.md §5.2). */
+            session_error(s, ss, &none, "bad_utf8", "", "the text message is not valid UTF-8");
+            session_close(ss, LWS_CLOSE_STATUS_INVALID_PAYLOAD, "bad utf-8");
         } else {
+            ss->rx[ss->rx_len] = 0;
             server_request(s, ss, ss->rx, ss->rx_len);
         }
+        if (ss->rx_cap > SERVER_HELLO_MAX) session_rx_shrink(ss); /* one large message does not pin its buffer */
         return 0;
     }
     case LWS_CALLBACK_SERVER_WRITEABLE: {
+        ss->stalled_since_ms = 0; /* the socket takes data: the client reads */
+        if (ss->closing == 2) return -1;
         if (ss->outq_n > 0) {
             char *text = ss->outq[ss->outq_head];
             size_t n = strlen(text);
-            if (ss->tx_cap < LWS_PRE + n) {
-                uint8_t *nb = realloc(ss->tx, LWS_PRE + n + 1);
-                if (!nb) return -1;
-                ss->tx = nb;
-                ss->tx_cap = LWS_PRE + n + 1;
-            }
+            if (session_tx_reserve(ss, LWS_PRE + n + 1) != 0) return -1;
             memcpy(ss->tx + LWS_PRE, text, n);
             free(text);
             ss->outq_head = (ss->outq_head + 1) % SERVER_OUTQ;
             ss->outq_n--;
+            ss->outq_bytes -= n;
             if (lws_write(wsi, ss->tx + LWS_PRE, n, LWS_WRITE_TEXT) < (int)n) return -1;
             s->bytes_sent += n;
         } else if (ss->closing) {
@@ -757,23 +985,22 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
                 break;
             }
         }
-        if (ss->authed && !session_wants_frame(ss)) ss->behind_since_ms = 0; /* caught up */
-        if (ss->outq_n > 0 || ss->closing || (ss->authed && session_wants_frame(ss))) lws_callback_on_writable(wsi);
+        /* A stream held back by its max_rate is re-armed by the tick, not here (that would spin). */
+        if (ss->outq_n > 0 || ss->closing || (ss->authed && session_frame_due(ss, lc_clock_ms())))
+            session_want_write(ss);
         return 0;
     }
     case LWS_CALLBACK_EVENT_WAIT_CANCELLED: {
-        /* The compute thread published: hand every session the newest result. */
+        /* The compute thread published (or failed): hand every session the newest result. */
         if (!s) return 0;
+        server_report_relight_failure(s);
         lc_published *p = lc_compute_take_newer(s->compute, &s->pub_seq);
         if (!p) return 0;
         for (lc_session *o = s->sessions; o; o = o->next) {
             lc_published_release(s->compute, o->frame); /* a newer frame replaces an unsent one */
             o->frame = lc_published_ref(s->compute, p);
             o->frame_seq = s->pub_seq;
-            if (session_wants_frame(o)) {
-                if (o->behind_since_ms == 0) o->behind_since_ms = lc_clock_ms();
-                lws_callback_on_writable(o->wsi);
-            }
+            if (session_wants_frame(o)) session_want_write(o);
         }
         lc_published_release(s->compute, p);
         return 0;
@@ -794,6 +1021,91 @@ static void http_append(char *buf, size_t cap, int *n, const char *fmt, ...) {
     if (w > 0) *n = (size_t)(*n + w) >= cap ? (int)cap - 1 : *n + w;
 }
 
+/* One metric's HELP and TYPE lines (Prometheus text format 0.0.4). */
+static void metric_head(char *buf, size_t cap, int *n, const char *name, const char *type, const char *help) {
+    http_append(buf, cap, n, "# HELP %s %s\n# TYPE %s %s\n", name, help, name, type);
+}
+
+static void metric_u64(char *buf, size_t cap, int *n, const char *name, const char *type, const char *help,
+                       uint64_t v) {
+    metric_head(buf, cap, n, name, type, help);
+    http_append(buf, cap, n, "%s %llu\n", name, (unsigned long long)v);
+}
+
+/* /metrics: Prometheus text, base units (seconds, bytes), every metric with HELP. */
+static int server_metrics(lc_server *s, char *body, size_t cap) {
+    int n = 0;
+    metric_u64(body, cap, &n, "lucent_clients", "gauge", "Connected WebSocket sessions.", s->n_sessions);
+    metric_u64(body, cap, &n, "lucent_revision", "gauge", "Revision of the scene state.", s->state.revision);
+    metric_u64(body, cap, &n, "lucent_frames_sent_total", "counter", "Binary frames sent to clients.",
+               s->frames_sent);
+    metric_u64(body, cap, &n, "lucent_sent_bytes_total", "counter", "Bytes of WebSocket payload sent to clients.",
+               s->bytes_sent);
+    metric_u64(body, cap, &n, "lucent_messages_received_total", "counter", "Text messages received from clients.",
+               s->messages_in);
+    metric_u64(body, cap, &n, "lucent_relights_total", "counter", "Relights published by the compute thread.",
+               lc_compute_count(s->compute));
+    uint64_t failures = 0;
+    lc_compute_failure(s->compute, &failures, NULL, 0);
+    metric_u64(body, cap, &n, "lucent_relight_failures_total", "counter",
+               "Relights that failed (reported to clients as error events).", failures);
+    uint64_t hist[LC_COMPUTE_BUCKETS];
+    double sum_ms;
+    lc_compute_histogram(s->compute, hist, &sum_ms);
+    metric_head(body, cap, &n, "lucent_relight_seconds", "histogram", "Time of one relight.");
+    for (int b = 0; b < LC_COMPUTE_BUCKETS - 1; b++)
+        http_append(body, cap, &n, "lucent_relight_seconds_bucket{le=\"%g\"} %llu\n", lc_compute_bucket_ms[b] * 1e-3,
+                    (unsigned long long)hist[b]);
+    http_append(body, cap, &n,
+                "lucent_relight_seconds_bucket{le=\"+Inf\"} %llu\nlucent_relight_seconds_sum %.6f\n"
+                "lucent_relight_seconds_count %llu\n",
+                (unsigned long long)hist[LC_COMPUTE_BUCKETS - 1], sum_ms * 1e-3,
+                (unsigned long long)hist[LC_COMPUTE_BUCKETS - 1]);
+    metric_u64(body, cap, &n, "lucent_journal_failures_total", "counter",
+               "Journal writes or fsyncs that failed (appends refused, or an everysec fsync).", lc_journal_failures(s->journal));
+    metric_u64(body, cap, &n, "lucent_journal_broken", "gauge",
+               "1 while changes are refused after a failed journal fsync (until a snapshot succeeds).",
+               (uint64_t)lc_journal_broken(s->journal));
+    metric_u64(body, cap, &n, "lucent_clients_dropped_total", "counter",
+               "Clients dropped for not taking their output (slow or not reading).", s->dropped_slow);
+    metric_u64(body, cap, &n, "lucent_auth_failures_total", "counter", "Hellos refused for an unknown token.",
+               s->auth_failures);
+    metric_u64(body, cap, &n, "lucent_accept_errors_total", "counter",
+               "Failed accept() calls (e.g. out of file descriptors).", server_accept_errors);
+    metric_head(body, cap, &n, "lucent_errors_total", "counter", "Error replies sent, by code.");
+    for (int i = 0; i < 32 && s->error_codes[i][0]; i++)
+        http_append(body, cap, &n, "lucent_errors_total{code=\"%s\"} %llu\n", s->error_codes[i],
+                    (unsigned long long)s->errors[i]);
+    return n;
+}
+
+/* /healthz: 200 "ok" while the service can take changes and relight them; 503 with the cause
+ * when the journal refuses changes or the newest relight failed. */
+static int server_health(lc_server *s, char *body, size_t cap, unsigned *status) {
+    char why[256];
+    uint64_t failed = lc_compute_failure(s->compute, NULL, why, sizeof why);
+    *status = HTTP_STATUS_SERVICE_UNAVAILABLE;
+    if (lc_journal_broken(s->journal))
+        return snprintf(body, cap, "unavailable revision %llu: the journal refuses changes after a failed fsync\n",
+                        (unsigned long long)s->state.revision);
+    if (failed)
+        return snprintf(body, cap, "degraded revision %llu: relight of revision %llu failed: %.200s\n",
+                        (unsigned long long)s->state.revision, (unsigned long long)failed, why);
+    *status = HTTP_STATUS_OK;
+    return snprintf(body, cap, "ok revision %llu\n", (unsigned long long)s->state.revision);
+}
+
+/* --www: 1 when the file a request maps to lies inside the root once symlinks are resolved
+ * (a link under the root must not publish /etc). Missing files pass: lws answers 404. */
+static int server_www_path_allowed(const lc_server *s, const char *uri) {
+    char root[PATH_MAX], path[PATH_MAX * 2], real[PATH_MAX];
+    if (!realpath(s->cfg->www, root)) return 0;
+    snprintf(path, sizeof path, "%s/%s", s->cfg->www, uri[0] == '/' ? uri + 1 : uri);
+    if (!realpath(path, real)) return errno == ENOENT || errno == ENOTDIR;
+    size_t rl = strlen(root);
+    return !strcmp(real, root) || (!strncmp(real, root, rl) && real[rl] == '/');
+}
+
 /* HTTP on the same port: /healthz, /metrics; everything else goes to the static mount. */
 static int server_http_callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len) {
     struct lws_vhost *vh = lws_get_vhost(wsi);
@@ -804,78 +1116,57 @@ static int server_http_callback(struct lws *wsi, enum lws_callback_reasons reaso
         lc_info("server", "refusing a WebSocket handshake without subprotocol %s", LC_PROTO_SUBPROTOCOL);
         return 1;
     }
+    if (reason == LWS_CALLBACK_FILTER_HTTP_CONNECTION && s && s->cfg->www[0]) {
+        const char *uri = in;
+        if (strcmp(uri, "/healthz") && strcmp(uri, "/metrics") && !server_www_path_allowed(s, uri)) {
+            lc_warn("server", "refusing %s: it resolves outside --www", uri);
+            server_refuse_http(wsi, HTTP_STATUS_FORBIDDEN, "forbidden\n");
+            return 1;
+        }
+        return 0;
+    }
     if (reason == LWS_CALLBACK_HTTP && s) {
         const char *uri = in;
-        char body[8192];
+        static unsigned char out[LWS_PRE + 16384]; /* service thread only */
+        char *body = (char *)out + LWS_PRE;
+        const size_t cap = sizeof out - LWS_PRE;
         int n = -1;
-        if (!strcmp(uri, "/healthz")) {
-            n = snprintf(body, sizeof body, "ok revision %llu\n", (unsigned long long)s->state.revision);
-        } else if (!strcmp(uri, "/metrics")) {
-            n = 0;
-            http_append(body, sizeof body, &n,
-                        "# TYPE lucent_clients gauge\nlucent_clients %u\n"
-                        "# TYPE lucent_revision gauge\nlucent_revision %llu\n"
-                        "# TYPE lucent_frames_sent_total counter\nlucent_frames_sent_total %llu\n"
-                        "# TYPE lucent_bytes_sent_total counter\nlucent_bytes_sent_total %llu\n"
-                        "# TYPE lucent_messages_received_total counter\nlucent_messages_received_total %llu\n"
-                        "# TYPE lucent_relights_total counter\nlucent_relights_total %llu\n",
-                        s->n_sessions, (unsigned long long)s->state.revision, (unsigned long long)s->frames_sent,
-                        (unsigned long long)s->bytes_sent, (unsigned long long)s->messages_in,
-                        (unsigned long long)lc_compute_count(s->compute));
-            uint64_t hist[LC_COMPUTE_BUCKETS];
-            double sum_ms;
-            lc_compute_histogram(s->compute, hist, &sum_ms);
-            http_append(body, sizeof body, &n, "# TYPE lucent_relight_ms histogram\n");
-            for (int b = 0; b < LC_COMPUTE_BUCKETS - 1; b++)
-                http_append(body, sizeof body, &n, "lucent_relight_ms_bucket{le=\"%g\"} %llu\n", lc_compute_bucket_ms[b],
-                            (unsigned long long)hist[b]);
-            http_append(body, sizeof body, &n,
-                        "lucent_relight_ms_bucket{le=\"+Inf\"} %llu\nlucent_relight_ms_sum %.3f\n"
-                        "lucent_relight_ms_count %llu\n# TYPE lucent_errors_total counter\n",
-                        (unsigned long long)hist[LC_COMPUTE_BUCKETS - 1], sum_ms,
-                        (unsigned long long)hist[LC_COMPUTE_BUCKETS - 1]);
-            for (int i = 0; i < 32 && s->error_codes[i][0]; i++)
-                http_append(body, sizeof body, &n, "lucent_errors_total{code=\"%s\"} %llu\n", s->error_codes[i],
-                            (unsigned long long)s->errors[i]);
-        }
+        unsigned status = HTTP_STATUS_OK;
+        if (!strcmp(uri, "/healthz")) n = server_health(s, body, cap, &status);
+        else if (!strcmp(uri, "/metrics")) n = server_metrics(s, body, cap);
         if (n >= 0) {
-            unsigned char buf[LWS_PRE + 8192 + 512], *start = buf + LWS_PRE, *p = start, *end = buf + sizeof buf;
-            if (lws_add_http_common_headers(wsi, HTTP_STATUS_OK, "text/plain; version=0.0.4", (lws_filepos_t)n, &p,
-                                            end) ||
+            unsigned char buf[LWS_PRE + 512], *start = buf + LWS_PRE, *p = start, *end = buf + sizeof buf;
+            if (lws_add_http_common_headers(wsi, status, "text/plain; version=0.0.4", (lws_filepos_t)n, &p, end) ||
                 lws_finalize_write_http_header(wsi, start, &p, end))
                 return 1;
-            memcpy(p, body, (size_t)n);
-            if (lws_write(wsi, p, (size_t)n, LWS_WRITE_HTTP_FINAL) != n) return 1;
+            if (lws_write(wsi, (unsigned char *)body, (size_t)n, LWS_WRITE_HTTP_FINAL) != n) return 1;
             return lws_http_transaction_completed(wsi) ? -1 : 0;
         }
     }
     return lws_callback_http_dummy(wsi, reason, user, in, len);
 }
 
-/* Once a second: hello timeouts, everysec fsync, rate-limited streams. */
+/* Every 250 ms: hello timeouts, sessions that stopped reading, everysec fsync, rate-limited
+ * streams. */
 static void server_tick(lws_sorted_usec_list_t *sul) {
     lc_server *s = lws_container_of(sul, lc_server, tick);
     double now = lc_clock_ms();
     for (lc_session *ss = s->sessions; ss; ss = ss->next) {
+        if (ss->closing == 2) continue;
         if (!ss->authed && !ss->closing && now - ss->connected_ms > s->cfg->hello_timeout * 1000.0) {
             lc_proto_id none = {0};
             session_error(s, ss, &none, "hello_required", "", "no hello within the time limit");
             session_close(ss, LWS_CLOSE_STATUS_POLICY_VIOLATION, "hello timeout");
         }
-        if (ss->authed && session_wants_frame(ss)) {
-            /* A client that cannot take frames (its socket is full) must not hold the others
-             * back or grow memory: past the limit it is dropped, without a close handshake
-             * it could not read anyway. */
-            if (ss->behind_since_ms > 0 && now - ss->behind_since_ms > s->cfg->slow_timeout * 1000.0) {
-                lc_warn("server", "client '%s' left frames unread for %d s; dropping it (1008)", ss->client,
-                        s->cfg->slow_timeout);
-                lws_close_reason(ss->wsi, LWS_CLOSE_STATUS_POLICY_VIOLATION, (unsigned char *)"too slow", 8);
-                lws_set_timeout(ss->wsi, PENDING_TIMEOUT_USER_OK, LWS_TO_KILL_ASYNC);
-                ss->behind_since_ms = 0;
-                continue;
-            }
-            lws_callback_on_writable(ss->wsi);
+        /* A client that takes none of its output (replies or frames: its socket stays full)
+         * must not hold memory or the others back: past --slow-timeout it is dropped. */
+        if (ss->stalled_since_ms > 0 && now - ss->stalled_since_ms > s->cfg->slow_timeout * 1000.0) {
+            char why[96];
+            snprintf(why, sizeof why, "took no output for %d s", s->cfg->slow_timeout);
+            session_drop(ss, why);
+            continue;
         }
+        if (ss->authed && session_frame_due(ss, now)) session_want_write(ss);
     }
     lc_journal_tick(s->journal, &s->state);
     lws_sul_schedule(s->ctx, 0, &s->tick, server_tick, 250 * LWS_US_PER_MS);
@@ -889,6 +1180,75 @@ static const struct lws_protocols server_protocols[] = {
 
 /* --- run ------------------------------------------------------------------------------------------ */
 
+/* 1 when the state dir holds no state yet: no snapshot and an absent or empty journal. */
+static int server_state_dir_fresh(const char *dir) {
+    char path[LC_CONFIG_PATH_MAX + 32];
+    struct stat st;
+    snprintf(path, sizeof path, "%.1024s/snapshot.json", dir);
+    if (stat(path, &st) == 0) return 0;
+    snprintf(path, sizeof path, "%.1024s/journal.log", dir);
+    return stat(path, &st) != 0 || st.st_size == 0;
+}
+
+/* --- descriptors ------------------------------------------------------------------------------ */
+
+/* What lucentd keeps for itself beyond the sockets: journal, snapshot writes, the bake, the
+ * engine's and the log's files. */
+#define SERVER_FD_RESERVE 32
+
+/* Descriptors the sockets may use: the open-files limit (the soft limit is raised to the hard
+ * one, as Redis does) minus what is open now and SERVER_FD_RESERVE. libwebsockets stops
+ * accepting when its table is full, so this keeps accept() from failing with EMFILE, where it
+ * would spin on the listening socket. 0 when unknown. */
+static unsigned server_fd_budget(void) {
+    struct rlimit rl;
+    if (getrlimit(RLIMIT_NOFILE, &rl) != 0) return 0;
+    if (rl.rlim_cur < rl.rlim_max) {
+        struct rlimit want = rl;
+        want.rlim_cur = rl.rlim_max == RLIM_INFINITY || rl.rlim_max > 1048576 ? 1048576 : rl.rlim_max;
+        if (setrlimit(RLIMIT_NOFILE, &want) == 0) rl = want;
+    }
+    unsigned open_now = 0;
+    DIR *d = opendir("/proc/self/fd");
+    if (d) {
+        for (struct dirent *e; (e = readdir(d));)
+            if (e->d_name[0] != '.') open_now++;
+        closedir(d);
+    }
+    if (rl.rlim_cur == RLIM_INFINITY) return 0;
+    if (rl.rlim_cur <= open_now + SERVER_FD_RESERVE + 16) return 16;
+    return (unsigned)rl.rlim_cur - open_now - SERVER_FD_RESERVE;
+}
+
+/* --max-clients, lowered to what the descriptor budget allows (a few sockets are lws's own:
+ * the listener, its wake-up pipe, HTTP requests). */
+static uint32_t server_max_clients(int configured, unsigned fd_budget) {
+    uint32_t n = (uint32_t)configured;
+    if (fd_budget && n > fd_budget - 8) n = fd_budget > 9 ? fd_budget - 8 : 1;
+    return n;
+}
+
+/* lws logs through here (service thread). accept() failures are counted and logged once per
+ * 10 s, and make the loop back off (server_accept_backoff) instead of spinning. */
+static void server_lws_log(int level, const char *line) {
+    size_t n = strlen(line);
+    while (n && (line[n - 1] == '\n' || line[n - 1] == '\r')) n--;
+    if (strstr(line, "accept:")) {
+        server_accept_errors++;
+        server_accept_failed = 1;
+        double now = lc_clock_ms();
+        if (now - server_accept_logged_ms < 10000) return;
+        lc_error("server", "cannot accept connections: %.*s (%llu times in the last interval; raise the "
+                 "open-files limit or lower --max-clients)", (int)n, line,
+                 (unsigned long long)(server_accept_errors - server_accept_logged_count));
+        server_accept_logged_ms = now;
+        server_accept_logged_count = server_accept_errors;
+        return;
+    }
+    if (level & LLL_ERR) lc_error("lws", "%.*s", (int)n, line);
+    else lc_warn("lws", "%.*s", (int)n, line);
+}
+
 /* SIGHUP: parse the configuration again and apply what can change while running. */
 static void server_reload(lc_server *s) {
     static lc_config next;
@@ -901,6 +1261,7 @@ static void server_reload(lc_server *s) {
     s->limits.max_message = (size_t)s->cfg->max_message;
     s->limits.max_depth = s->cfg->max_depth;
     s->limits.max_batch = (uint32_t)s->cfg->max_batch;
+    s->max_clients = server_max_clients(s->cfg->max_clients, s->fd_budget);
     lc_log_set_level((lc_log_level)s->cfg->log_level);
     lc_info("server", "SIGHUP: configuration reloaded%s%s", restart[0] ? "; needs a restart to change: " : "",
             restart);
@@ -933,6 +1294,13 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     lc_state_limits sl = {(uint32_t)cfg->max_lights, (uint32_t)cfg->max_objects};
     if (lc_state_init(&s.state, bake, &sl) != 0) return 1;
     s.state.settings.bounces = (uint32_t)cfg->bounces; /* a restored snapshot's settings replace this */
+    /* A fresh state dir starts with the bake's own lights (KHR_lights_punctual: the scene's
+     * initial lights); from then on the snapshot holds what clients made of them. */
+    const int fresh = server_state_dir_fresh(cfg->state_dir);
+    if (fresh && lc_state_seed(&s.state, err, sizeof err) != 0) {
+        lc_error("server", "%s", err);
+        goto done;
+    }
     /* --recover: the snapshot plus the journal's valid prefix; the journal reports what it drops. */
     s.journal = cfg->recover
                     ? lc_journal_recover(cfg->state_dir, (lc_fsync_mode)cfg->fsync_mode, &s.state, NULL, err, sizeof err)
@@ -941,15 +1309,24 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
         lc_error("server", "%s", err);
         goto done;
     }
-    lc_info("server", "state restored from %s: revision %llu, %u lights, %u objects", cfg->state_dir,
-            (unsigned long long)s.state.revision, s.state.n_lights, s.state.n_objects);
+    lc_info("server", "state %s %s: revision %llu, %u lights, %u objects", fresh ? "created in" : "restored from",
+            cfg->state_dir, (unsigned long long)s.state.revision, s.state.n_lights, s.state.n_objects);
+    if (fresh && s.state.n_lights && lc_journal_compact(s.journal, &s.state, err, sizeof err) != 0) {
+        lc_error("server", "writing the initial snapshot: %s", err);
+        goto done;
+    }
     s.asset_names = calloc(s.v->n_assets + 1, sizeof *s.asset_names);
     s.material_names = calloc(s.v->n_materials + 1, sizeof *s.material_names);
     if (!s.asset_names || !s.material_names) goto done;
     for (uint32_t i = 0; i < s.v->n_assets; i++) s.asset_names[i] = s.v->assets[i].name;
     for (uint32_t i = 0; i < s.v->n_materials; i++) s.material_names[i] = s.v->materials[i].name;
 
-    lws_set_log_level(LLL_ERR | LLL_WARN, NULL);
+    lws_set_log_level(LLL_ERR | LLL_WARN, server_lws_log);
+    s.fd_budget = server_fd_budget();
+    s.max_clients = server_max_clients(cfg->max_clients, s.fd_budget);
+    if (s.max_clients < (uint32_t)cfg->max_clients)
+        lc_warn("server", "--max-clients %d lowered to %u: the open-files limit leaves %u descriptors (ulimit -n)",
+                cfg->max_clients, s.max_clients, s.fd_budget);
     struct lws_http_mount mount;
     memset(&mount, 0, sizeof mount);
     mount.mountpoint = "/";
@@ -964,8 +1341,11 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     info.protocols = server_protocols;
     info.mounts = cfg->www[0] ? &mount : NULL;
     info.user = &s;
-    info.options = LWS_SERVER_OPTION_VALIDATE_UTF8 | LWS_SERVER_OPTION_HTTP_HEADERS_SECURITY_BEST_PRACTICES_ENFORCE;
+    /* UTF-8 is checked per message (the receive path), so the client hears `bad_utf8` before
+     * the 1007 close instead of lws closing silently. */
+    info.options = LWS_SERVER_OPTION_HTTP_HEADERS_SECURITY_BEST_PRACTICES_ENFORCE;
     info.pt_serv_buf_size = 65536;
+    info.fd_limit_per_thread = s.fd_budget;
     if (cfg->tls_cert[0]) {
         info.options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT;
         info.ssl_cert_filepath = cfg->tls_cert;
@@ -998,6 +1378,11 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     lws_sul_schedule(s.ctx, 0, &s.tick, server_tick, 250 * LWS_US_PER_MS);
     while (!server_stop_flag) {
         if (lws_service(s.ctx, 0) < 0) break;
+        if (server_accept_failed) { /* out of descriptors: let the clients' sockets drain */
+            server_accept_failed = 0;
+            struct timespec pause = {0, 50 * 1000 * 1000};
+            nanosleep(&pause, NULL);
+        }
         if (server_reload_flag) {
             server_reload_flag = 0;
             server_reload(&s);
@@ -1008,11 +1393,15 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     for (int i = 0; i < 20 && s.n_sessions; i++) lws_service(s.ctx, 0);
     rc = 0;
 done:
+    /* The compute thread first: a relight in flight ends with lws_cancel_service(), which must
+     * not touch a destroyed context. Sessions then release their frames as the context closes
+     * them, and only then is the compute object freed. */
+    lc_compute_stop(s.compute);
     if (s.ctx) {
         lws_sul_cancel(&s.tick);
-        lws_context_destroy(s.ctx); /* closes remaining sessions: they release their frames */
+        lws_context_destroy(s.ctx);
     }
-    lc_compute_stop(s.compute);
+    lc_compute_release(s.compute);
     if (s.journal && rc == 0) {
         if (lc_journal_compact(s.journal, &s.state, err, sizeof err) != 0) lc_error("server", "final snapshot: %s", err);
     }

@@ -1,6 +1,8 @@
 /* state: the dynamic scene state and its atomic, validated changes (see state.h). */
 #include "state.h"
 
+#include <cjson/cJSON.h>
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -191,6 +193,96 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
     }
 }
 
+/* The relight engine's own validation of the whole resulting state, so nothing is
+ * acknowledged that the engine would refuse after the `ok`. Its path ("/lights/3/...")
+ * names the state's light by index: the message names it by id. */
+static int state_engine_check(const lc_state *s, lc_proto_error *err) {
+    lc_engine_state es;
+    lc_engine_light *lights;
+    lc_engine_object *objects;
+    float *emission;
+    if (lc_state_to_engine(s, &es, &lights, &objects, &emission) != 0) {
+        state_err(err, "internal", 0, 0, "", "%s", "out of memory checking the change");
+        return -1;
+    }
+    char why[200];
+    int rc = lc_engine_check_state(s->scene, &es, why, sizeof why);
+    if (rc != 0) {
+        unsigned idx;
+        int used = 0;
+        state_err(err, "out_of_range", 0, 0, "", "%s", why);
+        if (!err) {
+        } else if (sscanf(why, "/lights/%u/%n", &idx, &used) == 1 && used > 0 && idx < s->n_lights)
+            snprintf(err->message, sizeof err->message, "light '%.64s': %.150s", s->lights[idx].id, why + used);
+        else if (sscanf(why, "/objects/%u/%n", &idx, &used) == 1 && used > 0 && idx < s->n_objects)
+            snprintf(err->message, sizeof err->message, "object '%.64s': %.150s", s->objects[idx].id, why + used);
+    }
+    free(lights);
+    free(objects);
+    free(emission);
+    return rc;
+}
+
+int lc_state_seed(lc_state *s, char *err, size_t errlen) {
+    int rc = -1;
+    char *text = NULL;
+    size_t n = 0, cap = 64;
+    cJSON *meta = cJSON_ParseWithLength(s->scene->meta_json, s->scene->meta_len);
+    const cJSON *lights = meta ? cJSON_GetObjectItemCaseSensitive(meta, "lights") : NULL;
+    if (!cJSON_IsArray(lights) || cJSON_GetArraySize(lights) == 0) {
+        rc = 0; /* no lights in the bake */
+        goto err;
+    }
+    /* The bake stores lucent/1 light objects: replay them as one batch of light.set, so they
+     * pass the same validation (and limits) as a client's change. */
+    int count = cJSON_GetArraySize(lights);
+    char **parts = calloc((size_t)count, sizeof *parts);
+    if (!parts) goto oom;
+    int k = 0;
+    for (const cJSON *l = lights->child; l; l = l->next, k++) {
+        parts[k] = cJSON_PrintUnformatted(l);
+        if (!parts[k]) break;
+        cap += strlen(parts[k]) + 32;
+    }
+    text = k == count ? malloc(cap) : NULL;
+    if (text) {
+        n = (size_t)snprintf(text, cap, "{\"type\":\"batch\",\"ops\":[");
+        for (int i = 0; i < count; i++)
+            n += (size_t)snprintf(text + n, cap - n, "%s{\"type\":\"light.set\",\"light\":%s}", i ? "," : "", parts[i]);
+        n += (size_t)snprintf(text + n, cap - n, "]}");
+    }
+    for (int i = 0; i < count; i++) cJSON_free(parts[i]);
+    free(parts);
+    if (!text) goto oom;
+    lc_proto_limits lim;
+    lc_proto_default_limits(&lim);
+    lim.max_message = n + 1;
+    lim.max_batch = (uint32_t)count;
+    lc_proto_request req;
+    lc_proto_error perr;
+    if (lc_proto_parse_request(text, n, &lim, &req, &perr) != 0) {
+        lc_set_err(err, errlen, "the bake's lights: %s at %s: %s", perr.code, perr.pointer, perr.message);
+        goto err;
+    }
+    uint64_t revision = s->revision;
+    int applied = lc_state_apply(s, req.ops, req.n_ops, 1, &perr);
+    lc_proto_request_release(&req);
+    if (applied != 0) {
+        lc_set_err(err, errlen, "the bake's lights: %s at %s: %s (raise --max-lights?)", perr.code, perr.pointer,
+                   perr.message);
+        goto err;
+    }
+    s->revision = revision; /* the initial state, not a change */
+    rc = 0;
+    goto err;
+oom:
+    lc_set_err(err, errlen, "out of memory reading the bake's lights");
+err:
+    free(text);
+    cJSON_Delete(meta);
+    return rc;
+}
+
 int lc_state_apply(lc_state *s, const lc_proto_op *ops, uint32_t n_ops, int batch, lc_proto_error *err) {
     lc_state next;
     if (lc_state_clone(&next, s) != 0) goto oom;
@@ -206,6 +298,10 @@ int lc_state_apply(lc_state *s, const lc_proto_op *ops, uint32_t n_ops, int batc
             lc_state_release(&next);
             return -1;
         }
+    if (state_engine_check(&next, err) != 0) {
+        lc_state_release(&next);
+        return -1;
+    }
     next.revision = s->revision + 1;
     lc_state_release(s);
     *s = next;

@@ -29,9 +29,13 @@ typedef struct lc_state {
     lc_proto_settings settings; /* every field present */
 } lc_state;
 
-/* Initial state: no lights or objects (the bake's own lights are offered by lc_state_seed),
+/* Initial state: no lights or objects (the bake's own lights are added by lc_state_seed),
  * the bake's material emission, no environment, engine default settings. */
 int lc_state_init(lc_state *s, const lc_lcb *bake, const lc_state_limits *limits);
+/* Adds the bake's own lights (KHR_lights_punctual, in META "lights") to a fresh state, as
+ * validated as a client's light.set; the revision stays. Returns 0 or -1 with err (a light
+ * the limits or the validation refuse). */
+int lc_state_seed(lc_state *s, char *err, size_t errlen);
 void lc_state_release(lc_state *s);
 /* Deep copy (dst uninitialised). Returns 0 or -1 (out of memory). */
 int lc_state_clone(lc_state *dst, const lc_state *src);

@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "lucent_proto.h"
+#include "util/limits.h"
 #include "util/utf8.h"
 
 #define PROTO_STR_MAX 256     /* §1.3: string length */
@@ -52,9 +53,9 @@ const char *lc_proto_encoding_name(lc_encoding e) {
 }
 
 void lc_proto_default_limits(lc_proto_limits *lim) {
-    lim->max_message = 65536;
-    lim->max_depth = 16;
-    lim->max_batch = 64;
+    lim->max_message = LC_LIMIT_MESSAGE;
+    lim->max_depth = LC_LIMIT_DEPTH;
+    lim->max_batch = LC_LIMIT_BATCH;
 }
 
 /* --- errors and pointers ---------------------------------------------------------------- */

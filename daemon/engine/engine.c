@@ -230,7 +230,10 @@ static int engine_finite(const float *x, int n, double limit) {
 static float engine_len(const float d[3]) { return sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]); }
 
 int lc_engine_validate_state(const lc_engine *e, const lc_engine_state *st, char *err, size_t errlen) {
-    const lc_lcb_view *v = e->v;
+    return lc_engine_check_state(e->v, st, err, errlen);
+}
+
+int lc_engine_check_state(const lc_lcb_view *v, const lc_engine_state *st, char *err, size_t errlen) {
     if (st->n_lights > LC_ENGINE_MAX_LIGHTS || (st->n_lights && !st->lights)) {
         lc_set_err(err, errlen, "/lights: at most %d lights", LC_ENGINE_MAX_LIGHTS);
         return -1;

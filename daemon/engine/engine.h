@@ -14,10 +14,11 @@
 #include <stdint.h>
 
 #include "lcb/lcb.h"
+#include "util/limits.h"
 
 #define LC_ENGINE_ID_MAX 65 /* ids up to 64 bytes, as lucent/1 allows */
-#define LC_ENGINE_MAX_LIGHTS 1024
-#define LC_ENGINE_MAX_OBJECTS 4096
+#define LC_ENGINE_MAX_LIGHTS LC_LIMIT_LIGHTS
+#define LC_ENGINE_MAX_OBJECTS LC_LIMIT_OBJECTS
 
 typedef enum { LC_BACKEND_AUTO = 0, LC_BACKEND_CPU, LC_BACKEND_EGL } lc_backend_kind;
 
@@ -124,6 +125,9 @@ const char *lc_engine_backend_name(const lc_engine *e);
 /* Validates state (finite numbers, ranges, asset indices; err names the field as a JSON
  * pointer-like path, e.g. "/lights/3/intensity") without relighting. */
 int lc_engine_validate_state(const lc_engine *e, const lc_engine_state *state, char *err, size_t errlen);
+/* The same checks against a bake alone (no engine): the daemon runs them before it
+ * acknowledges a change, on the service thread. */
+int lc_engine_check_state(const lc_lcb_view *bake, const lc_engine_state *state, char *err, size_t errlen);
 
 /* Relights for `state`. Work whose inputs did not change is skipped (e.g. moving an
  * object redoes direct light but not the sky's per-surfel rays unless the environment is

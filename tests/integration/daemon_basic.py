@@ -196,7 +196,7 @@ async def scenario(state_dir):
         check(body.startswith("ok"), "healthz: %r" % body)
         metrics = urllib.request.urlopen("http://127.0.0.1:%d/metrics" % port, timeout=5).read().decode()
         check("lucent_clients 2" in metrics and "lucent_errors_total{code=\"unknown_type\"} 1" in metrics and
-              "lucent_relight_ms_bucket{le=\"+Inf\"}" in metrics and "lucent_relight_ms_count" in metrics,
+              "lucent_relight_seconds_bucket{le=\"+Inf\"}" in metrics and "lucent_relight_seconds_count" in metrics,
               "metrics: %r" % metrics[:400])
         await ws2.close()
         await ws.close()

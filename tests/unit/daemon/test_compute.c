@@ -2,6 +2,7 @@
  * latest wins; a discarded submission (its journal write failed) is never handed out —
  * whether it was pending, running or already published — while the next one is. */
 #include <libwebsockets.h>
+#include <math.h>
 #include <time.h>
 
 #include "../engine/engine_fixture.h"
@@ -86,7 +87,43 @@ int main(void) {
     w = wait_pub(c, &seen, 5000);
     CHECK(w && w->job == job3, "the resubmission is published after a withdrawal");
     lc_published_release(c, w);
-    lc_compute_stop(c);
+    /* A relight that fails (a state the engine refuses, slipped past the checks) is
+     * recorded for the service thread to report, and cleared by the next good relight. */
+    {
+        CHECK(lc_compute_failure(c, NULL, NULL, 0) == 0, "no failure recorded after good relights");
+        lc_proto_light bad;
+        memset(&bad, 0, sizeof bad);
+        snprintf(bad.id, sizeof bad.id, "nan");
+        bad.type = LC_PLIGHT_POINT;
+        bad.color[0] = bad.color[1] = bad.color[2] = 1;
+        bad.intensity = NAN;
+        lc_state broken;
+        CHECK(lc_state_clone(&broken, &s) == 0, "clone");
+        lc_proto_light *nl = realloc(broken.lights, sizeof *nl);
+        if (nl) {
+            broken.lights = nl;
+            broken.lights[0] = bad;
+            broken.n_lights = 1;
+        }
+        broken.revision = 777;
+        uint64_t failures = 0;
+        char why[256] = "";
+        CHECK(lc_compute_submit(c, &broken, NULL) == 0, "submit a state the engine refuses");
+        for (int i = 0; i < 1000 && lc_compute_failure(c, &failures, why, sizeof why) == 0; i++) {
+            struct timespec ts = {0, 2 * 1000 * 1000};
+            nanosleep(&ts, NULL);
+        }
+        CHECK(lc_compute_failure(c, &failures, why, sizeof why) == 777 && failures == 1 && strstr(why, "intensity"),
+              "the failed relight is recorded with its revision and cause (%llu: %s)", (unsigned long long)failures, why);
+        lc_state_release(&broken);
+        s.revision++;
+        CHECK(lc_compute_submit(c, &s, NULL) == 0, "submit a good state");
+        lc_published *g = wait_pub(c, &seen, 5000);
+        CHECK(g != NULL && lc_compute_failure(c, &failures, NULL, 0) == 0 && failures == 1,
+              "a good relight clears the failure, the count stays");
+        lc_published_release(c, g);
+    }
+    lc_compute_release(c);
     lc_state_release(&s);
     lws_context_destroy(ctx);
     fixture_release(&f);

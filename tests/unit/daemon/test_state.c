@@ -168,6 +168,30 @@ int main(void) {
     snprintf(path, sizeof path, "%s/snapshot.json", dir);
     unlink(path);
     rmdir(dir);
+    /* What the engine would refuse is refused before the ok (issue 13): a spot whose inner
+     * cone exceeds its outer one, built past the protocol parser, must not be acknowledged. */
+    {
+        lc_proto_op bad = light_op("spot", 1);
+        bad.light.type = LC_PLIGHT_SPOT;
+        bad.light.direction[1] = -1;
+        bad.light.inner_cone = 1.0f;
+        bad.light.outer_cone = 0.5f;
+        uint64_t rev = s.revision;
+        uint32_t nl = s.n_lights;
+        CHECK(lc_state_apply(&s, &bad, 1, 0, &e) != 0, "a state the engine refuses is refused by lc_state_apply");
+        CHECK(!strcmp(e.code, "out_of_range") && strstr(e.message, "light 'spot'") &&
+                  strstr(e.message, "outerConeAngle"),
+              "the engine's refusal names the light and the field: %s %s", e.code, e.message);
+        CHECK(s.revision == rev && s.n_lights == nl, "a refused change leaves the state as it was");
+    }
+    /* The bake's own lights seed a fresh state (this bake has none: nothing changes). */
+    {
+        char serr[256];
+        uint64_t rev = s.revision;
+        uint32_t nl = s.n_lights;
+        CHECK(lc_state_seed(&s, serr, sizeof serr) == 0 && s.revision == rev && s.n_lights == nl,
+              "seeding from a bake without lights changes nothing");
+    }
     lc_state_release(&s);
     lc_state_release(&s1);
     lc_state_release(&s2);
