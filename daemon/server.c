@@ -132,6 +132,7 @@ struct lc_server {
     char error_codes[32][32];
     uint64_t dropped_slow;      /* sessions dropped for not taking their output */
     uint64_t auth_failures;     /* hellos with an unknown token */
+    uint64_t reloads;           /* SIGHUPs whose configuration was applied */
     server_auth_peer auth_peers[SERVER_AUTH_PEERS];
     uint64_t relight_failures_reported; /* compute failures already told to clients */
 };
@@ -1070,6 +1071,8 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
                "Clients dropped for not taking their output (slow or not reading).", s->dropped_slow);
     metric_u64(body, cap, &n, "lucent_auth_failures_total", "counter", "Hellos refused for an unknown token.",
                s->auth_failures);
+    metric_u64(body, cap, &n, "lucent_config_reloads_total", "counter",
+               "SIGHUP reloads whose configuration was applied (tests wait on it).", s->reloads);
     metric_u64(body, cap, &n, "lucent_accept_errors_total", "counter",
                "Failed accept() calls (e.g. out of file descriptors).", server_accept_errors);
     metric_head(body, cap, &n, "lucent_errors_total", "counter", "Error replies sent, by code.");
@@ -1258,6 +1261,7 @@ static void server_reload(lc_server *s) {
         return;
     }
     lc_config_apply_reloadable(s->cfg, &next, restart, sizeof restart);
+    s->reloads++;
     s->limits.max_message = (size_t)s->cfg->max_message;
     s->limits.max_depth = s->cfg->max_depth;
     s->limits.max_batch = (uint32_t)s->cfg->max_batch;
