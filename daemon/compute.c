@@ -2,7 +2,6 @@
  * sequence, stop, count and every lc_published refcount. */
 #include "compute.h"
 
-#include <libwebsockets.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
@@ -24,7 +23,8 @@ typedef struct compute_job {
 
 struct lc_compute {
     const lc_lcb *bake;
-    struct lws_context *ctx;
+    lc_compute_wake_fn wake; /* read-only after start */
+    void *wake_arg;
     int backend, threads, refine_passes, refine_delay_ms;
     pthread_t thread;
     pthread_mutex_t lock;
@@ -176,7 +176,7 @@ static void *compute_main(void *arg) {
             c->failed_revision = last->st.revision ? last->st.revision : 1;
             snprintf(c->failure, sizeof c->failure, "%.255s", err);
             pthread_mutex_unlock(&c->lock);
-            lws_cancel_service(c->ctx);
+            c->wake(c->wake_arg);
             continue;
         }
         pthread_mutex_lock(&c->lock);
@@ -197,7 +197,7 @@ static void *compute_main(void *arg) {
         c->hist_sum_ms += p->relight_ms;
         if (old && --old->refs == 0) published_free(old);
         pthread_mutex_unlock(&c->lock);
-        lws_cancel_service(c->ctx); /* the only lws call allowed off the service thread */
+        c->wake(c->wake_arg); /* lucentd: lws_cancel_service(), the only lws call made off the service thread */
         clock_gettime(CLOCK_MONOTONIC, &refine_due);
         if (job) refine_due.tv_nsec += (long)c->refine_delay_ms * 1000000L; /* later passes: back to back */
         refine_due.tv_sec += refine_due.tv_nsec / 1000000000L;
@@ -209,14 +209,15 @@ static void *compute_main(void *arg) {
 }
 
 lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, int refine_delay_ms,
-                             struct lws_context *ctx, char *err, size_t errlen) {
+                             lc_compute_wake_fn wake, void *wake_arg, char *err, size_t errlen) {
     lc_compute *c = calloc(1, sizeof *c);
     if (!c) {
         lc_set_err(err, errlen, "out of memory");
         return NULL;
     }
     c->bake = bake;
-    c->ctx = ctx;
+    c->wake = wake;
+    c->wake_arg = wake_arg;
     c->backend = backend;
     c->threads = threads;
     c->refine_passes = refine_passes;

@@ -1,7 +1,8 @@
 /* compute: the relight engine on its own thread. The service thread submits state copies
  * (latest wins: a submission replaces one not yet started, so a burst of updates costs one
  * relight); the compute thread relights, publishes an immutable, refcounted result under
- * `compute.lock`, and wakes the service thread with lws_cancel_service(). */
+ * `compute.lock`, and wakes the service thread through the wake callback (lucentd passes
+ * one that calls lws_cancel_service(); this module knows nothing of sockets). */
 #ifndef LC_COMPUTE_H
 #define LC_COMPUTE_H
 #include <stdint.h>
@@ -9,7 +10,9 @@
 #include "lcb/lcb.h"
 #include "state.h"
 
-struct lws_context;
+/* Called on the compute thread after each publication or failed relight; it must be safe
+ * to call from another thread (lws_cancel_service is). */
+typedef void (*lc_compute_wake_fn)(void *arg);
 
 /* One relight's outputs. Immutable once published; free with lc_published_release. */
 typedef struct lc_published {
@@ -35,7 +38,7 @@ typedef struct lc_compute lc_compute;
  * goes out first; the rest back to back, so they end long before a next update is due), each adding a bounce (frames of the same revision).
  * Returns NULL with err when the engine cannot start. */
 lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, int refine_delay_ms,
-                             struct lws_context *ctx, char *err, size_t errlen);
+                             lc_compute_wake_fn wake, void *wake_arg, char *err, size_t errlen);
 /* Service thread: submit the state to relight (copied). *job (may be NULL) receives the
  * submission's id, increasing from 1. The server submits before its journal fsync so the
  * relight overlaps the disk write; frames still go out only after the fsync, because the
@@ -61,8 +64,8 @@ uint64_t lc_compute_count(lc_compute *c);
 #define LC_COMPUTE_BUCKETS 11
 extern const double lc_compute_bucket_ms[LC_COMPUTE_BUCKETS];
 void lc_compute_histogram(lc_compute *c, uint64_t counts[LC_COMPUTE_BUCKETS], double *sum_ms);
-/* Finishes the relight in flight and joins the thread; after it returns the compute thread
- * makes no lws call, so the lws context may be destroyed. References to results stay valid
+/* Finishes the relight in flight and joins the thread; after it returns the wake callback
+ * is not called again (lucentd may then destroy its lws context). References to results stay valid
  * (release them, then lc_compute_release). NULL-safe. */
 void lc_compute_stop(lc_compute *c);
 /* Frees the compute object (stops it first if needed). Every lc_published reference must

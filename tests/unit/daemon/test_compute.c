@@ -10,6 +10,8 @@
 #include "compute.h"
 #include "state.h"
 
+static void test_wake(void *ctx) { lws_cancel_service(ctx); }
+
 /* Waits up to ms for a publication newer than *seen. */
 static lc_published *wait_pub(lc_compute *c, uint64_t *seen, int ms) {
     for (int i = 0; i < ms; i += 5) {
@@ -38,7 +40,7 @@ int main(void) {
     struct lws_context *ctx = lws_create_context(&info);
     CHECK(ctx != NULL, "lws context");
     char err[256];
-    lc_compute *c = lc_compute_start(f.bake, LC_BACKEND_CPU, 1, 0, 0, ctx, err, sizeof err);
+    lc_compute *c = lc_compute_start(f.bake, LC_BACKEND_CPU, 1, 0, 0, test_wake, ctx, err, sizeof err);
     CHECK(c != NULL, "compute start: %s", err);
     if (!c || !ctx) CHECK_DONE();
     lc_state_limits lim = {.max_lights = 8, .max_objects = 2};

@@ -1,0 +1,127 @@
+/* server_internal: what lucentd's service-thread files share (server.c: the WebSocket glue,
+ * sessions and the run loop; server_requests.c: hello, roles and request dispatch;
+ * server_http.c: /healthz, /metrics, --www and who may connect; server_frames.c: frame
+ * encoding). Private to lc_daemon. Every function declared here runs on the service thread. */
+#ifndef LC_SERVER_INTERNAL_H
+#define LC_SERVER_INTERNAL_H
+#include <libwebsockets.h>
+
+#include "compute.h"
+#include "config.h"
+#include "journal.h"
+#include "server_frames.h"
+#include "state.h"
+
+#define SERVER_OUTQ 1024 /* queued text messages per session (replies to a full request burst fit); past this the client is too slow */
+/* What a socket may send before its hello is accepted: a hello is a client name and a token
+ * (lucent_proto.h), so an unauthenticated peer never gets the full --max-message buffer. */
+#define SERVER_HELLO_MAX 4096
+
+enum { STREAMS = 4 }; /* index = lc_stream (1..3) */
+
+typedef struct lc_server lc_server;
+
+typedef struct lc_session {
+    struct lws *wsi;
+    lc_server *srv;
+    struct lc_session *next;
+    int authed, controller;
+    char client[LC_PROTO_NAME_MAX + 1];
+    char peer[64]; /* the peer's address, for the failed-hello throttle and the log */
+    char *rx;
+    size_t rx_len, rx_cap;
+    size_t rx_limit; /* the bound of the message being received, fixed at its first fragment (SIGHUP may change the live one) */
+    int rx_binary, rx_oversize;
+    char *outq[SERVER_OUTQ];
+    int outq_head, outq_n;
+    size_t outq_bytes;         /* bytes in outq: over --max-queue-bytes the client is dropped */
+    double stalled_since_ms;   /* since when output has waited without the client taking any (0 = none) */
+    int closing, close_code;
+    char close_reason[64];
+    double connected_ms;
+    double tokens, refill_ms; /* request rate limit (token bucket) */
+    struct {
+        int on, force;
+        lc_encoding enc;
+        int residual;          /* lightmap deltas as compressed residuals (PROTOCOL.md §6.2.1) */
+        uint64_t sequence;     /* frames sent on this stream */
+        uint64_t sent_pub_seq; /* publication last sent */
+        double max_rate, last_ms;
+    } stream[STREAMS];
+    lc_frames_copy copy; /* the client's lightmap copy and frame buffer */
+    lc_published *frame; /* newest result for this session (a reference) */
+    uint64_t frame_seq;
+    uint8_t *tx;
+    size_t tx_cap;
+} lc_session;
+
+/* Failed hellos per peer address (see server_auth_peer_for). */
+#define SERVER_AUTH_PEERS 256
+#define SERVER_AUTH_BURST 10.0
+#define SERVER_AUTH_PER_S 1.0
+typedef struct server_auth_peer {
+    char peer[64];
+    double tokens, last_ms;
+} server_auth_peer;
+
+struct lc_server {
+    lc_config cfg_live;   /* the configuration in force: SIGHUP reloads its reloadable fields */
+    lc_config cfg_reload; /* SIGHUP parses into this, then copies what may change */
+    lc_config *cfg;       /* = &cfg_live */
+    struct lws_http_mount mount; /* --www (lws keeps a pointer to it) */
+    int argc;
+    char **argv;
+    const lc_lcb *bake;
+    const lc_lcb_view *v;
+    lc_state state;
+    lc_journal *journal;
+    lc_compute *compute;
+    struct lws_context *ctx;
+    lc_session *sessions;
+    uint32_t n_sessions;
+    uint64_t pub_seq; /* compute publications seen */
+    uint32_t tile;    /* lightmap delta tile side: --tile, or chosen from the lightmap size */
+    lc_frames *frames; /* what sessions' frames share (each lightmap encoded once per encoding) */
+    const char **asset_names, **material_names;
+    lc_proto_limits limits;
+    lws_sorted_usec_list_t tick;
+    int port;
+    uint32_t max_clients; /* --max-clients, lowered to what the descriptor limit allows */
+    unsigned fd_budget;   /* descriptors the sockets may use (0 = unlimited) */
+    /* metrics */
+    uint64_t frames_sent, bytes_sent, messages_in, errors[32];
+    char error_codes[32][32];
+    uint64_t dropped_slow;      /* sessions dropped for not taking their output */
+    uint64_t auth_failures;     /* hellos with an unknown token */
+    uint64_t reloads;           /* SIGHUPs whose configuration was applied */
+    server_auth_peer auth_peers[SERVER_AUTH_PEERS];
+    uint64_t relight_failures_reported; /* compute failures already told to clients */
+};
+
+
+/* server.c */
+void server_count_error(lc_server *s, const char *code);
+/* Queues text (takes ownership); a client too far behind is dropped. */
+void session_send(lc_session *ss, char *text);
+void session_error(lc_server *s, lc_session *ss, const lc_proto_id *id, const char *code, const char *pointer,
+                   const char *message);
+/* Closes after what is queued has gone out (code and reason of the close frame). */
+void session_close(lc_session *ss, int code, const char *reason);
+/* 1 when some stream has a newer frame than the client got. */
+int session_wants_frame(const lc_session *ss);
+/* accept() failures seen so far (for /metrics). */
+uint64_t server_accept_errors_total(void);
+
+/* server_requests.c: one complete text message from the session. */
+void server_request(lc_server *s, lc_session *ss, const char *text, size_t len);
+
+/* server_http.c */
+/* Answers a WebSocket handshake with an HTTP status and body instead of a silent close.
+ * Returns 1 (lws then drops the connection). */
+int server_refuse_http(struct lws *wsi, unsigned status, const char *body);
+/* 1 when the handshake's Origin may open a session (PROTOCOL.md §1.1); else why. */
+int server_origin_allowed(const lc_server *s, struct lws *wsi, char *why, size_t whylen);
+/* The "http" protocol's callback: /healthz, /metrics, the --www mount's checks. */
+int server_http_callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);
+
+#endif
