@@ -17,15 +17,8 @@ typedef struct tcpu {
     const lc_lcb_view *v;
     uint32_t cells;
     uint32_t coeff_cap;  /* bands^2 the buffers are sized for */
-    float *flux;         /* n_nodes*3 */
-    float *radiosity;    /* n_surfels*3 */
+    lc_transport_outputs out; /* what the frame publishes; cache SH at a stride of coeff_cap */
     float *e_ind;        /* n_surfels*3, kept across runs for progressive feedback */
-    float *cache_sh;     /* n_caches*coeff_cap*3 */
-    float *lightmap;     /* W*H*3 */
-    float *lightmap_sh;  /* W*H*coeff_cap*3, allocated on demand */
-    float *grid_sh;      /* cells*27 */
-    float *object_sh;    /* n_objects*27 */
-    uint32_t object_cap;
     uint8_t *feedback_cache; /* per cache: some surfel reads it */
     uint32_t *feedback_list; /* those caches */
     uint32_t n_feedback;
@@ -33,26 +26,13 @@ typedef struct tcpu {
     float cone[256][8];
 } tcpu;
 
-void lc_transport_cone_table(float table[256][8]) {
-    for (int q = 0; q < 256; q++) {
-        double alpha = q / 255.0 * M_PI;
-        for (int l = 0; l < 8; l++) table[q][l] = (float)lc_sh_cone_ratio(l, cos(alpha));
-    }
-}
-
 static void tcpu_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out);
 
 static void tcpu_release(void *impl) {
     tcpu *t = impl;
     if (!t) return;
-    free(t->flux);
-    free(t->radiosity);
+    lc_transport_outputs_release(&t->out);
     free(t->e_ind);
-    free(t->cache_sh);
-    free(t->lightmap);
-    free(t->lightmap_sh);
-    free(t->grid_sh);
-    free(t->object_sh);
     free(t->feedback_cache);
     free(t->feedback_list);
     free(t->texel_w);
@@ -66,18 +46,12 @@ static void *tcpu_create(const lc_lcb_view *v, int threads, char *err, size_t er
     t->v = v;
     t->cells = v->grid_dims[0] * v->grid_dims[1] * v->grid_dims[2];
     t->coeff_cap = LC_SH_MAX_COEFFS;
-    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
-    t->flux = calloc((size_t)v->n_nodes * 3, sizeof(float));
-    t->radiosity = calloc((size_t)v->n_surfels * 3, sizeof(float));
+    if (lc_transport_outputs_alloc(&t->out, v) != 0) goto oom;
     t->e_ind = calloc((size_t)v->n_surfels * 3, sizeof(float));
-    t->cache_sh = calloc((size_t)v->n_caches * t->coeff_cap * 3, sizeof(float));
-    t->lightmap = calloc(texels * 3, sizeof(float));
-    t->grid_sh = calloc((size_t)t->cells * 27, sizeof(float));
     t->feedback_cache = calloc(v->n_caches ? v->n_caches : 1, 1);
     t->feedback_list = calloc(v->n_caches ? v->n_caches : 1, sizeof(uint32_t));
     t->texel_w = malloc(((size_t)v->n_texel_caches * v->links_per_cache * 3 + 1) * sizeof(float));
-    if (!t->flux || !t->radiosity || !t->e_ind || !t->cache_sh || !t->lightmap || !t->grid_sh ||
-        !t->feedback_cache || !t->feedback_list || !t->texel_w)
+    if (!t->e_ind || !t->feedback_cache || !t->feedback_list || !t->texel_w)
         goto oom;
     for (uint32_t s = 0; s < v->n_surfels; s++)
         if (v->surfels[s].cache != LC_NONE) t->feedback_cache[v->surfels[s].cache] = 1;
@@ -101,13 +75,13 @@ static void tcpu_pull(tcpu *t) {
     const lc_lcb_view *v = t->v;
     for (uint32_t i = v->n_nodes; i-- > 0;) {
         const lc_lcb_node *nd = &v->nodes[i];
-        float *f = t->flux + 3 * (size_t)i;
+        float *f = t->out.flux + 3 * (size_t)i;
         if (nd->child[0] == LC_NONE) {
             const lc_lcb_surfel *s = &v->surfels[nd->first_surfel];
-            const float *b = t->radiosity + 3 * (size_t)nd->first_surfel;
+            const float *b = t->out.radiosity + 3 * (size_t)nd->first_surfel;
             for (int k = 0; k < 3; k++) f[k] = b[k] * s->area;
         } else {
-            const float *a = t->flux + 3 * (size_t)nd->child[0], *b = t->flux + 3 * (size_t)nd->child[1];
+            const float *a = t->out.flux + 3 * (size_t)nd->child[0], *b = t->out.flux + 3 * (size_t)nd->child[1];
             for (int k = 0; k < 3; k++) f[k] = a[k] + b[k];
         }
     }
@@ -179,7 +153,7 @@ tcpu_gather_blocked(const tcpu *t, const lc_lcb_link *lk, uint32_t used, int ban
         for (uint32_t i = 0; i < TCPU_BLOCK; i++) { /* gathers: not vectorised, kept apart */
             if (i < n) {
                 const lc_lcb_link *l = &lk[k0 + i];
-                const float *phi = t->flux + 3 * (size_t)l->node;
+                const float *phi = t->out.flux + 3 * (size_t)l->node;
                 p0[i] = phi[0] * l->factor;
                 p1[i] = phi[1] * l->factor;
                 p2[i] = phi[2] * l->factor;
@@ -258,7 +232,7 @@ static void tcpu_gather_texel(const tcpu *t, const lc_lcb_link *lk, const float 
     for (uint32_t k0 = 0; k0 < used; k0 += TCPU_BLOCK) {
         uint32_t n = used - k0 < TCPU_BLOCK ? used - k0 : TCPU_BLOCK;
         for (uint32_t i = 0; i < n; i++) {
-            const float *phi = t->flux + 3 * (size_t)lk[k0 + i].node, *wk = w + 3 * (size_t)(k0 + i);
+            const float *phi = t->out.flux + 3 * (size_t)lk[k0 + i].node, *wk = w + 3 * (size_t)(k0 + i);
             for (int ch = 0; ch < 3; ch++)
                 for (int m = 0; m < 3; m++) lane[ch][m][i] += phi[ch] * wk[m];
         }
@@ -282,7 +256,7 @@ static void tcpu_gather_generic(const tcpu *t, const lc_lcb_link *lk, uint32_t u
     const int nc = bands * bands;
     memset(acc, 0, 3 * TCPU_MAX_COEFFS * sizeof(float));
     for (uint32_t k = 0; k < used; k++) {
-        const float *phi = t->flux + 3 * (size_t)lk[k].node;
+        const float *phi = t->out.flux + 3 * (size_t)lk[k].node;
         float d[3], y[TCPU_MAX_COEFFS];
         tcpu_oct_decode(lk[k].dir_cone, d);
         lc_sh_eval_fast(bands, d[0], d[1], d[2], y);
@@ -326,7 +300,7 @@ static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
         } else {
             tcpu_gather_generic(t, lk, used, bands, ncc, acc);
         }
-        float *out = t->cache_sh + (size_t)c * t->coeff_cap * 3;
+        float *out = t->out.cache_sh + (size_t)c * t->coeff_cap * 3;
         for (int j = 0; j < nc; j++) {
             if (j >= ncu) { /* bands this cache does not carry */
                 out[3 * j + 0] = out[3 * j + 1] = out[3 * j + 2] = 0;
@@ -389,7 +363,7 @@ static void tcpu_feedback_range(void *ctx, size_t begin, size_t end, int thread)
             e[0] = e[1] = e[2] = 0;
             continue;
         }
-        const float *sh = t->cache_sh + (size_t)sf->cache * t->coeff_cap * 3;
+        const float *sh = t->out.cache_sh + (size_t)sf->cache * t->coeff_cap * 3;
         tcpu_irradiance(sh, job->bands, (v->caches[sf->cache].flags & LC_CACHE_TEXEL) != 0, sf->normal, e);
     }
 }
@@ -421,9 +395,72 @@ static void tcpu_grid_sample(const tcpu *t, const float p[3], float out[27]) {
         }
         if (w == 0) continue;
         size_t cell = (size_t)idx[0] + v->grid_dims[0] * ((size_t)idx[1] + v->grid_dims[1] * (size_t)idx[2]);
-        const float *src = t->grid_sh + cell * 27;
+        const float *src = t->out.grid_sh + cell * 27;
         for (int j = 0; j < 27; j++) out[j] += w * src[j];
     }
+}
+
+/* --- passes ---------------------------------------------------------------------------------- */
+
+/* B = B0 + albedo E_ind at every surfel. */
+static void tcpu_radiosity(tcpu *t, const float *b0) {
+    const lc_lcb_view *v = t->v;
+    for (uint32_t s = 0; s < v->n_surfels; s++) {
+        const float *alb = v->surfels[s].albedo;
+        for (int k = 0; k < 3; k++) t->out.radiosity[3 * s + k] = b0[3 * s + k] + alb[k] * t->e_ind[3 * s + k];
+    }
+}
+
+/* The pull is linear, so chroma compression converts once at the nodes: RGB -> Y, Co, Cg. */
+static void tcpu_to_ycocg(tcpu *t) {
+    for (uint32_t i = 0; i < t->v->n_nodes; i++) {
+        float *f = t->out.flux + 3 * (size_t)i;
+        float co = (f[0] - f[2]) * 0.5f, tt = f[2] + co, cg = (f[1] - tt) * 0.5f;
+        f[0] = tt + cg;
+        f[1] = co;
+        f[2] = cg;
+    }
+}
+
+/* Lightmap: each texel shows its cache's irradiance for the cache normal. */
+static int tcpu_lightmap(tcpu *t, const lc_engine_settings *st, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
+    const size_t cap = t->coeff_cap, texels = (size_t)v->lightmap_width * v->lightmap_height;
+    for (size_t i = 0; i < texels; i++) {
+        uint32_t c = v->lightmap[i];
+        float *e = t->out.lightmap + 3 * i;
+        if (c == LC_NONE) {
+            e[0] = e[1] = e[2] = 0;
+            continue;
+        }
+        tcpu_irradiance(t->out.cache_sh + (size_t)c * cap * 3, (int)st->bands, 1, v->caches[c].normal, e);
+    }
+    return st->sh_lightmap ? lc_transport_fill_lightmap_sh(&t->out, v, "cpu", err, errlen) : 0;
+}
+
+/* Grid: cosine-convolved L2 irradiance SH per sample. */
+static void tcpu_grid(tcpu *t, int bands) {
+    const lc_lcb_view *v = t->v;
+    static const float a[9] = {(float)M_PI, (float)(2 * M_PI / 3), (float)(2 * M_PI / 3), (float)(2 * M_PI / 3),
+                               (float)(M_PI / 4), (float)(M_PI / 4), (float)(M_PI / 4), (float)(M_PI / 4),
+                               (float)(M_PI / 4)};
+    int nc9 = bands >= 3 ? 9 : bands * bands;
+    for (uint32_t i = 0; i < t->cells; i++) {
+        uint32_t c = v->grid[i];
+        float *g = t->out.grid_sh + (size_t)i * 27;
+        memset(g, 0, 27 * sizeof(float));
+        const float *sh = t->out.cache_sh + (size_t)c * t->coeff_cap * 3;
+        for (int j = 0; j < nc9; j++)
+            for (int k = 0; k < 3; k++) g[3 * j + k] = a[j] * sh[3 * j + k];
+    }
+}
+
+/* Objects: each one's L2 irradiance SH, trilinear in the grid at its position. */
+static int tcpu_objects(tcpu *t, const lc_transport_input *in, char *err, size_t errlen) {
+    if (lc_transport_reserve_objects(&t->out, in->n_objects, "cpu", err, errlen) != 0) return -1;
+    for (uint32_t i = 0; i < in->n_objects; i++)
+        tcpu_grid_sample(t, in->object_pos + 3 * (size_t)i, t->out.object_sh + 27 * (size_t)i);
+    return 0;
 }
 
 /* --- run ------------------------------------------------------------------------------------- */
@@ -433,12 +470,8 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     const lc_lcb_view *v = t->v;
     const lc_engine_settings *st = &in->settings;
     int bands = (int)st->bands;
-    int chroma = st->chroma_compression && st->chroma_bands < st->bands;
-    if (bands < 1 || bands > LC_SH_MAX_BANDS) {
-        lc_set_err(err, errlen, "/settings/bands: %d is outside 1..%d", bands, LC_SH_MAX_BANDS);
-        return -1;
-    }
-    const size_t cap = t->coeff_cap;
+    int chroma = lc_transport_chroma(st);
+    if (lc_transport_check_settings(st, err, errlen) != 0) return -1;
     double t1;
     if (in->reset_feedback) memset(t->e_ind, 0, (size_t)v->n_surfels * 3 * sizeof(float));
     double ms_pull = 0, ms_gather = 0, ms_bounce = 0;
@@ -446,22 +479,11 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     for (uint32_t pass = 0; pass <= st->bounces; pass++) {
         int last = pass == st->bounces;
         t1 = lc_clock_ms();
-        for (uint32_t s = 0; s < v->n_surfels; s++) {
-            const float *alb = v->surfels[s].albedo;
-            for (int k = 0; k < 3; k++)
-                t->radiosity[3 * s + k] = in->b0[3 * s + k] + alb[k] * t->e_ind[3 * s + k];
-        }
+        tcpu_radiosity(t, in->b0);
         double t2 = lc_clock_ms();
         ms_bounce += t2 - t1;
         tcpu_pull(t);
-        if (chroma) /* the pull is linear, so convert once at the nodes: RGB -> Y, Co, Cg */
-            for (uint32_t i = 0; i < v->n_nodes; i++) {
-                float *f = t->flux + 3 * (size_t)i;
-                float co = (f[0] - f[2]) * 0.5f, tt = f[2] + co, cg = (f[1] - tt) * 0.5f;
-                f[0] = tt + cg;
-                f[1] = co;
-                f[2] = cg;
-            }
+        if (chroma) tcpu_to_ycocg(t);
         double t3 = lc_clock_ms();
         ms_pull += t3 - t2;
         /* Intermediate passes only need the caches some surfel reads. */
@@ -480,68 +502,16 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     fr->stage_ms[LC_STAGE_GATHER] = ms_gather;
     fr->stage_ms[LC_STAGE_CHROMA] = 0;
 
-    /* Lightmap: each texel shows its cache's irradiance for the cache normal. */
     t1 = lc_clock_ms();
-    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
-    if (st->sh_lightmap && !t->lightmap_sh) {
-        t->lightmap_sh = calloc(texels * cap * 3, sizeof(float));
-        if (!t->lightmap_sh) {
-            lc_set_err(err, errlen, "cpu transport: out of memory for the SH lightmap");
-            return -1;
-        }
-    }
-    for (size_t i = 0; i < texels; i++) {
-        uint32_t c = v->lightmap[i];
-        float *e = t->lightmap + 3 * i;
-        if (c == LC_NONE) {
-            e[0] = e[1] = e[2] = 0;
-            if (st->sh_lightmap) memset(t->lightmap_sh + i * cap * 3, 0, cap * 3 * sizeof(float));
-            continue;
-        }
-        const float *sh = t->cache_sh + (size_t)c * cap * 3;
-        tcpu_irradiance(sh, bands, 1, v->caches[c].normal, e);
-        if (st->sh_lightmap) memcpy(t->lightmap_sh + i * cap * 3, sh, cap * 3 * sizeof(float));
-    }
+    if (tcpu_lightmap(t, st, err, errlen) != 0) return -1;
     double t2 = lc_clock_ms();
     fr->stage_ms[LC_STAGE_LIGHTMAP] = t2 - t1;
-
-    /* Grid: cosine-convolved L2 irradiance SH per sample. */
-    static const float a[9] = {(float)M_PI, (float)(2 * M_PI / 3), (float)(2 * M_PI / 3), (float)(2 * M_PI / 3),
-                               (float)(M_PI / 4), (float)(M_PI / 4), (float)(M_PI / 4), (float)(M_PI / 4),
-                               (float)(M_PI / 4)};
-    int nc9 = bands >= 3 ? 9 : bands * bands;
-    for (uint32_t i = 0; i < t->cells; i++) {
-        uint32_t c = v->grid[i];
-        float *g = t->grid_sh + (size_t)i * 27;
-        memset(g, 0, 27 * sizeof(float));
-        const float *sh = t->cache_sh + (size_t)c * cap * 3;
-        for (int j = 0; j < nc9; j++)
-            for (int k = 0; k < 3; k++) g[3 * j + k] = a[j] * sh[3 * j + k];
-    }
+    tcpu_grid(t, bands);
     double t3 = lc_clock_ms();
     fr->stage_ms[LC_STAGE_GRID] = t3 - t2;
-
-    if (in->n_objects > t->object_cap) {
-        float *o = realloc(t->object_sh, (size_t)in->n_objects * 27 * sizeof(float));
-        if (!o) {
-            lc_set_err(err, errlen, "cpu transport: out of memory for %u objects", in->n_objects);
-            return -1;
-        }
-        t->object_sh = o;
-        t->object_cap = in->n_objects;
-    }
-    for (uint32_t i = 0; i < in->n_objects; i++)
-        tcpu_grid_sample(t, in->object_pos + 3 * (size_t)i, t->object_sh + 27 * (size_t)i);
+    if (tcpu_objects(t, in, err, errlen) != 0) return -1;
     fr->stage_ms[LC_STAGE_OBJECTS] = lc_clock_ms() - t3;
-
-    /* Arrays only: the engine front fills the dimensions from the bake and the settings. */
-    fr->lightmap = t->lightmap;
-    fr->lightmap_sh = st->sh_lightmap ? t->lightmap_sh : NULL;
-    fr->cache_sh = t->cache_sh;
-    fr->grid_sh = t->grid_sh;
-    fr->object_sh = t->object_sh;
-    fr->surfel_radiosity = t->radiosity;
-    fr->node_flux = chroma ? NULL : t->flux; /* YCoCg when compressing */
+    lc_transport_publish(&t->out, st, fr);
     return 0;
 }
 

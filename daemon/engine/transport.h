@@ -58,11 +58,49 @@ static inline int lc_transport_texel_bands(const lc_engine_settings *st) {
  * basis; the GL backend keeps its SH evaluation and clears band 0. Identical results. */
 static inline int lc_transport_texel_band1(const lc_engine_settings *st) { return !st->sh_lightmap && st->bands >= 2; }
 
+/* Chroma compression is on only when it drops bands: Co/Cg get chroma_bands < bands. */
+static inline int lc_transport_chroma(const lc_engine_settings *st) {
+    return st->chroma_compression && st->chroma_bands < st->bands;
+}
+
 extern const lc_transport_ops lc_transport_cpu;
 extern const lc_transport_ops lc_transport_egl;
 
-/* Shared helpers (defined in cpu/transport_cpu.c, also used by tests and the GL backend's
- * uploads): the h_l(cos alpha) table for the 256 quantised cone angles, 8 bands each. */
+/* --- shared by both backends (engine/transport.c) ----------------------------------------- */
+
+/* The h_l(cos alpha) table for the 256 quantised cone angles, 8 bands each: the CPU gather's
+ * lookup and the GL backend's upload (one table, so both weigh a link the same). */
 void lc_transport_cone_table(float table[256][8]);
+
+/* The settings a run refuses (err names the field): bands outside 1..LC_SH_MAX_BANDS. */
+int lc_transport_check_settings(const lc_engine_settings *st, char *err, size_t errlen);
+
+/* The host arrays a backend publishes in each frame, laid out the same by both (cache and
+ * lightmap SH records LC_SH_MAX_COEFFS coefficients wide), so either backend's frame reads
+ * the same way. Owned by the backend; the frame borrows them until the next run. */
+typedef struct lc_transport_outputs {
+    float *radiosity;   /* n_surfels*3: B of the last pass */
+    float *flux;        /* n_nodes*3: pulled flux of the last pass (YCoCg when compressing) */
+    float *cache_sh;    /* n_caches*LC_SH_MAX_COEFFS*3 */
+    float *lightmap;    /* W*H*3 */
+    float *lightmap_sh; /* W*H*LC_SH_MAX_COEFFS*3, allocated on first use */
+    float *grid_sh;     /* cells*27 */
+    float *object_sh;   /* object_cap*27, grown on demand */
+    uint32_t object_cap;
+} lc_transport_outputs;
+
+/* Allocates every array but the SH lightmap and the objects', zeroed; -1 out of memory
+ * (nothing left allocated). */
+int lc_transport_outputs_alloc(lc_transport_outputs *o, const lc_lcb_view *v);
+void lc_transport_outputs_release(lc_transport_outputs *o);
+/* Room for n_objects objects' SH; -1 with err ("<backend> transport: out of memory ..."). */
+int lc_transport_reserve_objects(lc_transport_outputs *o, uint32_t n_objects, const char *backend, char *err,
+                                 size_t errlen);
+/* The SH lightmap: each texel's cache SH (zeros for empty texels), from o->cache_sh. A
+ * per-texel copy on the host is cheaper than a GPU read-back of W*H records. -1 with err. */
+int lc_transport_fill_lightmap_sh(lc_transport_outputs *o, const lc_lcb_view *v, const char *backend, char *err,
+                                  size_t errlen);
+/* Points the frame's output arrays at o (the engine front fills the dimensions). */
+void lc_transport_publish(const lc_transport_outputs *o, const lc_engine_settings *st, lc_engine_frame *fr);
 
 #endif

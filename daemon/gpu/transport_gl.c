@@ -75,8 +75,8 @@ typedef struct tgl {
     uint32_t gpu_object_cap;
     GLuint queries[TGL_MAX_STAMPS];
     /* Host outputs (owned; the frame points here until the next run): */
-    float *radiosity, *flux, *cache_sh, *cache_tmp, *lightmap, *lightmap_sh, *grid_sh, *object_sh;
-    uint32_t object_cap;
+    lc_transport_outputs out;
+    float *cache_tmp; /* the cache SH as read back, at the GPU's stride of bands^2 */
 } tgl;
 
 /* Runs on the compute thread; frees everything, tolerating a half-built impl. */
@@ -97,14 +97,8 @@ static void tgl_release(void *impl) {
         if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
     }
     lc_egl_release(t->egl);
-    free(t->radiosity);
-    free(t->flux);
-    free(t->cache_sh);
+    lc_transport_outputs_release(&t->out);
     free(t->cache_tmp);
-    free(t->lightmap);
-    free(t->lightmap_sh);
-    free(t->grid_sh);
-    free(t->object_sh);
     free(t);
 }
 
@@ -134,26 +128,11 @@ static void tgl_warm_up(tgl *t, GLuint prog) {
     glUseProgram(0);
 }
 
-/* Runs on the compute thread. threads == -1: called by AUTO, which wants a hardware GPU. */
-static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t errlen) {
-    tgl *t = calloc(1, sizeof *t);
-    void *host = NULL; /* staging for the packed uploads */
-    if (!t) {
-        lc_set_err(err, errlen, "out of memory");
-        return NULL;
-    }
-    t->v = v;
-    t->cells = v->grid_dims[0] * v->grid_dims[1] * v->grid_dims[2];
-    t->texels = (size_t)v->lightmap_width * v->lightmap_height;
-    t->egl = lc_egl_create(err, errlen);
-    if (!t->egl) goto err;
-    if (threads == -1 && lc_egl_is_software(t->egl)) {
-        lc_set_err(err, errlen, "EGL device is a software rasterizer (llvmpipe); the CPU backend is faster here");
-        goto err;
-    }
-
-    /* Limits: everything read at random must fit one binding; links and the full cache SH
-     * are windowed per `chunk` caches. */
+/* Caches per gather window (t->chunk): everything read at random must fit one binding; links
+ * and the full cache SH are bound as windows of whole caches. -1 with err when the bake does
+ * not fit this device. */
+static int tgl_fit_limits(tgl *t, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
     GLint64 max_block = 0;
     GLint align = 16;
     glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &max_block);
@@ -174,7 +153,7 @@ static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t err
         if (need[i].bytes > limit) {
             lc_set_err(err, errlen, "%s needs %zu MiB, over the %zu MiB shader storage block limit", need[i].what,
                        need[i].bytes >> 20, limit >> 20);
-            goto err;
+            return -1;
         }
     size_t per_cache = (size_t)v->links_per_cache * sizeof(lc_lcb_link);
     if (per_cache < TGL_CAP * 12) per_cache = TGL_CAP * 12;
@@ -183,29 +162,38 @@ static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t err
     chunk -= chunk % 256;
     if (align > 3072) {
         lc_set_err(err, errlen, "SSBO offset alignment %d is not supported", align);
-        goto err;
+        return -1;
     }
     if (chunk == 0) {
         lc_set_err(err, errlen, "%u links per cache do not fit a shader storage window", v->links_per_cache);
-        goto err;
+        return -1;
     }
     t->chunk = chunk > v->n_caches ? (v->n_caches ? v->n_caches : 1) : (uint32_t)chunk;
+    return 0;
+}
 
-    /* Programs: all fixed ones now (a broken shader fails creation), gather for the bake's
-     * default bands now and the others on first use. */
+/* Programs: all fixed ones now (a broken shader fails creation), gather for the bake's
+ * default bands now and the others on first use. */
+static int tgl_compile(tgl *t, int def_bands, char *err, size_t errlen) {
     for (int i = 0; i < TGL_N_PROGS; i++) {
         t->prog[i] = lc_gl_compile_program(tgl_prog_names[i], lc_gl_shader_source(tgl_prog_names[i]), err, errlen);
-        if (!t->prog[i]) goto err;
+        if (!t->prog[i]) return -1;
     }
-    int def_bands = v->sh_bands >= 1 && v->sh_bands <= LC_SH_MAX_BANDS ? (int)v->sh_bands : 3;
-    if (!tgl_gather_program(t, def_bands, def_bands, err, errlen)) goto err;
+    return tgl_gather_program(t, def_bands, def_bands, err, errlen) ? 0 : -1;
+}
 
-    /* Static uploads, packed into the std430 structs through one staging allocation. */
+/* Surfels, nodes and caches, packed into the std430 structs through one staging allocation. */
+static int tgl_upload_structs(tgl *t, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
     size_t stage_bytes = (size_t)v->n_surfels * sizeof(tgl_surfel);
     if ((size_t)v->n_nodes * sizeof(tgl_node) > stage_bytes) stage_bytes = (size_t)v->n_nodes * sizeof(tgl_node);
     if ((size_t)v->n_caches * sizeof(tgl_cache) > stage_bytes) stage_bytes = (size_t)v->n_caches * sizeof(tgl_cache);
-    host = malloc(stage_bytes ? stage_bytes : 16);
-    if (!host) goto oom;
+    int rc = -1;
+    void *host = malloc(stage_bytes ? stage_bytes : 16);
+    if (!host) {
+        lc_set_err(err, errlen, "egl transport: out of memory");
+        return -1;
+    }
     tgl_surfel *sf = host;
     for (uint32_t s = 0; s < v->n_surfels; s++) {
         memcpy(sf[s].normal, v->surfels[s].normal, sizeof sf[s].normal);
@@ -232,35 +220,50 @@ static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t err
         cc[c].link_count = v->caches[c].link_count;
     }
     if (!(t->b_caches = lc_gl_buffer((size_t)v->n_caches * sizeof *cc, cc, "caches", err, errlen))) goto err;
+    rc = 0;
+err:
     free(host);
-    host = NULL;
-    /* Which caches some surfel reads: the only ones intermediate passes need. */
+    return rc;
+}
+
+/* Which caches some surfel reads: the only ones intermediate passes need. */
+static int tgl_upload_feedback_list(tgl *t, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
     uint8_t *used = calloc(v->n_caches ? v->n_caches : 1, 1);
     uint32_t *list = calloc(v->n_caches ? v->n_caches : 1, sizeof *list);
-    host = list;
+    int rc = -1;
     if (!used || !list) {
-        free(used);
-        goto oom;
+        lc_set_err(err, errlen, "egl transport: out of memory");
+        goto err;
     }
     for (uint32_t s = 0; s < v->n_surfels; s++)
         if (v->surfels[s].cache != LC_NONE) used[v->surfels[s].cache] = 1;
     for (uint32_t c = 0; c < v->n_caches; c++)
         if (used[c]) list[t->n_feedback++] = c;
-    free(used);
     if (!(t->b_list = lc_gl_buffer((size_t)t->n_feedback * 4, list, "feedback cache list", err, errlen))) goto err;
-    free(host);
-    host = NULL;
+    rc = 0;
+err:
+    free(used);
+    free(list);
+    return rc;
+}
+
+/* The links as mapped, the lightmap and grid indices and the cone table. */
+static int tgl_upload_tables(tgl *t, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
     if (!(t->b_links = lc_gl_buffer((size_t)v->n_caches * v->links_per_cache * sizeof(lc_lcb_link), v->links,
                                     "links", err, errlen)))
-        goto err;
-    if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) goto err;
-    if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) goto err;
+        return -1;
+    if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) return -1;
+    if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) return -1;
     float cone[256][8];
     lc_transport_cone_table(cone);
-    if (!(t->b_cone = lc_gl_buffer(sizeof cone, cone, "cone table", err, errlen))) goto err;
-    for (int i = 0; i < TGL_N_PROGS; i++) tgl_warm_up(t, t->prog[i]);
-    tgl_warm_up(t, t->gather[def_bands][def_bands]);
-    /* SH normalisation for the generic (> 4 bands) path, computed as lc_sh_eval does. */
+    if (!(t->b_cone = lc_gl_buffer(sizeof cone, cone, "cone table", err, errlen))) return -1;
+    return 0;
+}
+
+/* SH normalisation for the generic (> 4 bands) gather, computed as lc_sh_eval does. */
+static int tgl_upload_sh_norm(tgl *t, char *err, size_t errlen) {
     double shk[TGL_CAP];
     for (int l = 0; l < LC_SH_MAX_BANDS; l++)
         for (int m = 0; m <= l; m++) {
@@ -270,37 +273,62 @@ static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t err
             shk[l * l + l + m] = m == 0 ? k_lm : M_SQRT2 * k_lm;
             if (m) shk[l * l + l - m] = 0;
         }
-    if (!(t->b_shk = lc_gl_buffer(sizeof shk, shk, "SH normalisation", err, errlen))) goto err;
+    return (t->b_shk = lc_gl_buffer(sizeof shk, shk, "SH normalisation", err, errlen)) ? 0 : -1;
+}
 
-    /* Per-run buffers (zeroed). */
+/* Per-run GPU buffers (zeroed), the timestamp queries and the host outputs, sized as the CPU
+ * backend's. */
+static int tgl_create_run_buffers(tgl *t, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
     size_t s12 = (size_t)v->n_surfels * 12;
-    if (!(t->b_b0 = lc_gl_buffer(s12, NULL, "B0", err, errlen))) goto err;
-    if (!(t->b_radiosity = lc_gl_buffer(s12, NULL, "radiosity", err, errlen))) goto err;
-    if (!(t->b_e_ind = lc_gl_buffer(s12, NULL, "E_ind", err, errlen))) goto err;
-    if (!(t->b_flux = lc_gl_buffer((size_t)v->n_nodes * 12, NULL, "node flux", err, errlen))) goto err;
-    if (!(t->b_cache_sh = lc_gl_buffer((size_t)v->n_caches * TGL_CAP * 12, NULL, "cache SH", err, errlen))) goto err;
-    if (!(t->b_sh9 = lc_gl_buffer((size_t)v->n_caches * 108, NULL, "cache L2 SH", err, errlen))) goto err;
-    if (!(t->b_lightmap = lc_gl_buffer(t->texels * 12, NULL, "lightmap", err, errlen))) goto err;
-    if (!(t->b_grid_sh = lc_gl_buffer((size_t)t->cells * 108, NULL, "grid SH", err, errlen))) goto err;
+    if (!(t->b_b0 = lc_gl_buffer(s12, NULL, "B0", err, errlen))) return -1;
+    if (!(t->b_radiosity = lc_gl_buffer(s12, NULL, "radiosity", err, errlen))) return -1;
+    if (!(t->b_e_ind = lc_gl_buffer(s12, NULL, "E_ind", err, errlen))) return -1;
+    if (!(t->b_flux = lc_gl_buffer((size_t)v->n_nodes * 12, NULL, "node flux", err, errlen))) return -1;
+    if (!(t->b_cache_sh = lc_gl_buffer((size_t)v->n_caches * TGL_CAP * 12, NULL, "cache SH", err, errlen))) return -1;
+    if (!(t->b_sh9 = lc_gl_buffer((size_t)v->n_caches * 108, NULL, "cache L2 SH", err, errlen))) return -1;
+    if (!(t->b_lightmap = lc_gl_buffer(t->texels * 12, NULL, "lightmap", err, errlen))) return -1;
+    if (!(t->b_grid_sh = lc_gl_buffer((size_t)t->cells * 108, NULL, "grid SH", err, errlen))) return -1;
     glGenQueries(TGL_MAX_STAMPS, t->queries);
-
-    /* Host outputs, sized as the CPU backend's. */
-    t->radiosity = calloc((size_t)v->n_surfels * 3 + 1, sizeof(float));
-    t->flux = calloc((size_t)v->n_nodes * 3 + 1, sizeof(float));
-    t->cache_sh = calloc((size_t)v->n_caches * TGL_CAP * 3 + 1, sizeof(float));
     t->cache_tmp = calloc((size_t)v->n_caches * TGL_CAP * 3 + 1, sizeof(float));
-    t->lightmap = calloc(t->texels * 3 + 1, sizeof(float));
-    t->grid_sh = calloc((size_t)t->cells * 27 + 1, sizeof(float));
-    if (!t->radiosity || !t->flux || !t->cache_sh || !t->cache_tmp || !t->lightmap || !t->grid_sh) goto oom;
+    if (lc_transport_outputs_alloc(&t->out, v) != 0 || !t->cache_tmp) {
+        lc_set_err(err, errlen, "egl transport: out of memory");
+        return -1;
+    }
+    return 0;
+}
+
+/* Runs on the compute thread. threads == -1: called by AUTO, which wants a hardware GPU. */
+static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t errlen) {
+    tgl *t = calloc(1, sizeof *t);
+    if (!t) {
+        lc_set_err(err, errlen, "out of memory");
+        return NULL;
+    }
+    t->v = v;
+    t->cells = v->grid_dims[0] * v->grid_dims[1] * v->grid_dims[2];
+    t->texels = (size_t)v->lightmap_width * v->lightmap_height;
+    t->egl = lc_egl_create(err, errlen);
+    if (!t->egl) goto err;
+    if (threads == -1 && lc_egl_is_software(t->egl)) {
+        lc_set_err(err, errlen, "EGL device is a software rasterizer (llvmpipe); the CPU backend is faster here");
+        goto err;
+    }
+    if (tgl_fit_limits(t, err, errlen) != 0) goto err;
+    int def_bands = v->sh_bands >= 1 && v->sh_bands <= LC_SH_MAX_BANDS ? (int)v->sh_bands : 3;
+    if (tgl_compile(t, def_bands, err, errlen) != 0) goto err;
+    if (tgl_upload_structs(t, err, errlen) != 0 || tgl_upload_feedback_list(t, err, errlen) != 0 ||
+        tgl_upload_tables(t, err, errlen) != 0)
+        goto err;
+    for (int i = 0; i < TGL_N_PROGS; i++) tgl_warm_up(t, t->prog[i]);
+    tgl_warm_up(t, t->gather[def_bands][def_bands]);
+    if (tgl_upload_sh_norm(t, err, errlen) != 0 || tgl_create_run_buffers(t, err, errlen) != 0) goto err;
     if (lc_gl_check("egl transport: create", err, errlen) != 0) goto err;
     lc_info("egl", "transport ready: %s; %u surfels, %u nodes in %u levels, %u caches x %u links (%u per window)",
             lc_egl_description(t->egl), v->n_surfels, v->n_nodes, v->n_levels, v->n_caches, v->links_per_cache,
             t->chunk);
     return t;
-oom:
-    lc_set_err(err, errlen, "egl transport: out of memory");
 err:
-    free(host);
     tgl_release(t);
     return NULL;
 }
@@ -328,126 +356,125 @@ static void tgl_read(GLuint buf, size_t bytes, void *dst, double *ms) {
     *ms += lc_clock_ms() - t0;
 }
 
-/* Runs on the compute thread. */
-static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr, char *err, size_t errlen) {
-    tgl *t = impl;
-    const lc_lcb_view *v = t->v;
-    const lc_engine_settings *st = &in->settings;
-    int bands = (int)st->bands;
-    int chroma = st->chroma_compression && st->chroma_bands < st->bands;
+/* The gather program for these settings, after the checks a run makes first (a lost context,
+ * the settings' ranges) and making the context current; 0 with err set on failure. */
+static GLuint tgl_prepare(tgl *t, const lc_engine_settings *st, char *err, size_t errlen) {
     if (t->lost) {
         lc_set_err(err, errlen, "egl transport: the GL context was lost; recreate the engine");
-        return -1;
+        return 0;
     }
-    if (bands < 1 || bands > LC_SH_MAX_BANDS) {
-        lc_set_err(err, errlen, "/settings/bands: %d is outside 1..%d", bands, LC_SH_MAX_BANDS);
-        return -1;
-    }
+    if (lc_transport_check_settings(st, err, errlen) != 0) return 0;
     if (st->bounces > TGL_MAX_BOUNCES) {
         lc_set_err(err, errlen, "/settings/bounces: %u is over %d", st->bounces, TGL_MAX_BOUNCES);
-        return -1;
+        return 0;
     }
-    if (lc_egl_make_current(t->egl, err, errlen) != 0) return -1;
-    int ncc_bands = chroma ? (int)st->chroma_bands : bands;
+    if (lc_egl_make_current(t->egl, err, errlen) != 0) return 0;
+    int bands = (int)st->bands, ncc_bands = lc_transport_chroma(st) ? (int)st->chroma_bands : bands;
     GLuint gather = t->gather[bands][ncc_bands];
     if (!gather) { /* first use of this band count */
-        if (!(gather = tgl_gather_program(t, bands, ncc_bands, err, errlen))) return -1;
+        if (!(gather = tgl_gather_program(t, bands, ncc_bands, err, errlen))) return 0;
         tgl_warm_up(t, gather);
     }
-    const int nc = bands * bands;
-    const GLbitfield ssbo = GL_SHADER_STORAGE_BARRIER_BIT;
-    tgl_stamps ts = {0};
-    int rc = 0;
-    tgl_stamp(t, &ts, 0);
+    return gather;
+}
 
-    glNamedBufferSubData(t->b_b0, 0, (GLsizeiptr)((size_t)v->n_surfels * 12), in->b0);
-    if (in->reset_feedback) glClearNamedBufferData(t->b_e_ind, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
-    /* One window (the usual case) lets intermediate passes gather only the feedback caches. */
-    int single_window = t->chunk >= v->n_caches;
+/* --- passes (each the GL twin of the CPU backend's; every one ends with its writes visible) --- */
 
-    for (uint32_t pass = 0; pass <= st->bounces; pass++) {
-        int last = pass == st->bounces;
-        /* B = B0 + albedo E_ind */
-        glUseProgram(t->prog[TGL_RADIOSITY]);
-        lc_gl_bind(0, t->b_surfels, 0, (size_t)v->n_surfels * sizeof(tgl_surfel));
-        lc_gl_bind(1, t->b_b0, 0, (size_t)v->n_surfels * 12);
-        lc_gl_bind(2, t->b_e_ind, 0, (size_t)v->n_surfels * 12);
-        lc_gl_bind(3, t->b_radiosity, 0, (size_t)v->n_surfels * 12);
-        tgl_uniform_count(t->prog[TGL_RADIOSITY], v->n_surfels);
-        lc_gl_dispatch_1d(v->n_surfels, TGL_LOCAL);
-        glMemoryBarrier(ssbo);
-        tgl_stamp(t, &ts, LC_STAGE_BOUNCE);
+/* B = B0 + albedo E_ind (radiosity.comp). */
+static void tgl_radiosity(tgl *t) {
+    const lc_lcb_view *v = t->v;
+    glUseProgram(t->prog[TGL_RADIOSITY]);
+    lc_gl_bind(0, t->b_surfels, 0, (size_t)v->n_surfels * sizeof(tgl_surfel));
+    lc_gl_bind(1, t->b_b0, 0, (size_t)v->n_surfels * 12);
+    lc_gl_bind(2, t->b_e_ind, 0, (size_t)v->n_surfels * 12);
+    lc_gl_bind(3, t->b_radiosity, 0, (size_t)v->n_surfels * 12);
+    tgl_uniform_count(t->prog[TGL_RADIOSITY], v->n_surfels);
+    lc_gl_dispatch_1d(v->n_surfels, TGL_LOCAL);
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+}
 
-        /* Pull, deepest level first: each level reads the one below. */
-        glUseProgram(t->prog[TGL_PULL]);
-        lc_gl_bind(0, t->b_nodes, 0, (size_t)v->n_nodes * sizeof(tgl_node));
-        lc_gl_bind(1, t->b_radiosity, 0, (size_t)v->n_surfels * 12);
-        lc_gl_bind(2, t->b_flux, 0, (size_t)v->n_nodes * 12);
-        for (uint32_t lv = v->n_levels; lv-- > 0;) {
-            uint32_t begin = v->levels[lv], count = v->levels[lv + 1] - begin;
-            glProgramUniform1ui(t->prog[TGL_PULL], 1, begin);
-            tgl_uniform_count(t->prog[TGL_PULL], count);
-            lc_gl_dispatch_1d(count, TGL_LOCAL);
-            glMemoryBarrier(ssbo);
-        }
-        tgl_stamp(t, &ts, LC_STAGE_PULL);
-        if (chroma) {
-            glUseProgram(t->prog[TGL_CHROMA]);
-            lc_gl_bind(0, t->b_flux, 0, (size_t)v->n_nodes * 12);
-            tgl_uniform_count(t->prog[TGL_CHROMA], v->n_nodes);
-            lc_gl_dispatch_1d(v->n_nodes, TGL_LOCAL);
-            glMemoryBarrier(ssbo);
-        }
-        tgl_stamp(t, &ts, LC_STAGE_CHROMA);
-
-        /* Gather */
-        glUseProgram(gather);
-        lc_gl_bind(1, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
-        lc_gl_bind(2, t->b_flux, 0, (size_t)v->n_nodes * 12);
-        lc_gl_bind(3, t->b_cone, 0, 256 * 8 * 4);
-        lc_gl_bind(5, t->b_sh9, 0, (size_t)v->n_caches * 108);
-        lc_gl_bind(6, t->b_list, 0, (size_t)t->n_feedback * 4);
-        lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
-        glProgramUniform1ui(gather, 2, v->links_per_cache);
-        glProgramUniform1i(gather, 4, lc_transport_texel_bands(st) * lc_transport_texel_bands(st));
-        glProgramUniform1i(gather, 5, lc_transport_texel_band1(st));
-        const size_t link_bytes = (size_t)v->links_per_cache * sizeof(lc_lcb_link), sh_bytes = (size_t)nc * 12;
-        if (!last && single_window && t->n_feedback < v->n_caches) {
-            lc_gl_bind(0, t->b_links, 0, (size_t)v->n_caches * link_bytes);
-            lc_gl_bind(4, t->b_cache_sh, 0, (size_t)v->n_caches * sh_bytes);
-            glProgramUniform1ui(gather, 1, 0);
-            glProgramUniform1ui(gather, 3, 1);
-            tgl_uniform_count(gather, t->n_feedback);
-            lc_gl_dispatch_1d(t->n_feedback, TGL_LOCAL);
-        } else {
-            glProgramUniform1ui(gather, 3, 0);
-            for (uint32_t c0 = 0; c0 < v->n_caches; c0 += t->chunk) {
-                uint32_t cnt = v->n_caches - c0 < t->chunk ? v->n_caches - c0 : t->chunk;
-                lc_gl_bind(0, t->b_links, c0 * link_bytes, cnt * link_bytes);
-                lc_gl_bind(4, t->b_cache_sh, c0 * sh_bytes, cnt * sh_bytes);
-                glProgramUniform1ui(gather, 1, c0);
-                tgl_uniform_count(gather, cnt);
-                lc_gl_dispatch_1d(cnt, TGL_LOCAL);
-            }
-        }
-        glMemoryBarrier(ssbo);
-        tgl_stamp(t, &ts, LC_STAGE_GATHER);
-
-        /* Feedback for the next pass (and, progressive, for the next relight). */
-        glUseProgram(t->prog[TGL_FEEDBACK]);
-        lc_gl_bind(0, t->b_surfels, 0, (size_t)v->n_surfels * sizeof(tgl_surfel));
-        lc_gl_bind(1, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
-        lc_gl_bind(2, t->b_sh9, 0, (size_t)v->n_caches * 108);
-        lc_gl_bind(3, t->b_e_ind, 0, (size_t)v->n_surfels * 12);
-        tgl_uniform_count(t->prog[TGL_FEEDBACK], v->n_surfels);
-        glProgramUniform1i(t->prog[TGL_FEEDBACK], 2, bands);
-        lc_gl_dispatch_1d(v->n_surfels, TGL_LOCAL);
-        glMemoryBarrier(ssbo);
-        tgl_stamp(t, &ts, LC_STAGE_BOUNCE);
-        if ((rc = lc_gl_check("egl transport: bounce pass", err, errlen)) != 0) goto gl_err;
+/* Pull, deepest level first: each level reads the one below (pull.comp once per level). */
+static void tgl_pull(tgl *t) {
+    const lc_lcb_view *v = t->v;
+    glUseProgram(t->prog[TGL_PULL]);
+    lc_gl_bind(0, t->b_nodes, 0, (size_t)v->n_nodes * sizeof(tgl_node));
+    lc_gl_bind(1, t->b_radiosity, 0, (size_t)v->n_surfels * 12);
+    lc_gl_bind(2, t->b_flux, 0, (size_t)v->n_nodes * 12);
+    for (uint32_t lv = v->n_levels; lv-- > 0;) {
+        uint32_t begin = v->levels[lv], count = v->levels[lv + 1] - begin;
+        glProgramUniform1ui(t->prog[TGL_PULL], 1, begin);
+        tgl_uniform_count(t->prog[TGL_PULL], count);
+        lc_gl_dispatch_1d(count, TGL_LOCAL);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
     }
+}
 
-    /* Lightmap: irradiance of each texel's cache for the cache normal. */
+/* RGB -> Y, Co, Cg at the nodes when compressing (chroma.comp), as tcpu_to_ycocg. */
+static void tgl_to_ycocg(tgl *t) {
+    glUseProgram(t->prog[TGL_CHROMA]);
+    lc_gl_bind(0, t->b_flux, 0, (size_t)t->v->n_nodes * 12);
+    tgl_uniform_count(t->prog[TGL_CHROMA], t->v->n_nodes);
+    lc_gl_dispatch_1d(t->v->n_nodes, TGL_LOCAL);
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+}
+
+/* Cache SH from the links (gather.comp). One window (the usual case) lets an intermediate
+ * pass gather only the caches some surfel reads; else every window of `chunk` caches. */
+static void tgl_gather(tgl *t, GLuint gather, const lc_engine_settings *st, int last) {
+    const lc_lcb_view *v = t->v;
+    const int nc = (int)(st->bands * st->bands);
+    glUseProgram(gather);
+    lc_gl_bind(1, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
+    lc_gl_bind(2, t->b_flux, 0, (size_t)v->n_nodes * 12);
+    lc_gl_bind(3, t->b_cone, 0, 256 * 8 * 4);
+    lc_gl_bind(5, t->b_sh9, 0, (size_t)v->n_caches * 108);
+    lc_gl_bind(6, t->b_list, 0, (size_t)t->n_feedback * 4);
+    lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
+    glProgramUniform1ui(gather, 2, v->links_per_cache);
+    glProgramUniform1i(gather, 4, lc_transport_texel_bands(st) * lc_transport_texel_bands(st));
+    glProgramUniform1i(gather, 5, lc_transport_texel_band1(st));
+    const size_t link_bytes = (size_t)v->links_per_cache * sizeof(lc_lcb_link), sh_bytes = (size_t)nc * 12;
+    int single_window = t->chunk >= v->n_caches;
+    if (!last && single_window && t->n_feedback < v->n_caches) {
+        lc_gl_bind(0, t->b_links, 0, (size_t)v->n_caches * link_bytes);
+        lc_gl_bind(4, t->b_cache_sh, 0, (size_t)v->n_caches * sh_bytes);
+        glProgramUniform1ui(gather, 1, 0);
+        glProgramUniform1ui(gather, 3, 1);
+        tgl_uniform_count(gather, t->n_feedback);
+        lc_gl_dispatch_1d(t->n_feedback, TGL_LOCAL);
+    } else {
+        glProgramUniform1ui(gather, 3, 0);
+        for (uint32_t c0 = 0; c0 < v->n_caches; c0 += t->chunk) {
+            uint32_t cnt = v->n_caches - c0 < t->chunk ? v->n_caches - c0 : t->chunk;
+            lc_gl_bind(0, t->b_links, c0 * link_bytes, cnt * link_bytes);
+            lc_gl_bind(4, t->b_cache_sh, c0 * sh_bytes, cnt * sh_bytes);
+            glProgramUniform1ui(gather, 1, c0);
+            tgl_uniform_count(gather, cnt);
+            lc_gl_dispatch_1d(cnt, TGL_LOCAL);
+        }
+    }
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+}
+
+/* Feedback for the next pass (and, progressive, for the next relight): E_ind per surfel
+ * (feedback.comp). */
+static void tgl_feedback(tgl *t, int bands) {
+    const lc_lcb_view *v = t->v;
+    glUseProgram(t->prog[TGL_FEEDBACK]);
+    lc_gl_bind(0, t->b_surfels, 0, (size_t)v->n_surfels * sizeof(tgl_surfel));
+    lc_gl_bind(1, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
+    lc_gl_bind(2, t->b_sh9, 0, (size_t)v->n_caches * 108);
+    lc_gl_bind(3, t->b_e_ind, 0, (size_t)v->n_surfels * 12);
+    tgl_uniform_count(t->prog[TGL_FEEDBACK], v->n_surfels);
+    glProgramUniform1i(t->prog[TGL_FEEDBACK], 2, bands);
+    lc_gl_dispatch_1d(v->n_surfels, TGL_LOCAL);
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+}
+
+/* Lightmap: irradiance of each texel's cache for the cache normal (lightmap.comp). No barrier:
+ * the grid pass after it reads the cache SH, not the lightmap. */
+static void tgl_lightmap(tgl *t, int bands) {
+    const lc_lcb_view *v = t->v;
     glUseProgram(t->prog[TGL_LIGHTMAP]);
     lc_gl_bind(0, t->b_lm_index, 0, t->texels * 4);
     lc_gl_bind(1, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
@@ -456,20 +483,24 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
     tgl_uniform_count(t->prog[TGL_LIGHTMAP], t->texels);
     glProgramUniform1i(t->prog[TGL_LIGHTMAP], 2, bands);
     lc_gl_dispatch_1d(t->texels, TGL_LOCAL);
-    tgl_stamp(t, &ts, LC_STAGE_LIGHTMAP);
+}
 
-    /* Grid: cosine-convolved L2 SH per sample. */
+/* Grid: cosine-convolved L2 SH per sample (grid.comp). */
+static void tgl_grid(tgl *t, int bands) {
     glUseProgram(t->prog[TGL_GRID]);
     lc_gl_bind(0, t->b_grid_index, 0, (size_t)t->cells * 4);
-    lc_gl_bind(1, t->b_sh9, 0, (size_t)v->n_caches * 108);
+    lc_gl_bind(1, t->b_sh9, 0, (size_t)t->v->n_caches * 108);
     lc_gl_bind(2, t->b_grid_sh, 0, (size_t)t->cells * 108);
     tgl_uniform_count(t->prog[TGL_GRID], t->cells);
     glProgramUniform1i(t->prog[TGL_GRID], 2, bands);
     lc_gl_dispatch_1d(t->cells, TGL_LOCAL);
-    glMemoryBarrier(ssbo);
-    tgl_stamp(t, &ts, LC_STAGE_GRID);
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+}
 
-    /* Objects: positions uploaded each run (the buffers grow with the object count). */
+/* Objects: positions uploaded each run (the buffers grow with the object count), each one's
+ * SH trilinear in the grid (objects.comp). -1 with err out of memory. */
+static int tgl_objects(tgl *t, const lc_transport_input *in, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
     if (in->n_objects > t->gpu_object_cap) {
         GLuint old[2] = {t->b_obj_pos, t->b_obj_sh};
         glDeleteBuffers(2, old);
@@ -480,15 +511,7 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
         if (!(t->b_obj_sh = lc_gl_buffer((size_t)in->n_objects * 108, NULL, "object SH", err, errlen))) return -1;
         t->gpu_object_cap = in->n_objects;
     }
-    if (in->n_objects > t->object_cap) {
-        float *o = realloc(t->object_sh, (size_t)in->n_objects * 27 * sizeof(float));
-        if (!o) {
-            lc_set_err(err, errlen, "egl transport: out of memory for %u objects", in->n_objects);
-            return -1;
-        }
-        t->object_sh = o;
-        t->object_cap = in->n_objects;
-    }
+    if (lc_transport_reserve_objects(&t->out, in->n_objects, "egl", err, errlen) != 0) return -1;
     if (in->n_objects) {
         glNamedBufferSubData(t->b_obj_pos, 0, (GLsizeiptr)((size_t)in->n_objects * 12), in->object_pos);
         GLuint p = t->prog[TGL_OBJECTS];
@@ -502,62 +525,88 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
         glProgramUniform3ui(p, 4, v->grid_dims[0], v->grid_dims[1], v->grid_dims[2]);
         lc_gl_dispatch_1d(in->n_objects, TGL_LOCAL);
     }
+    return 0;
+}
+
+/* Reads every output back into the host arrays, each read timed into its stage's rb[]; the
+ * cache SH goes from the GPU's stride of bands^2 to the frame's LC_SH_MAX_COEFFS (as the CPU
+ * backend's). -1 with err out of memory for the SH lightmap. */
+static int tgl_read_back(tgl *t, const lc_transport_input *in, double rb[LC_STAGE_COUNT], char *err,
+                         size_t errlen) {
+    const lc_lcb_view *v = t->v;
+    const size_t nc = (size_t)in->settings.bands * in->settings.bands;
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT); /* shader writes must be visible to buffer reads */
+    tgl_read(t->b_radiosity, (size_t)v->n_surfels * 12, t->out.radiosity, &rb[LC_STAGE_BOUNCE]);
+    tgl_read(t->b_flux, (size_t)v->n_nodes * 12, t->out.flux, &rb[LC_STAGE_PULL]);
+    tgl_read(t->b_cache_sh, (size_t)v->n_caches * nc * 12, t->cache_tmp, &rb[LC_STAGE_GATHER]);
+    double t0 = lc_clock_ms();
+    for (uint32_t c = 0; c < v->n_caches; c++)
+        memcpy(t->out.cache_sh + (size_t)c * TGL_CAP * 3, t->cache_tmp + (size_t)c * nc * 3, nc * 3 * sizeof(float));
+    rb[LC_STAGE_GATHER] += lc_clock_ms() - t0;
+    tgl_read(t->b_lightmap, t->texels * 12, t->out.lightmap, &rb[LC_STAGE_LIGHTMAP]);
+    t0 = lc_clock_ms();
+    if (in->settings.sh_lightmap && lc_transport_fill_lightmap_sh(&t->out, v, "egl", err, errlen) != 0) return -1;
+    rb[LC_STAGE_LIGHTMAP] += lc_clock_ms() - t0;
+    tgl_read(t->b_grid_sh, (size_t)t->cells * 108, t->out.grid_sh, &rb[LC_STAGE_GRID]);
+    tgl_read(t->b_obj_sh, (size_t)in->n_objects * 108, t->out.object_sh, &rb[LC_STAGE_OBJECTS]);
+    return 0;
+}
+
+/* Stage times from the timestamps (all available: the read-back waited for the GPU) plus
+ * each stage's read-back. */
+static void tgl_stage_times(tgl *t, const tgl_stamps *ts, const double rb[LC_STAGE_COUNT], lc_engine_frame *fr) {
+    double ms[LC_STAGE_COUNT] = {0};
+    GLuint64 prev = 0;
+    for (int i = 0; i < ts->n; i++) {
+        GLuint64 now = 0;
+        glGetQueryObjectui64v(t->queries[i], GL_QUERY_RESULT, &now);
+        if (i > 0 && now >= prev) ms[ts->stage[i]] += (double)(now - prev) * 1e-6;
+        prev = now;
+    }
+    for (int s = LC_STAGE_BOUNCE; s <= LC_STAGE_CHROMA; s++) fr->stage_ms[s] = ms[s] + rb[s];
+}
+
+/* Runs on the compute thread: the passes of transport.h in the CPU backend's order, one
+ * timestamp after each, then the read-back. */
+static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr, char *err, size_t errlen) {
+    tgl *t = impl;
+    const lc_lcb_view *v = t->v;
+    const lc_engine_settings *st = &in->settings;
+    GLuint gather = tgl_prepare(t, st, err, errlen);
+    if (!gather) return -1;
+    tgl_stamps ts = {0};
+    int rc = 0;
+    tgl_stamp(t, &ts, 0);
+
+    glNamedBufferSubData(t->b_b0, 0, (GLsizeiptr)((size_t)v->n_surfels * 12), in->b0);
+    if (in->reset_feedback) glClearNamedBufferData(t->b_e_ind, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
+    for (uint32_t pass = 0; pass <= st->bounces; pass++) {
+        tgl_radiosity(t);
+        tgl_stamp(t, &ts, LC_STAGE_BOUNCE);
+        tgl_pull(t);
+        tgl_stamp(t, &ts, LC_STAGE_PULL);
+        if (lc_transport_chroma(st)) tgl_to_ycocg(t);
+        tgl_stamp(t, &ts, LC_STAGE_CHROMA);
+        tgl_gather(t, gather, st, pass == st->bounces);
+        tgl_stamp(t, &ts, LC_STAGE_GATHER);
+        tgl_feedback(t, (int)st->bands);
+        tgl_stamp(t, &ts, LC_STAGE_BOUNCE);
+        if ((rc = lc_gl_check("egl transport: bounce pass", err, errlen)) != 0) goto gl_err;
+    }
+    tgl_lightmap(t, (int)st->bands);
+    tgl_stamp(t, &ts, LC_STAGE_LIGHTMAP);
+    tgl_grid(t, (int)st->bands);
+    tgl_stamp(t, &ts, LC_STAGE_GRID);
+    if (tgl_objects(t, in, err, errlen) != 0) return -1;
     tgl_stamp(t, &ts, LC_STAGE_OBJECTS);
     glUseProgram(0);
     if ((rc = lc_gl_check("egl transport: outputs", err, errlen)) != 0) goto gl_err;
 
-    /* Read-back: shader writes must be visible to buffer reads. */
-    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     double rb[LC_STAGE_COUNT] = {0};
-    tgl_read(t->b_radiosity, (size_t)v->n_surfels * 12, t->radiosity, &rb[LC_STAGE_BOUNCE]);
-    tgl_read(t->b_flux, (size_t)v->n_nodes * 12, t->flux, &rb[LC_STAGE_PULL]);
-    tgl_read(t->b_cache_sh, (size_t)v->n_caches * nc * 12, t->cache_tmp, &rb[LC_STAGE_GATHER]);
-    double t0 = lc_clock_ms();
-    /* GPU stride is bands^2; the frame's (as the CPU backend's) is LC_SH_MAX_COEFFS. */
-    for (uint32_t c = 0; c < v->n_caches; c++)
-        memcpy(t->cache_sh + (size_t)c * TGL_CAP * 3, t->cache_tmp + (size_t)c * nc * 3, (size_t)nc * 3 * sizeof(float));
-    rb[LC_STAGE_GATHER] += lc_clock_ms() - t0;
-    tgl_read(t->b_lightmap, t->texels * 12, t->lightmap, &rb[LC_STAGE_LIGHTMAP]);
-    t0 = lc_clock_ms();
-    if (st->sh_lightmap) { /* a per-texel copy of the cache SH: cheaper on the host than read back */
-        if (!t->lightmap_sh) t->lightmap_sh = calloc(t->texels * TGL_CAP * 3 + 1, sizeof(float));
-        if (!t->lightmap_sh) {
-            lc_set_err(err, errlen, "egl transport: out of memory for the SH lightmap");
-            return -1;
-        }
-        for (size_t i = 0; i < t->texels; i++) {
-            uint32_t c = v->lightmap[i];
-            float *dst = t->lightmap_sh + i * TGL_CAP * 3;
-            if (c == LC_NONE)
-                memset(dst, 0, TGL_CAP * 3 * sizeof(float));
-            else
-                memcpy(dst, t->cache_sh + (size_t)c * TGL_CAP * 3, TGL_CAP * 3 * sizeof(float));
-        }
-    }
-    rb[LC_STAGE_LIGHTMAP] += lc_clock_ms() - t0;
-    tgl_read(t->b_grid_sh, (size_t)t->cells * 108, t->grid_sh, &rb[LC_STAGE_GRID]);
-    tgl_read(t->b_obj_sh, (size_t)in->n_objects * 108, t->object_sh, &rb[LC_STAGE_OBJECTS]);
+    if (tgl_read_back(t, in, rb, err, errlen) != 0) return -1;
     if ((rc = lc_gl_check("egl transport: read-back", err, errlen)) != 0) goto gl_err;
-
-    /* Stage times from the timestamps (all available: the read-back waited for the GPU). */
-    double ms[LC_STAGE_COUNT] = {0};
-    GLuint64 prev = 0;
-    for (int i = 0; i < ts.n; i++) {
-        GLuint64 now = 0;
-        glGetQueryObjectui64v(t->queries[i], GL_QUERY_RESULT, &now);
-        if (i > 0 && now >= prev) ms[ts.stage[i]] += (double)(now - prev) * 1e-6;
-        prev = now;
-    }
-    for (int s = LC_STAGE_BOUNCE; s <= LC_STAGE_CHROMA; s++) fr->stage_ms[s] = ms[s] + rb[s];
-
-    /* Arrays only: the engine front fills the dimensions from the bake and the settings. */
-    fr->lightmap = t->lightmap;
-    fr->lightmap_sh = st->sh_lightmap ? t->lightmap_sh : NULL;
-    fr->cache_sh = t->cache_sh;
-    fr->grid_sh = t->grid_sh;
-    fr->object_sh = t->object_sh;
-    fr->surfel_radiosity = t->radiosity;
-    fr->node_flux = chroma ? NULL : t->flux; /* YCoCg when compressing */
+    tgl_stage_times(t, &ts, rb, fr);
+    lc_transport_publish(&t->out, st, fr);
     return 0;
 gl_err:
     glUseProgram(0);
