@@ -1,14 +1,17 @@
 #include "util/log.h"
 
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <string.h>
 #include <time.h>
 
-static lc_log_level log_level = LC_LOG_INFO;
+/* Atomic because lucentd's service thread sets it on SIGHUP while the compute thread logs;
+ * relaxed order is enough: the level guards nothing else, a line may see the old one. */
+static _Atomic int log_level = LC_LOG_INFO;
 
-void lc_log_set_level(lc_log_level level) { log_level = level; }
-lc_log_level lc_log_get_level(void) { return log_level; }
+void lc_log_set_level(lc_log_level level) { atomic_store_explicit(&log_level, (int)level, memory_order_relaxed); }
+lc_log_level lc_log_get_level(void) { return (lc_log_level)atomic_load_explicit(&log_level, memory_order_relaxed); }
 
 int lc_log_parse_level(const char *name) {
     static const char *names[] = {"debug", "info", "warn", "error"};
@@ -18,7 +21,7 @@ int lc_log_parse_level(const char *name) {
 }
 
 void lc_log(lc_log_level level, const char *module, const char *fmt, ...) {
-    if (level < log_level) return;
+    if ((int)level < atomic_load_explicit(&log_level, memory_order_relaxed)) return;
     static const char *tags[] = {"debug", "info", "warn", "error"};
     char msg[1024];
     va_list ap;

@@ -4,6 +4,7 @@
 
 typedef enum { LC_LOG_DEBUG = 0, LC_LOG_INFO, LC_LOG_WARN, LC_LOG_ERROR } lc_log_level;
 
+/* The level is one atomic (relaxed): any thread may set it while others log. */
 void lc_log_set_level(lc_log_level level);
 lc_log_level lc_log_get_level(void);
 /* Parses "debug|info|warn|error"; returns -1 when unknown. */
