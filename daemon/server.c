@@ -39,13 +39,12 @@ static void server_on_signal(int sig) {
 /* --- outgoing ---------------------------------------------------------------------------------- */
 
 void server_count_error(lc_server *s, const char *code) {
-    for (int i = 0; i < 32; i++) {
-        if (!s->error_codes[i][0]) snprintf(s->error_codes[i], sizeof s->error_codes[i], "%s", code);
-        if (!strcmp(s->error_codes[i], code)) {
-            s->errors[i]++;
-            return;
-        }
+    int i = lc_proto_errcode_find(code);
+    if (i < 0) { /* every producer takes its code from the catalogue: a bug if it did not */
+        lc_warn("server", "error code '%s' is not in the catalogue (lucent_errors.h); counted as internal", code);
+        i = LC_ERR_INTERNAL;
     }
+    s->errors[i]++;
 }
 
 /* Asks lws for a WRITEABLE callback; until it comes the session counts as stalled (its
@@ -93,13 +92,13 @@ void session_send(lc_session *ss, char *text) {
     session_want_write(ss);
 }
 
-void session_error(lc_server *s, lc_session *ss, const lc_proto_id *id, const char *code, const char *pointer,
-                          const char *message) {
+void session_error(lc_server *s, lc_session *ss, const lc_proto_id *id, lc_proto_errcode code, const char *pointer,
+                   const char *message) {
     lc_proto_error e;
-    snprintf(e.code, sizeof e.code, "%s", code);
+    lc_proto_error_set_code(&e, code);
     snprintf(e.pointer, sizeof e.pointer, "%s", pointer);
     snprintf(e.message, sizeof e.message, "%s", message);
-    server_count_error(s, code);
+    server_count_error(s, e.code);
     session_send(ss, lc_proto_build_error(id, &e));
 }
 
@@ -174,7 +173,7 @@ static void server_report_relight_failure(lc_server *s) {
     snprintf(msg, sizeof msg, "relight of revision %llu failed: %.200s", (unsigned long long)rev, why);
     lc_proto_id none = {0};
     for (lc_session *o = s->sessions; o; o = o->next)
-        if (o->authed) session_error(s, o, &none, "internal", "", msg);
+        if (o->authed) session_error(s, o, &none, LC_ERR_INTERNAL, "", msg);
 }
 
 static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len) {
@@ -191,7 +190,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         char why[320];
         if (!server_origin_allowed(s, wsi, why, sizeof why)) {
             lc_warn("server", "refusing a WebSocket handshake: %s", why);
-            server_count_error(s, "origin_refused");
+            s->origins_refused++;
             return server_refuse_http(wsi, HTTP_STATUS_FORBIDDEN, "origin not allowed (see lucentd --help, --origins)\n");
         }
         return 0;
@@ -248,16 +247,16 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         if (!lws_is_final_fragment(wsi)) return 0;
         lc_proto_id none = {0};
         if (ss->rx_binary) {
-            session_error(s, ss, &none, "binary_not_allowed", "", "clients send text (JSON) messages only");
+            session_error(s, ss, &none, LC_ERR_BINARY_NOT_ALLOWED, "", "clients send text (JSON) messages only");
         } else if (ss->rx_oversize) {
             char msg[96];
             snprintf(msg, sizeof msg, "message over the size limit (%zu bytes%s)", ss->rx_limit,
                      ss->authed ? "" : " before hello");
-            session_error(s, ss, &none, "too_large", "", msg);
+            session_error(s, ss, &none, LC_ERR_TOO_LARGE, "", msg);
             session_close(ss, LWS_CLOSE_STATUS_MESSAGE_TOO_LARGE, "too large");
         } else if (!lc_proto_utf8_valid(ss->rx, ss->rx_len)) {
             /* lws's own check would close with 1007 before saying why (PROTOCOL.md §5.2). */
-            session_error(s, ss, &none, "bad_utf8", "", "the text message is not valid UTF-8");
+            session_error(s, ss, &none, LC_ERR_BAD_UTF8, "", "the text message is not valid UTF-8");
             session_close(ss, LWS_CLOSE_STATUS_INVALID_PAYLOAD, "bad utf-8");
         } else {
             ss->rx[ss->rx_len] = 0;
@@ -349,7 +348,7 @@ static void server_tick(lws_sorted_usec_list_t *sul) {
         if (ss->closing == 2) continue;
         if (!ss->authed && !ss->closing && now - ss->connected_ms > s->cfg->hello_timeout * 1000.0) {
             lc_proto_id none = {0};
-            session_error(s, ss, &none, "hello_required", "", "no hello within the time limit");
+            session_error(s, ss, &none, LC_ERR_HELLO_REQUIRED, "", "no hello within the time limit");
             session_close(ss, LWS_CLOSE_STATUS_POLICY_VIOLATION, "hello timeout");
         }
         /* A client that takes none of its output (replies or frames: its socket stays full)

@@ -145,6 +145,8 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
                (uint64_t)lc_journal_broken(s->journal));
     metric_u64(body, cap, &n, "lucent_clients_dropped_total", "counter",
                "Clients dropped for not taking their output (slow or not reading).", s->dropped_slow);
+    metric_u64(body, cap, &n, "lucent_origins_refused_total", "counter",
+               "WebSocket handshakes refused with 403 for their Origin.", s->origins_refused);
     metric_u64(body, cap, &n, "lucent_auth_failures_total", "counter", "Hellos refused for an unknown token.",
                s->auth_failures);
     metric_u64(body, cap, &n, "lucent_config_reloads_total", "counter",
@@ -152,8 +154,8 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
     metric_u64(body, cap, &n, "lucent_accept_errors_total", "counter",
                "Failed accept() calls (e.g. out of file descriptors).", server_accept_errors_total());
     metric_head(body, cap, &n, "lucent_errors_total", "counter", "Error replies sent, by code.");
-    for (int i = 0; i < 32 && s->error_codes[i][0]; i++)
-        http_append(body, cap, &n, "lucent_errors_total{code=\"%s\"} %llu\n", s->error_codes[i],
+    for (int i = 0; i < LC_ERR_COUNT; i++)
+        http_append(body, cap, &n, "lucent_errors_total{code=\"%s\"} %llu\n", lc_proto_errcode_name((lc_proto_errcode)i),
                     (unsigned long long)s->errors[i]);
     return n;
 }

@@ -89,8 +89,9 @@ struct lc_server {
     uint32_t max_clients; /* --max-clients, lowered to what the descriptor limit allows */
     unsigned fd_budget;   /* descriptors the sockets may use (0 = unlimited) */
     /* metrics */
-    uint64_t frames_sent, bytes_sent, messages_in, errors[32];
-    char error_codes[32][32];
+    uint64_t frames_sent, bytes_sent, messages_in;
+    uint64_t errors[LC_ERR_COUNT]; /* error replies per catalogue code */
+    uint64_t origins_refused;      /* handshakes refused for their Origin */
     uint64_t dropped_slow;      /* sessions dropped for not taking their output */
     uint64_t auth_failures;     /* hellos with an unknown token */
     uint64_t reloads;           /* SIGHUPs whose configuration was applied */
@@ -103,7 +104,7 @@ struct lc_server {
 void server_count_error(lc_server *s, const char *code);
 /* Queues text (takes ownership); a client too far behind is dropped. */
 void session_send(lc_session *ss, char *text);
-void session_error(lc_server *s, lc_session *ss, const lc_proto_id *id, const char *code, const char *pointer,
+void session_error(lc_server *s, lc_session *ss, const lc_proto_id *id, lc_proto_errcode code, const char *pointer,
                    const char *message);
 /* Closes after what is queued has gone out (code and reason of the close frame). */
 void session_close(lc_session *ss, int code, const char *reason);

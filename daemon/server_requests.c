@@ -77,12 +77,12 @@ static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *
     /* After a failed fsync the journal takes nothing until a snapshot succeeds: retry it
      * now (the tick retries once a second too); logged once by the journal, not per refusal. */
     if (lc_journal_broken(s->journal) && lc_journal_compact(s->journal, &s->state, jerr, sizeof jerr) != 0) {
-        session_error(s, ss, &req->id, "internal", "",
+        session_error(s, ss, &req->id, LC_ERR_INTERNAL, "",
                       "changes are refused: the journal's disk failed (the lucentd log says why); retry later");
         return;
     }
     if (lc_state_clone(&before, &s->state) != 0) {
-        session_error(s, ss, &req->id, "internal", "", "out of memory");
+        session_error(s, ss, &req->id, LC_ERR_INTERNAL, "", "out of memory");
         return;
     }
     if (lc_state_apply(&s->state, req->ops, req->n_ops, req->type == LC_REQ_BATCH, &e) != 0) {
@@ -102,7 +102,7 @@ static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *
         lc_state_release(&s->state);
         s->state = before;
         lc_compute_submit(s->compute, &s->state, NULL);
-        session_error(s, ss, &req->id, "internal", "",
+        session_error(s, ss, &req->id, LC_ERR_INTERNAL, "",
                       lc_journal_broken(s->journal)
                           ? "the change could not be stored, and the journal refuses changes until it recovers "
                             "(the lucentd log says why)"
@@ -130,7 +130,7 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
     }
     if (!ss->authed) {
         if (req.type != LC_REQ_HELLO) {
-            session_error(s, ss, &req.id, "hello_required", "/type", "the first message must be hello");
+            session_error(s, ss, &req.id, LC_ERR_HELLO_REQUIRED, "/type", "the first message must be hello");
             session_close(ss, LWS_CLOSE_STATUS_POLICY_VIOLATION, "hello required");
             goto done;
         }
@@ -138,7 +138,7 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
         server_auth_peer *ap = c->controller_tokens[0] ? server_auth_peer_for(s, ss->peer) : NULL;
         if (ap && ap->tokens < 1) {
             /* Refused before the token is looked at, so guessing from this address is useless. */
-            session_error(s, ss, &req.id, "rate_limited", "/token", "too many failed hellos from this address; wait and retry");
+            session_error(s, ss, &req.id, LC_ERR_RATE_LIMITED, "/token", "too many failed hellos from this address; wait and retry");
             session_close(ss, LWS_CLOSE_STATUS_POLICY_VIOLATION, "rate limited");
             goto done;
         }
@@ -148,7 +148,7 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
         else {
             ap->tokens -= 1;
             s->auth_failures++;
-            session_error(s, ss, &req.id, "unauthorized", "/token", "unknown token");
+            session_error(s, ss, &req.id, LC_ERR_UNAUTHORIZED, "/token", "unknown token");
             session_close(ss, LWS_CLOSE_STATUS_POLICY_VIOLATION, "unauthorized");
             lc_info("server", "refused client '%s' from %s: unknown token", req.client, ss->peer);
             goto done;
@@ -164,22 +164,22 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
     ss->tokens = fmin(2.0 * s->cfg->rate, ss->tokens + (now - ss->refill_ms) * 1e-3 * s->cfg->rate);
     ss->refill_ms = now;
     if (ss->tokens < 1) {
-        session_error(s, ss, &req.id, "rate_limited", "", "too many requests; slow down");
+        session_error(s, ss, &req.id, LC_ERR_RATE_LIMITED, "", "too many requests; slow down");
         goto done;
     }
     ss->tokens -= 1;
     if (lc_proto_is_change(req.type) && !ss->controller) {
-        session_error(s, ss, &req.id, "forbidden", "/type", "viewers cannot change the state");
+        session_error(s, ss, &req.id, LC_ERR_FORBIDDEN, "/type", "viewers cannot change the state");
         goto done;
     }
     switch (req.type) {
     case LC_REQ_HELLO:
-        session_error(s, ss, &req.id, "invalid", "/type", "hello was already received");
+        session_error(s, ss, &req.id, LC_ERR_INVALID, "/type", "hello was already received");
         break;
     case LC_REQ_SUBSCRIBE: {
         if (req.stream == LC_STREAM_LIGHTMAP ? !lc_frame_texel_bytes(req.encoding)
                                              : !lc_frame_sh_value_bytes(req.encoding)) {
-            session_error(s, ss, &req.id, "invalid", "/encoding", "this encoding is not available for the stream");
+            session_error(s, ss, &req.id, LC_ERR_INVALID, "/encoding", "this encoding is not available for the stream");
             break;
         }
         session_take_latest(s, ss);

@@ -10,10 +10,10 @@
 
 #include "util/log.h"
 
-static void state_err(lc_proto_error *err, const char *code, int batch, uint32_t op, const char *field,
+static void state_err(lc_proto_error *err, lc_proto_errcode code, int batch, uint32_t op, const char *field,
                       const char *fmt, const char *arg) {
     if (!err) return;
-    snprintf(err->code, sizeof err->code, "%s", code);
+    lc_proto_error_set_code(err, code);
     if (batch) snprintf(err->pointer, sizeof err->pointer, "/ops/%u%s", op, field);
     else snprintf(err->pointer, sizeof err->pointer, "%s", field);
     snprintf(err->message, sizeof err->message, fmt, arg);
@@ -125,7 +125,7 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
             s->n_lights >= s->limits.max_lights) {
             char lim[32];
             snprintf(lim, sizeof lim, "%u", s->limits.max_lights);
-            state_err(err, "limit_exceeded", batch, i, "/light/id", "the server holds at most %s lights", lim);
+            state_err(err, LC_ERR_LIMIT_EXCEEDED, batch, i, "/light/id", "the server holds at most %s lights", lim);
             return -1;
         }
         state_upsert(s->lights, &s->n_lights, sizeof *s->lights, &op->light);
@@ -133,20 +133,20 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
     }
     case LC_REQ_LIGHT_REMOVE:
         if (state_remove(s->lights, &s->n_lights, sizeof *s->lights, op->target) != 0) {
-            state_err(err, "unknown_id", batch, i, "/light_id", "no light with id '%s'", op->target);
+            state_err(err, LC_ERR_UNKNOWN_ID, batch, i, "/light_id", "no light with id '%s'", op->target);
             return -1;
         }
         return 0;
     case LC_REQ_OBJECT_SET: {
         if (state_asset(s->scene, op->object.asset) < 0) {
-            state_err(err, "unknown_asset", batch, i, "/object/asset", "the scene has no asset '%s'", op->object.asset);
+            state_err(err, LC_ERR_UNKNOWN_ASSET, batch, i, "/object/asset", "the scene has no asset '%s'", op->object.asset);
             return -1;
         }
         if (state_find(s->objects, s->n_objects, sizeof *s->objects, op->object.id) < 0 &&
             s->n_objects >= s->limits.max_objects) {
             char lim[32];
             snprintf(lim, sizeof lim, "%u", s->limits.max_objects);
-            state_err(err, "limit_exceeded", batch, i, "/object/id", "the server holds at most %s objects", lim);
+            state_err(err, LC_ERR_LIMIT_EXCEEDED, batch, i, "/object/id", "the server holds at most %s objects", lim);
             return -1;
         }
         state_upsert(s->objects, &s->n_objects, sizeof *s->objects, &op->object);
@@ -154,14 +154,14 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
     }
     case LC_REQ_OBJECT_REMOVE:
         if (state_remove(s->objects, &s->n_objects, sizeof *s->objects, op->target) != 0) {
-            state_err(err, "unknown_id", batch, i, "/object_id", "no object with id '%s'", op->target);
+            state_err(err, LC_ERR_UNKNOWN_ID, batch, i, "/object_id", "no object with id '%s'", op->target);
             return -1;
         }
         return 0;
     case LC_REQ_MATERIAL_SET: {
         long m = state_material(s->scene, op->target);
         if (m < 0) {
-            state_err(err, "unknown_material", batch, i, "/material", "the scene has no material '%s'", op->target);
+            state_err(err, LC_ERR_UNKNOWN_MATERIAL, batch, i, "/material", "the scene has no material '%s'", op->target);
             return -1;
         }
         memcpy(s->emission[m], op->emission, sizeof s->emission[m]);
@@ -181,14 +181,14 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
         if (!(n->present & (1u << LC_SET_CHROMA_BANDS)) && next.chroma_bands > next.bands)
             next.chroma_bands = next.bands; /* follow a band reduction */
         if (next.chroma_bands < 1 || next.chroma_bands > next.bands) {
-            state_err(err, "out_of_range", batch, i, "/settings/chroma_bands", "%s", "chroma_bands must be in 1..bands");
+            state_err(err, LC_ERR_OUT_OF_RANGE, batch, i, "/settings/chroma_bands", "%s", "chroma_bands must be in 1..bands");
             return -1;
         }
         s->settings = next;
         return 0;
     }
     default:
-        state_err(err, "invalid", batch, i, "/type", "%s", "not a change operation");
+        state_err(err, LC_ERR_INVALID, batch, i, "/type", "%s", "not a change operation");
         return -1;
     }
 }
@@ -202,7 +202,7 @@ static int state_engine_check(const lc_state *s, lc_proto_error *err) {
     lc_engine_object *objects;
     float *emission;
     if (lc_state_to_engine(s, &es, &lights, &objects, &emission) != 0) {
-        state_err(err, "internal", 0, 0, "", "%s", "out of memory checking the change");
+        state_err(err, LC_ERR_INTERNAL, 0, 0, "", "%s", "out of memory checking the change");
         return -1;
     }
     char why[200];
@@ -210,7 +210,7 @@ static int state_engine_check(const lc_state *s, lc_proto_error *err) {
     if (rc != 0) {
         unsigned idx;
         int used = 0;
-        state_err(err, "out_of_range", 0, 0, "", "%s", why);
+        state_err(err, LC_ERR_OUT_OF_RANGE, 0, 0, "", "%s", why);
         if (!err) {
         } else if (sscanf(why, "/lights/%u/%n", &idx, &used) == 1 && used > 0 && idx < s->n_lights)
             snprintf(err->message, sizeof err->message, "light '%.64s': %.150s", s->lights[idx].id, why + used);
@@ -309,20 +309,20 @@ int lc_state_apply(lc_state *s, const lc_proto_op *ops, uint32_t n_ops, int batc
 oom_next:
     lc_state_release(&next);
 oom:
-    state_err(err, "internal", 0, 0, "", "%s", "out of memory applying the change");
+    state_err(err, LC_ERR_INTERNAL, 0, 0, "", "%s", "out of memory applying the change");
     return -1;
 }
 
 int lc_state_restore(lc_state *s, const lc_proto_parsed_state *p, lc_proto_error *err) {
     lc_state next;
     if (lc_state_clone(&next, s) != 0) {
-        state_err(err, "internal", 0, 0, "", "%s", "out of memory");
+        state_err(err, LC_ERR_INTERNAL, 0, 0, "", "%s", "out of memory");
         return -1;
     }
     next.n_lights = next.n_objects = 0;
     if (p->n_lights > s->limits.max_lights || p->n_objects > s->limits.max_objects) {
         lc_state_release(&next);
-        state_err(err, "limit_exceeded", 0, 0, "", "%s", "the snapshot holds more lights or objects than the limits");
+        state_err(err, LC_ERR_LIMIT_EXCEEDED, 0, 0, "", "%s", "the snapshot holds more lights or objects than the limits");
         return -1;
     }
     lc_proto_light *l = realloc(next.lights, ((size_t)p->n_lights + 1) * sizeof *l);
@@ -331,13 +331,13 @@ int lc_state_restore(lc_state *s, const lc_proto_parsed_state *p, lc_proto_error
     if (o) next.objects = o;
     if (!l || !o) {
         lc_state_release(&next);
-        state_err(err, "internal", 0, 0, "", "%s", "out of memory");
+        state_err(err, LC_ERR_INTERNAL, 0, 0, "", "%s", "out of memory");
         return -1;
     }
     for (uint32_t i = 0; i < p->n_lights; i++) state_upsert(next.lights, &next.n_lights, sizeof *l, &p->lights[i]);
     for (uint32_t i = 0; i < p->n_objects; i++) {
         if (state_asset(next.scene, p->objects[i].asset) < 0) {
-            state_err(err, "unknown_asset", 0, 0, "/objects", "the bake has no asset '%s' (was it rebaked?)",
+            state_err(err, LC_ERR_UNKNOWN_ASSET, 0, 0, "/objects", "the bake has no asset '%s' (was it rebaked?)",
                       p->objects[i].asset);
             lc_state_release(&next);
             return -1;

@@ -11,6 +11,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "lucent_errors.h"
+
 #define LC_PROTO_NAME "lucent/1"
 #define LC_PROTO_SUBPROTOCOL "lucent.v1"
 #define LC_PROTO_ID_MAX 64      /* bytes in a light/object id or request id string */
@@ -129,10 +131,13 @@ typedef struct lc_proto_limits {
 
 /* Error: stable code (PROTOCOL.md §5.2), RFC 6901 pointer, human message. */
 typedef struct lc_proto_error {
-    char code[32];
+    char code[32]; /* a catalogue code (lucent_errors.h), as on the wire; set with lc_proto_error_set_code */
     char pointer[160];
     char message[256];
 } lc_proto_error;
+
+/* err->code = the catalogue entry's name. */
+void lc_proto_error_set_code(lc_proto_error *err, lc_proto_errcode code);
 
 void lc_proto_default_limits(lc_proto_limits *lim);
 

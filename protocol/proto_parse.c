@@ -60,11 +60,41 @@ void lc_proto_default_limits(lc_proto_limits *lim) {
 
 /* --- errors and pointers ---------------------------------------------------------------- */
 
+static const struct {
+    const char *code, *meaning, *connection;
+} proto_errors[LC_ERR_COUNT] = {
+#define PROTO_ERROR_ROW(id, code, meaning, connection) {code, meaning, connection},
+    LC_PROTO_ERRORS(PROTO_ERROR_ROW)
+#undef PROTO_ERROR_ROW
+};
+
+const char *lc_proto_errcode_name(lc_proto_errcode c) {
+    return (unsigned)c < LC_ERR_COUNT ? proto_errors[c].code : proto_errors[LC_ERR_INTERNAL].code;
+}
+
+const char *lc_proto_errcode_meaning(lc_proto_errcode c) {
+    return (unsigned)c < LC_ERR_COUNT ? proto_errors[c].meaning : "";
+}
+
+const char *lc_proto_errcode_connection(lc_proto_errcode c) {
+    return (unsigned)c < LC_ERR_COUNT ? proto_errors[c].connection : "";
+}
+
+int lc_proto_errcode_find(const char *code) {
+    for (int i = 0; i < LC_ERR_COUNT; i++)
+        if (!strcmp(proto_errors[i].code, code)) return i;
+    return -1;
+}
+
+void lc_proto_error_set_code(lc_proto_error *err, lc_proto_errcode code) {
+    snprintf(err->code, sizeof err->code, "%s", lc_proto_errcode_name(code));
+}
+
 /* Fills err. Messages quote client text only through proto_quote(). */
-static void proto_error(lc_proto_error *err, const char *code, const char *ptr, const char *fmt, ...)
+static void proto_error(lc_proto_error *err, lc_proto_errcode code, const char *ptr, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
-static void proto_error(lc_proto_error *err, const char *code, const char *ptr, const char *fmt, ...) {
-    if (snprintf(err->code, sizeof err->code, "%s", code) < 0) err->code[0] = 0;
+static void proto_error(lc_proto_error *err, lc_proto_errcode code, const char *ptr, const char *fmt, ...) {
+    lc_proto_error_set_code(err, code);
     if (snprintf(err->pointer, sizeof err->pointer, "%s", ptr) < 0) err->pointer[0] = 0;
     va_list ap;
     va_start(ap, fmt);
@@ -333,28 +363,28 @@ static int proto_load(const char *text, size_t len, int max_depth, cJSON **root,
     *flags = 0;
     if (max_depth < 1) max_depth = 1;
     if (max_depth > PROTO_DEPTH_CAP) max_depth = PROTO_DEPTH_CAP;
-    if (!text) return proto_fail(err, "bad_json", "", "empty message");
+    if (!text) return proto_fail(err, LC_ERR_BAD_JSON, "", "empty message");
     if (proto_too_deep(text, len, max_depth))
-        return proto_fail(err, "too_deep", "", "nesting deeper than %d", max_depth);
-    if (proto_scan_json(text, len, flags) < 0) return proto_fail(err, "bad_json", "", "not valid JSON");
+        return proto_fail(err, LC_ERR_TOO_DEEP, "", "nesting deeper than %d", max_depth);
+    if (proto_scan_json(text, len, flags) < 0) return proto_fail(err, LC_ERR_BAD_JSON, "", "not valid JSON");
     *root = cJSON_ParseWithLength(text, len);
-    if (!*root) return proto_fail(err, "bad_json", "", "not valid JSON");
-    if (!cJSON_IsObject(*root)) return proto_fail(err, "bad_json", "", "message is not a JSON object");
+    if (!*root) return proto_fail(err, LC_ERR_BAD_JSON, "", "not valid JSON");
+    if (!cJSON_IsObject(*root)) return proto_fail(err, LC_ERR_BAD_JSON, "", "message is not a JSON object");
     return 0;
 }
 
 /* --- field readers: 0 absent (and optional), 1 read, -1 error ---------------------------- */
 
 static int proto_missing(int required, const char *p, lc_proto_error *err) {
-    return required ? proto_fail(err, "invalid", p, "%s is required", p) : 0;
+    return required ? proto_fail(err, LC_ERR_INVALID, p, "%s is required", p) : 0;
 }
 
 static int proto_num_item(const cJSON *it, const char *p, double lo, double hi, double *out,
                           lc_proto_error *err) {
-    if (!cJSON_IsNumber(it)) return proto_fail(err, "invalid", p, "%s must be a number", p);
+    if (!cJSON_IsNumber(it)) return proto_fail(err, LC_ERR_INVALID, p, "%s must be a number", p);
     double v = it->valuedouble;
-    if (!isfinite(v)) return proto_fail(err, "out_of_range", p, "%s is not a finite number", p);
-    if (v < lo || v > hi) return proto_fail(err, "out_of_range", p, "%s must be in [%g, %g]", p, lo, hi);
+    if (!isfinite(v)) return proto_fail(err, LC_ERR_OUT_OF_RANGE, p, "%s is not a finite number", p);
+    if (v < lo || v > hi) return proto_fail(err, LC_ERR_OUT_OF_RANGE, p, "%s must be in [%g, %g]", p, lo, hi);
     *out = v;
     return 1;
 }
@@ -374,11 +404,11 @@ static int proto_uint(const cJSON *obj, const char *key, const char *base, int r
     proto_ptr(p, base, key);
     const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
     if (!it) return proto_missing(required, p, err);
-    if (!cJSON_IsNumber(it)) return proto_fail(err, "invalid", p, "%s must be an integer", p);
+    if (!cJSON_IsNumber(it)) return proto_fail(err, LC_ERR_INVALID, p, "%s must be an integer", p);
     double v = it->valuedouble;
-    if (!isfinite(v)) return proto_fail(err, "out_of_range", p, "%s is not a finite number", p);
-    if (v != floor(v)) return proto_fail(err, "invalid", p, "%s must be an integer", p);
-    if (v < lo || v > hi) return proto_fail(err, "out_of_range", p, "%s must be in [%u, %u]", p, lo, hi);
+    if (!isfinite(v)) return proto_fail(err, LC_ERR_OUT_OF_RANGE, p, "%s is not a finite number", p);
+    if (v != floor(v)) return proto_fail(err, LC_ERR_INVALID, p, "%s must be an integer", p);
+    if (v < lo || v > hi) return proto_fail(err, LC_ERR_OUT_OF_RANGE, p, "%s must be in [%u, %u]", p, lo, hi);
     *out = (uint32_t)v;
     return 1;
 }
@@ -389,20 +419,20 @@ static int proto_bool(const cJSON *obj, const char *key, const char *base, int r
     proto_ptr(p, base, key);
     const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
     if (!it) return proto_missing(required, p, err);
-    if (!cJSON_IsBool(it)) return proto_fail(err, "invalid", p, "%s must be a boolean", p);
+    if (!cJSON_IsBool(it)) return proto_fail(err, LC_ERR_INVALID, p, "%s must be a boolean", p);
     *out = cJSON_IsTrue(it) ? 1 : 0;
     return 1;
 }
 
 static int proto_str_item(const cJSON *it, const char *p, size_t minlen, size_t maxlen, char *out, size_t cap,
                           lc_proto_error *err) {
-    if (!cJSON_IsString(it) || !it->valuestring) return proto_fail(err, "invalid", p, "%s must be a string", p);
+    if (!cJSON_IsString(it) || !it->valuestring) return proto_fail(err, LC_ERR_INVALID, p, "%s must be a string", p);
     size_t n = strlen(it->valuestring);
-    if (!lc_utf8_valid(it->valuestring, n)) return proto_fail(err, "invalid", p, "%s is not valid UTF-8", p);
+    if (!lc_utf8_valid(it->valuestring, n)) return proto_fail(err, LC_ERR_INVALID, p, "%s is not valid UTF-8", p);
     if (n < minlen || n > maxlen)
-        return proto_fail(err, "invalid", p, "%s must be %zu..%zu bytes long", p, minlen, maxlen);
+        return proto_fail(err, LC_ERR_INVALID, p, "%s must be %zu..%zu bytes long", p, minlen, maxlen);
     if (out) {
-        if (n >= cap) return proto_fail(err, "invalid", p, "%s is too long", p);
+        if (n >= cap) return proto_fail(err, LC_ERR_INVALID, p, "%s is too long", p);
         memcpy(out, it->valuestring, n + 1);
     }
     return 1;
@@ -426,7 +456,7 @@ static int proto_enum_item(const cJSON *it, const char *p, const char *const *na
             *out = k;
             return 1;
         }
-    return proto_fail(err, "invalid", p, "%s: unknown value", p);
+    return proto_fail(err, LC_ERR_INVALID, p, "%s: unknown value", p);
 }
 
 static int proto_enum(const cJSON *obj, const char *key, const char *base, int required, const char *const *names,
@@ -446,7 +476,7 @@ static int proto_vec(const cJSON *obj, const char *key, const char *base, int re
     const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
     if (!it) return proto_missing(required, p, err);
     if (!cJSON_IsArray(it) || cJSON_GetArraySize(it) != n)
-        return proto_fail(err, "invalid", p, "%s must be an array of %d numbers", p, n);
+        return proto_fail(err, LC_ERR_INVALID, p, "%s must be an array of %d numbers", p, n);
     int i = 0;
     for (const cJSON *e = it->child; e; e = e->next, i++) {
         proto_ptr_index(pe, p, i);
@@ -488,7 +518,7 @@ static int proto_object(const cJSON *obj, const char *key, const char *base, int
     proto_ptr(p, base, key);
     *out = cJSON_GetObjectItemCaseSensitive(obj, key);
     if (!*out) return proto_missing(required, p, err);
-    if (!cJSON_IsObject(*out)) return proto_fail(err, "invalid", p, "%s must be an object", p);
+    if (!cJSON_IsObject(*out)) return proto_fail(err, LC_ERR_INVALID, p, "%s must be an object", p);
     return 1;
 }
 
@@ -517,7 +547,7 @@ static int proto_parse_light(const cJSON *o, const char *p, lc_proto_light *L, l
     if ((r = proto_vec(o, "direction", p, L->type != LC_PLIGHT_POINT, 3, -1e300, 1e300, v, err)) < 0) return -1;
     if (r) {
         proto_ptr(q, p, "direction");
-        if (!proto_normalise(v, 3)) return proto_fail(err, "out_of_range", q, "%s must not be zero", q);
+        if (!proto_normalise(v, 3)) return proto_fail(err, LC_ERR_OUT_OF_RANGE, q, "%s must not be zero", q);
         proto_copy3(L->direction, v);
     }
     double inner = 0, outer;
@@ -539,7 +569,7 @@ static int proto_parse_light(const cJSON *o, const char *p, lc_proto_light *L, l
             proto_ptr(q, p, "size");
             char qe[PROTO_PTR_MAX];
             proto_ptr_index(qe, q, i);
-            if (!(v[i] > 0 && v[i] <= 1e4)) return proto_fail(err, "out_of_range", qe, "%s must be in (0, 1e4]", qe);
+            if (!(v[i] > 0 && v[i] <= 1e4)) return proto_fail(err, LC_ERR_OUT_OF_RANGE, qe, "%s must be in (0, 1e4]", qe);
         }
         L->size[0] = (float)v[0];
         L->size[1] = n_size == 2 ? (float)v[1] : 0;
@@ -565,7 +595,7 @@ static int proto_parse_object(const cJSON *o, const char *p, lc_proto_object *O,
     if ((r = proto_vec(o, "rotation", p, 0, 4, -1e300, 1e300, v, err)) < 0) return -1;
     if (r) {
         proto_ptr(q, p, "rotation");
-        if (!proto_normalise(v, 4)) return proto_fail(err, "out_of_range", q, "%s must not be zero", q);
+        if (!proto_normalise(v, 4)) return proto_fail(err, LC_ERR_OUT_OF_RANGE, q, "%s must not be zero", q);
         for (int i = 0; i < 4; i++) O->rotation[i] = (float)v[i];
     } else {
         O->rotation[3] = 1;
@@ -575,7 +605,7 @@ static int proto_parse_object(const cJSON *o, const char *p, lc_proto_object *O,
         proto_ptr(q, p, "scale");
         for (int i = 0; i < 3; i++) {
             proto_ptr_index(qe, q, i);
-            if (fabs(v[i]) < 1e-6) return proto_fail(err, "out_of_range", qe, "|%s| must be in [1e-6, 1e4]", qe);
+            if (fabs(v[i]) < 1e-6) return proto_fail(err, LC_ERR_OUT_OF_RANGE, qe, "|%s| must be in [1e-6, 1e4]", qe);
         }
         proto_copy3(O->scale, v);
     } else {
@@ -658,7 +688,7 @@ static int proto_parse_op(const cJSON *m, const char *base, lc_req_type t, lc_pr
         if (proto_object(m, "settings", base, 1, &sub, p, err) < 0) return -1;
         return proto_parse_settings(sub, p, &op->settings, err);
     default:
-        return proto_fail(err, "invalid", base, "not a change request");
+        return proto_fail(err, LC_ERR_INVALID, base, "not a change request");
     }
 }
 
@@ -676,10 +706,10 @@ static int proto_read_type(const cJSON *m, const char *base, lc_req_type *t, lc_
     char p[PROTO_PTR_MAX];
     proto_ptr(p, base, "type");
     const cJSON *it = cJSON_GetObjectItemCaseSensitive(m, "type");
-    if (!cJSON_IsString(it) || !it->valuestring) return proto_fail(err, "unknown_type", p, "missing type");
+    if (!cJSON_IsString(it) || !it->valuestring) return proto_fail(err, LC_ERR_UNKNOWN_TYPE, p, "missing type");
     if (proto_type_of(it->valuestring, t) < 0) {
         char q[PROTO_QUOTE_MAX + 4];
-        return proto_fail(err, "unknown_type", p, "unknown type \"%s\"", proto_quote(q, it->valuestring));
+        return proto_fail(err, LC_ERR_UNKNOWN_TYPE, p, "unknown type \"%s\"", proto_quote(q, it->valuestring));
     }
     return 0;
 }
@@ -694,10 +724,10 @@ static int proto_read_id(const cJSON *m, lc_proto_id *id, lc_proto_error *err) {
         id->kind = 1;
         return 0;
     }
-    if (!cJSON_IsNumber(it)) return proto_fail(err, "invalid", "/id", "/id must be a string or an integer");
+    if (!cJSON_IsNumber(it)) return proto_fail(err, LC_ERR_INVALID, "/id", "/id must be a string or an integer");
     double v = it->valuedouble;
-    if (isfinite(v) && v != floor(v)) return proto_fail(err, "invalid", "/id", "/id must be an integer");
-    if (!(v >= 0 && v < PROTO_TWO_53)) return proto_fail(err, "out_of_range", "/id", "/id must be in [0, 2^53)");
+    if (isfinite(v) && v != floor(v)) return proto_fail(err, LC_ERR_INVALID, "/id", "/id must be an integer");
+    if (!(v >= 0 && v < PROTO_TWO_53)) return proto_fail(err, LC_ERR_OUT_OF_RANGE, "/id", "/id must be in [0, 2^53)");
     id->kind = 2;
     id->num = (int64_t)v;
     return 0;
@@ -715,7 +745,7 @@ static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto
         if (proto_str(m, "token", "", 0, 0, LC_PROTO_TOKEN_MAX, out->token, sizeof out->token, err) < 0) return -1;
         const cJSON *enc = cJSON_GetObjectItemCaseSensitive(m, "encodings");
         if (enc) {
-            if (!cJSON_IsArray(enc)) return proto_fail(err, "invalid", "/encodings", "/encodings must be an array");
+            if (!cJSON_IsArray(enc)) return proto_fail(err, LC_ERR_INVALID, "/encodings", "/encodings must be an array");
             int i = 0;
             for (const cJSON *e = enc->child; e; e = e->next, i++) {
                 proto_ptr_index(p, "/encodings", i);
@@ -735,35 +765,35 @@ static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto
         if ((r = proto_enum(m, "encoding", "", 0, proto_encoding_names, 3, &k, err)) < 0) return -1;
         if (r) {
             if (k == 0 && out->stream != LC_STREAM_LIGHTMAP)
-                return proto_fail(err, "invalid", "/encoding", "rgb9e5 is for the lightmap stream only");
+                return proto_fail(err, LC_ERR_INVALID, "/encoding", "rgb9e5 is for the lightmap stream only");
             out->encoding = (lc_encoding)(k + 1);
         }
         if (proto_num(m, "max_rate", "", 0, 0.1, 120, &out->max_rate, err) < 0) return -1;
         if ((r = proto_enum(m, "delta", "", 0, proto_delta_names, 2, &k, err)) < 0) return -1;
         if (r && out->stream != LC_STREAM_LIGHTMAP)
-            return proto_fail(err, "invalid", "/delta", "delta is for the lightmap stream only");
+            return proto_fail(err, LC_ERR_INVALID, "/delta", "delta is for the lightmap stream only");
         out->residual = r && k == 1;
         return 0;
     case LC_REQ_BATCH: {
         const cJSON *ops = cJSON_GetObjectItemCaseSensitive(m, "ops");
-        if (!ops) return proto_fail(err, "invalid", "/ops", "/ops is required");
-        if (!cJSON_IsArray(ops)) return proto_fail(err, "invalid", "/ops", "/ops must be an array");
+        if (!ops) return proto_fail(err, LC_ERR_INVALID, "/ops", "/ops is required");
+        if (!cJSON_IsArray(ops)) return proto_fail(err, LC_ERR_INVALID, "/ops", "/ops must be an array");
         int n = cJSON_GetArraySize(ops);
-        if (n < 1) return proto_fail(err, "invalid", "/ops", "a batch needs at least one op");
+        if (n < 1) return proto_fail(err, LC_ERR_INVALID, "/ops", "a batch needs at least one op");
         if ((uint32_t)n > lim->max_batch)
-            return proto_fail(err, "limit_exceeded", "/ops", "%d ops, at most %u per batch", n, lim->max_batch);
+            return proto_fail(err, LC_ERR_LIMIT_EXCEEDED, "/ops", "%d ops, at most %u per batch", n, lim->max_batch);
         out->ops = calloc((size_t)n, sizeof *out->ops);
-        if (!out->ops) return proto_fail(err, "internal", "", "out of memory");
+        if (!out->ops) return proto_fail(err, LC_ERR_INTERNAL, "", "out of memory");
         int i = 0;
         for (const cJSON *op = ops->child; op; op = op->next, i++) {
             char base[PROTO_PTR_MAX];
             lc_req_type t;
             proto_ptr_index(base, "/ops", i);
-            if (!cJSON_IsObject(op)) return proto_fail(err, "invalid", base, "%s must be an object", base);
+            if (!cJSON_IsObject(op)) return proto_fail(err, LC_ERR_INVALID, base, "%s must be an object", base);
             if (proto_read_type(op, base, &t, err) < 0) return -1;
             if (!lc_proto_is_change(t) || t == LC_REQ_BATCH) {
                 proto_ptr(p, base, "type");
-                return proto_fail(err, "invalid", p, "%s: %s is not allowed in a batch", p, proto_type_names[t]);
+                return proto_fail(err, LC_ERR_INVALID, p, "%s: %s is not allowed in a batch", p, proto_type_names[t]);
             }
             if (proto_parse_op(op, base, t, &out->ops[i], err) < 0) return -1;
             out->n_ops = (uint32_t)i + 1;
@@ -777,7 +807,7 @@ static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto
         return proto_num(m, "t", "", 1, -INFINITY, INFINITY, &out->ping_t, err) < 0 ? -1 : 0;
     default:
         out->ops = calloc(1, sizeof *out->ops);
-        if (!out->ops) return proto_fail(err, "internal", "", "out of memory");
+        if (!out->ops) return proto_fail(err, LC_ERR_INTERNAL, "", "out of memory");
         if (proto_parse_op(m, "", out->type, &out->ops[0], err) < 0) return -1;
         out->n_ops = 1;
         return 0;
@@ -798,24 +828,24 @@ int lc_proto_parse_request(const char *text, size_t len, const lc_proto_limits *
         lim = &deflim;
     }
     if (len > lim->max_message) {
-        proto_error(err, "too_large", "", "message of %zu bytes, at most %zu", len, lim->max_message);
+        proto_error(err, LC_ERR_TOO_LARGE, "", "message of %zu bytes, at most %zu", len, lim->max_message);
         goto err;
     }
     if (proto_load(text, len, lim->max_depth, &root, &flags, err) < 0) goto err;
     /* cJSON ends a string at its first NUL: an id with a \u0000 would be echoed cut short */
     if (flags & PROTO_SCAN_NUL_IN_ID) {
-        proto_error(err, "invalid", "/id", "/id must not contain \\u0000");
+        proto_error(err, LC_ERR_INVALID, "/id", "/id must not contain \\u0000");
         goto err;
     }
     if (proto_read_id(root, &out->id, err) < 0) goto err;
     if (flags & PROTO_SCAN_NUL_ESCAPE) { /* after the id, so the error echoes it */
-        proto_error(err, "invalid", "", "strings must not contain \\u0000");
+        proto_error(err, LC_ERR_INVALID, "", "strings must not contain \\u0000");
         goto err;
     }
     if (proto_read_type(root, "", &out->type, err) < 0) goto err;
     if (proto_parse_body(root, lim, out, err) < 0) goto err;
     if (flags & PROTO_SCAN_BAD_UTF8) {
-        proto_error(err, "invalid", "", "a string is not valid UTF-8");
+        proto_error(err, LC_ERR_INVALID, "", "a string is not valid UTF-8");
         goto err;
     }
     cJSON_Delete(root);
@@ -840,7 +870,7 @@ static int proto_array(const cJSON *root, const char *key, const cJSON **arr, lc
     char p[PROTO_PTR_MAX];
     proto_ptr(p, "", key);
     *arr = cJSON_GetObjectItemCaseSensitive(root, key);
-    if (!cJSON_IsArray(*arr)) return proto_fail(err, "invalid", p, "%s must be an array", p);
+    if (!cJSON_IsArray(*arr)) return proto_fail(err, LC_ERR_INVALID, p, "%s must be an array", p);
     return cJSON_GetArraySize(*arr);
 }
 
@@ -856,17 +886,17 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
     memset(out, 0, sizeof *out);
     if (proto_load(text, len, 16, &root, &flags, err) < 0) goto err;
     if (flags & PROTO_SCAN_NUL_ESCAPE) {
-        proto_error(err, "invalid", "", "strings must not contain \\u0000");
+        proto_error(err, LC_ERR_INVALID, "", "strings must not contain \\u0000");
         goto err;
     }
     it = cJSON_GetObjectItemCaseSensitive(root, "type");
     if (!cJSON_IsString(it) || strcmp(it->valuestring, "state")) {
-        proto_error(err, "unknown_type", "/type", "not a state message");
+        proto_error(err, LC_ERR_UNKNOWN_TYPE, "/type", "not a state message");
         goto err;
     }
     if (proto_num(root, "revision", "", 1, 0, PROTO_TWO_53 - 1, &rev, err) < 0) goto err;
     if (rev != floor(rev)) {
-        proto_error(err, "invalid", "/revision", "/revision must be an integer");
+        proto_error(err, LC_ERR_INVALID, "/revision", "/revision must be an integer");
         goto err;
     }
     out->revision = (uint64_t)rev;
@@ -877,13 +907,13 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
     for (it = arr->child; it; it = it->next, i++) {
         proto_ptr_index(p, "/lights", i);
         if (!cJSON_IsObject(it)) {
-            proto_error(err, "invalid", p, "%s must be an object", p);
+            proto_error(err, LC_ERR_INVALID, p, "%s must be an object", p);
             goto err;
         }
         if (proto_parse_light(it, p, &out->lights[i], err) < 0) goto err;
         if (i && strcmp(out->lights[i - 1].id, out->lights[i].id) >= 0) { /* sorted, unique */
             proto_ptr(q, p, "id");
-            proto_error(err, "invalid", q, "lights must be sorted by id without duplicates");
+            proto_error(err, LC_ERR_INVALID, q, "lights must be sorted by id without duplicates");
             goto err;
         }
         out->n_lights = (uint32_t)i + 1;
@@ -895,13 +925,13 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
     for (it = arr->child; it; it = it->next, i++) {
         proto_ptr_index(p, "/objects", i);
         if (!cJSON_IsObject(it)) {
-            proto_error(err, "invalid", p, "%s must be an object", p);
+            proto_error(err, LC_ERR_INVALID, p, "%s must be an object", p);
             goto err;
         }
         if (proto_parse_object(it, p, &out->objects[i], err) < 0) goto err;
         if (i && strcmp(out->objects[i - 1].id, out->objects[i].id) >= 0) {
             proto_ptr(q, p, "id");
-            proto_error(err, "invalid", q, "objects must be sorted by id without duplicates");
+            proto_error(err, LC_ERR_INVALID, q, "objects must be sorted by id without duplicates");
             goto err;
         }
         out->n_objects = (uint32_t)i + 1;
@@ -915,7 +945,7 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
         double v[3];
         proto_ptr_index(p, "/materials", i);
         if (!cJSON_IsObject(it)) {
-            proto_error(err, "invalid", p, "%s must be an object", p);
+            proto_error(err, LC_ERR_INVALID, p, "%s must be an object", p);
             goto err;
         }
         if (proto_str(it, "name", p, 1, 1, LC_PROTO_ID_MAX, out->material_names[i], LC_PROTO_ID_MAX + 1, err) < 0)
@@ -930,13 +960,13 @@ int lc_proto_parse_state(const char *text, size_t len, lc_proto_parsed_state *ou
     if (proto_object(root, "settings", "", 1, &sub, p, err) < 0) goto err;
     if (proto_parse_settings(sub, p, &out->settings, err) < 0) goto err;
     if (flags & PROTO_SCAN_BAD_UTF8) {
-        proto_error(err, "invalid", "", "a string is not valid UTF-8");
+        proto_error(err, LC_ERR_INVALID, "", "a string is not valid UTF-8");
         goto err;
     }
     cJSON_Delete(root);
     return 0;
 oom:
-    proto_error(err, "internal", "", "out of memory");
+    proto_error(err, LC_ERR_INTERNAL, "", "out of memory");
 err:
     cJSON_Delete(root);
     lc_proto_parsed_state_free(out);

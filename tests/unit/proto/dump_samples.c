@@ -3,6 +3,7 @@
  * as the builders write it, and client messages that the C parser accepts (valid) or
  * refuses (invalid). Exits 1 when the C parser disagrees with a sample's label, so the
  * schemas and the parser are checked against the same examples. */
+#include <cjson/cJSON.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -36,7 +37,24 @@ static void client(int valid, const char *json) {
 
 #define L_POINT "{\"id\":\"key\",\"type\":\"point\",\"position\":[0,2.5,0],\"color\":[1,0.9,0.8],\"intensity\":120}"
 
-int main(void) {
+/* --errors: the error catalogue as JSON lines {"code", "meaning", "connection"} (for
+ * check_error_catalogue.py). */
+static int dump_errors(void) {
+    for (int i = 0; i < LC_ERR_COUNT; i++) {
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "code", lc_proto_errcode_name((lc_proto_errcode)i));
+        cJSON_AddStringToObject(o, "meaning", lc_proto_errcode_meaning((lc_proto_errcode)i));
+        cJSON_AddStringToObject(o, "connection", lc_proto_errcode_connection((lc_proto_errcode)i));
+        char *t = cJSON_PrintUnformatted(o);
+        printf("%s\n", t);
+        cJSON_free(t);
+        cJSON_Delete(o);
+    }
+    return 0;
+}
+
+int main(int argc, char **argv) {
+    if (argc > 1 && !strcmp(argv[1], "--errors")) return dump_errors();
     /* --- client -> server, valid --- */
     client(1, "{\"type\":\"hello\",\"id\":1,\"client\":\"my-viewer/2.0\",\"token\":\"secret\",\"encodings\":[\"rgb9e5\"]}");
     client(1, "{\"type\":\"subscribe\",\"id\":\"s\",\"stream\":\"lightmap\",\"encoding\":\"rgb9e5\",\"max_rate\":30}");
