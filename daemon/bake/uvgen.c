@@ -744,6 +744,9 @@ typedef struct {
     double *beyond;                           /* area beyond the chart angle of its normal */
     uint64_t work, budget;                    /* triangles projected by trials, and the cap */
     uint8_t *alive, *merged;
+    uvgen_keyed *sorted;                      /* scratch: live charts by area, per pass */
+    uvgen_cand *cand;                         /* scratch: one chart's neighbours */
+    uint32_t stamp;                           /* slot_stamp of the chart being scored */
 } uvgen_merge_state;
 
 /* Tries to merge chart b into chart a (a keeps its id). The merged chart projects onto the
@@ -818,152 +821,186 @@ static int uvgen_try_merge(uvgen_ctx *cx, uvgen_merge_state *st, uint32_t a, uin
     return 0;
 }
 
-/* Merges small charts into edge-adjacent ones, smallest first, each trying its neighbours by
- * cost (normal deviation, then how little of its boundary they share). Rewrites cx->order
- * and *charts (n_charts in and out) with the merged charts as contiguous ranges; they still
- * need projecting. d: the density (0: estimate it for atlas W). */
-static int uvgen_merge(uvgen_ctx *cx, uvgen_chart **charts, uint32_t *n_charts, const uint32_t *adj_start,
-                       const uint32_t *adj, double d, uint32_t W, uint32_t pad, double cos_a) {
+/* Allocates the merge state for n charts over T triangles (the arrays uvgen_merge_init does
+ * not fill start zeroed). -1 out of memory, with whatever was allocated left for the free. */
+static int uvgen_merge_state_alloc(uvgen_merge_state *st, uint32_t n, uint32_t T) {
+    st->head = malloc((size_t)n * sizeof *st->head);
+    st->tail = malloc((size_t)n * sizeof *st->tail);
+    st->pn = malloc(3 * (size_t)n * sizeof *st->pn);
+    st->area_n = malloc((size_t)n * sizeof *st->area_n);
+    st->budget = 32 * (uint64_t)T + (1u << 20);
+    st->beyond = calloc(n, sizeof *st->beyond);
+    st->merged = calloc(n, 1);
+    st->slot = malloc((size_t)n * sizeof *st->slot);
+    st->slot_stamp = calloc(n, sizeof *st->slot_stamp);
+    st->next = malloc((size_t)T * sizeof *st->next);
+    st->chart_of = malloc((size_t)T * sizeof *st->chart_of);
+    st->area = calloc(n, sizeof *st->area);
+    st->nsum = calloc(3 * (size_t)n, sizeof *st->nsum);
+    st->w = malloc((size_t)n * sizeof *st->w);
+    st->h = malloc((size_t)n * sizeof *st->h);
+    st->tri_a = malloc((size_t)T * sizeof *st->tri_a);
+    st->alive = malloc(n);
+    st->sorted = malloc((size_t)n * sizeof *st->sorted);
+    st->cand = malloc((size_t)n * sizeof *st->cand);
+    if (!st->head || !st->tail || !st->pn || !st->area_n || !st->beyond || !st->merged || !st->slot ||
+        !st->slot_stamp || !st->next || !st->chart_of || !st->area || !st->nsum || !st->w || !st->h || !st->tri_a ||
+        !st->alive || !st->sorted || !st->cand)
+        return -1;
+    return 0;
+}
+
+static void uvgen_merge_state_free(uvgen_merge_state *st) {
+    free(st->head);
+    free(st->tail);
+    free(st->pn);
+    free(st->area_n);
+    free(st->beyond);
+    free(st->merged);
+    free(st->slot);
+    free(st->slot_stamp);
+    free(st->next);
+    free(st->chart_of);
+    free(st->area);
+    free(st->nsum);
+    free(st->w);
+    free(st->h);
+    free(st->tri_a);
+    free(st->alive);
+    free(st->sorted);
+    free(st->cand);
+}
+
+/* The state of the n grown charts: each chart's triangles as a linked list, its area, normal
+ * sum, extent and the area beyond the chart angle of its normal. Returns the total area. */
+static double uvgen_merge_init(const uvgen_ctx *cx, uvgen_merge_state *st, const uvgen_chart *charts, uint32_t n,
+                               double cos_a) {
     const lc_mesh *m = cx->m;
-    const uint32_t T = m->n_triangles, n = *n_charts;
-    uvgen_merge_state st = {0};
-    uvgen_keyed *sorted = NULL;
-    uvgen_cand *cand = NULL;
-    uvgen_chart *out = NULL;
-    int rc = -1;
-    st.head = malloc((size_t)n * sizeof *st.head);
-    st.tail = malloc((size_t)n * sizeof *st.tail);
-    st.pn = malloc(3 * (size_t)n * sizeof *st.pn);
-    st.area_n = malloc((size_t)n * sizeof *st.area_n);
-    st.budget = 32 * (uint64_t)T + (1u << 20);
-    st.beyond = calloc(n, sizeof *st.beyond);
-    st.merged = calloc(n, 1);
-    st.slot = malloc((size_t)n * sizeof *st.slot);
-    st.slot_stamp = calloc(n, sizeof *st.slot_stamp);
-    st.next = malloc((size_t)T * sizeof *st.next);
-    st.chart_of = malloc((size_t)T * sizeof *st.chart_of);
-    st.area = calloc(n, sizeof *st.area);
-    st.nsum = calloc(3 * (size_t)n, sizeof *st.nsum);
-    st.w = malloc((size_t)n * sizeof *st.w);
-    st.h = malloc((size_t)n * sizeof *st.h);
-    st.tri_a = malloc((size_t)T * sizeof *st.tri_a);
-    st.alive = malloc(n);
-    sorted = malloc((size_t)n * sizeof *sorted);
-    cand = malloc((size_t)n * sizeof *cand);
-    if (!st.head || !st.tail || !st.pn || !st.area_n || !st.beyond || !st.merged || !st.slot || !st.slot_stamp || !st.next || !st.chart_of || !st.area ||
-        !st.nsum || !st.w || !st.h || !st.tri_a || !st.alive || !sorted || !cand)
-        goto err;
     for (uint32_t i = 0; i < n; i++) {
-        const uvgen_chart *c = &(*charts)[i];
-        st.alive[i] = 1;
-        st.w[i] = c->w;
-        st.area_n[i] = c->count;
-        st.h[i] = c->h;
-        st.head[i] = cx->order[c->start];
-        st.tail[i] = cx->order[c->start + c->count - 1];
+        const uvgen_chart *c = &charts[i];
+        st->alive[i] = 1;
+        st->w[i] = c->w;
+        st->area_n[i] = c->count;
+        st->h[i] = c->h;
+        st->head[i] = cx->order[c->start];
+        st->tail[i] = cx->order[c->start + c->count - 1];
         for (uint32_t q = c->start; q < c->start + c->count; q++) {
             uint32_t t = cx->order[q];
             double cr[3];
             uvgen_tri_cross(m, t, cr, NULL);
-            st.tri_a[t] = 0.5 * sqrt(uvgen_dot(cr, cr));
-            st.chart_of[t] = i;
-            st.next[t] = q + 1 < c->start + c->count ? cx->order[q + 1] : LC_NONE;
-            st.area[i] += st.tri_a[t];
+            st->tri_a[t] = 0.5 * sqrt(uvgen_dot(cr, cr));
+            st->chart_of[t] = i;
+            st->next[t] = q + 1 < c->start + c->count ? cx->order[q + 1] : LC_NONE;
+            st->area[i] += st->tri_a[t];
             if (!cx->degen[t])
-                for (int k = 0; k < 3; k++) st.nsum[3 * (size_t)i + k] += cr[k];
+                for (int k = 0; k < 3; k++) st->nsum[3 * (size_t)i + k] += cr[k];
         }
     }
     double total_area = 0;
     for (uint32_t i = 0; i < n; i++) {
-        total_area += st.area[i];
+        total_area += st->area[i];
         double N[3];
-        memcpy(N, st.nsum + 3 * (size_t)i, sizeof N);
+        memcpy(N, st->nsum + 3 * (size_t)i, sizeof N);
         if (!uvgen_normalize(N)) continue;
-        for (uint32_t t = st.head[i]; t != LC_NONE; t = st.next[t])
-            if (!cx->degen[t] && uvgen_dot(cx->tri_n + 3 * (size_t)t, N) < cos_a) st.beyond[i] += st.tri_a[t];
+        for (uint32_t t = st->head[i]; t != LC_NONE; t = st->next[t])
+            if (!cx->degen[t] && uvgen_dot(cx->tri_n + 3 * (size_t)t, N) < cos_a) st->beyond[i] += st->tri_a[t];
     }
-    uint32_t stamp = 0, alive = n;
-    for (int pass = 0; pass < UVGEN_MERGE_PASSES; pass++) {
-        double dd = d > 0 ? d : uvgen_density_estimate(st.w, st.h, st.alive, n, W, pad, total_area);
-        uint32_t ns = 0, merged = 0;
-        for (uint32_t i = 0; i < n; i++)
-            if (st.alive[i]) sorted[ns++] = (uvgen_keyed){st.area[i], i};
-        qsort(sorted, ns, sizeof *sorted, uvgen_keyed_cmp);
-        for (uint32_t si = 0; si < ns; si++) {
-            uint32_t s = sorted[si].tri; /* a chart id here */
-            if (!st.alive[s]) continue;
-            /* neighbours with the length of boundary shared with each */
-            uint32_t nc = 0;
-            double shared_all = 0;
-            stamp++;
-            for (uint32_t t = st.head[s]; t != LC_NONE; t = st.next[t]) {
-                const uint32_t *it = m->index + 3 * (size_t)t;
-                uint32_t wt[3] = {cx->weld[it[0]], cx->weld[it[1]], cx->weld[it[2]]};
-                for (uint32_t e = adj_start[t]; e < adj_start[t + 1]; e++) {
-                    uint32_t nb = adj[e], o = st.chart_of[nb];
-                    if (o == s) continue;
-                    const uint32_t *in = m->index + 3 * (size_t)nb;
-                    uint32_t common[2], k = 0;
-                    for (int x = 0; x < 3 && k < 2; x++)
-                        for (int y = 0; y < 3; y++)
-                            if (wt[x] == cx->weld[in[y]]) {
-                                common[k++] = wt[x];
-                                break;
-                            }
-                    double len = 0;
-                    if (k == 2) {
-                        double p0[3], p1[3];
-                        uvgen_load(m, common[0], p0);
-                        uvgen_load(m, common[1], p1);
-                        len = sqrt((p0[0] - p1[0]) * (p0[0] - p1[0]) + (p0[1] - p1[1]) * (p0[1] - p1[1]) +
-                                   (p0[2] - p1[2]) * (p0[2] - p1[2]));
+    return total_area;
+}
+
+/* Chart s's edge neighbours into st->cand, cheapest first: cost = normal deviation, then how
+ * little of s's boundary each shares. Returns how many. */
+static uint32_t uvgen_merge_candidates(const uvgen_ctx *cx, uvgen_merge_state *st, uint32_t s,
+                                       const uint32_t *adj_start, const uint32_t *adj) {
+    const lc_mesh *m = cx->m;
+    uvgen_cand *cand = st->cand;
+    /* neighbours with the length of boundary shared with each */
+    uint32_t nc = 0;
+    double shared_all = 0;
+    st->stamp++;
+    for (uint32_t t = st->head[s]; t != LC_NONE; t = st->next[t]) {
+        const uint32_t *it = m->index + 3 * (size_t)t;
+        uint32_t wt[3] = {cx->weld[it[0]], cx->weld[it[1]], cx->weld[it[2]]};
+        for (uint32_t e = adj_start[t]; e < adj_start[t + 1]; e++) {
+            uint32_t nb = adj[e], o = st->chart_of[nb];
+            if (o == s) continue;
+            const uint32_t *in = m->index + 3 * (size_t)nb;
+            uint32_t common[2], k = 0;
+            for (int x = 0; x < 3 && k < 2; x++)
+                for (int y = 0; y < 3; y++)
+                    if (wt[x] == cx->weld[in[y]]) {
+                        common[k++] = wt[x];
+                        break;
                     }
-                    if (st.slot_stamp[o] != stamp) {
-                        st.slot_stamp[o] = stamp;
-                        st.slot[o] = nc;
-                        cand[nc++] = (uvgen_cand){0, o};
-                    }
-                    cand[st.slot[o]].cost += len;
-                    shared_all += len;
-                }
+            double len = 0;
+            if (k == 2) {
+                double p0[3], p1[3];
+                uvgen_load(m, common[0], p0);
+                uvgen_load(m, common[1], p1);
+                len = sqrt((p0[0] - p1[0]) * (p0[0] - p1[0]) + (p0[1] - p1[1]) * (p0[1] - p1[1]) +
+                           (p0[2] - p1[2]) * (p0[2] - p1[2]));
             }
-            double ns_[3];
-            memcpy(ns_, st.nsum + 3 * (size_t)s, sizeof ns_);
-            int ok_s = uvgen_normalize(ns_);
-            for (uint32_t i = 0; i < nc; i++) {
-                double no[3], dev = 1;
-                memcpy(no, st.nsum + 3 * (size_t)cand[i].chart, sizeof no);
-                if (ok_s && uvgen_normalize(no)) dev = 1 - uvgen_dot(ns_, no);
-                double frac = shared_all > 0 ? cand[i].cost / shared_all : 0;
-                cand[i].cost = dev + 0.5 * (1 - frac);
+            if (st->slot_stamp[o] != st->stamp) {
+                st->slot_stamp[o] = st->stamp;
+                st->slot[o] = nc;
+                cand[nc++] = (uvgen_cand){0, o};
             }
-            qsort(cand, nc, sizeof *cand, uvgen_cand_cmp);
-            for (uint32_t i = 0, tries = 0; i < nc && tries < UVGEN_MERGE_TRIES && st.alive[s]; i++) {
-                uint32_t o = cand[i].chart;
-                if (!st.alive[o]) continue;
-                tries++;
-                /* the larger keeps its id (relabelling the smaller stays cheap) */
-                uint32_t keep = st.area[o] > st.area[s] || (st.area[o] == st.area[s] && o < s) ? o : s;
-                int r = uvgen_try_merge(cx, &st, keep, keep == o ? s : o, dd, pad, cos_a);
-                if (r < 0) goto err;
-                merged += (uint32_t)r;
-            }
+            cand[st->slot[o]].cost += len;
+            shared_all += len;
         }
-        alive -= merged;
-        lc_debug("uvgen", "merge pass %d at %.3g texels/m: %u of %u charts merged", pass, dd, merged, ns);
-        if (merged * 100 < ns) break; /* converged */
     }
-    out = malloc((size_t)(alive ? alive : 1) * sizeof *out);
-    if (!out) goto err;
+    double ns_[3];
+    memcpy(ns_, st->nsum + 3 * (size_t)s, sizeof ns_);
+    int ok_s = uvgen_normalize(ns_);
+    for (uint32_t i = 0; i < nc; i++) {
+        double no[3], dev = 1;
+        memcpy(no, st->nsum + 3 * (size_t)cand[i].chart, sizeof no);
+        if (ok_s && uvgen_normalize(no)) dev = 1 - uvgen_dot(ns_, no);
+        double frac = shared_all > 0 ? cand[i].cost / shared_all : 0;
+        cand[i].cost = dev + 0.5 * (1 - frac);
+    }
+    qsort(cand, nc, sizeof *cand, uvgen_cand_cmp);
+    return nc;
+}
+
+/* One merge pass at density dd over the ns live charts, smallest first, each trying up to
+ * UVGEN_MERGE_TRIES neighbours. Returns how many merged, or -1 out of memory. */
+static int64_t uvgen_merge_pass(uvgen_ctx *cx, uvgen_merge_state *st, uint32_t ns, const uint32_t *adj_start,
+                                const uint32_t *adj, double dd, uint32_t pad, double cos_a) {
+    uint32_t merged = 0;
+    for (uint32_t si = 0; si < ns; si++) {
+        uint32_t s = st->sorted[si].tri; /* a chart id here */
+        if (!st->alive[s]) continue;
+        uint32_t nc = uvgen_merge_candidates(cx, st, s, adj_start, adj);
+        for (uint32_t i = 0, tries = 0; i < nc && tries < UVGEN_MERGE_TRIES && st->alive[s]; i++) {
+            uint32_t o = st->cand[i].chart;
+            if (!st->alive[o]) continue;
+            tries++;
+            /* the larger keeps its id (relabelling the smaller stays cheap) */
+            uint32_t keep = st->area[o] > st->area[s] || (st->area[o] == st->area[s] && o < s) ? o : s;
+            int r = uvgen_try_merge(cx, st, keep, keep == o ? s : o, dd, pad, cos_a);
+            if (r < 0) return -1;
+            merged += (uint32_t)r;
+        }
+    }
+    return merged;
+}
+
+/* Rewrites cx->order and *charts with the alive charts of the n as contiguous ranges. -1
+ * out of memory. */
+static int uvgen_merge_collect(uvgen_ctx *cx, const uvgen_merge_state *st, uvgen_chart **charts,
+                               uint32_t *n_charts, uint32_t n, uint32_t alive) {
+    uvgen_chart *out = malloc((size_t)(alive ? alive : 1) * sizeof *out);
+    if (!out) return -1;
     uint32_t k = 0, pos = 0;
     for (uint32_t i = 0; i < n; i++) {
-        if (!st.alive[i]) continue;
+        if (!st->alive[i]) continue;
         uvgen_chart c = {0};
         c.start = pos;
-        for (uint32_t t = st.head[i]; t != LC_NONE; t = st.next[t]) cx->order[pos++] = t;
+        for (uint32_t t = st->head[i]; t != LC_NONE; t = st->next[t]) cx->order[pos++] = t;
         c.count = pos - c.start;
-        if (st.merged[i]) {
-            memcpy(c.ref, st.pn + 3 * (size_t)i, sizeof c.ref);
+        if (st->merged[i]) {
+            memcpy(c.ref, st->pn + 3 * (size_t)i, sizeof c.ref);
             c.fixed = 1;
         } else { /* unmerged: its own reference (the chart angle bound holds) */
             memcpy(c.ref, (*charts)[i].ref, sizeof c.ref);
@@ -974,28 +1011,37 @@ static int uvgen_merge(uvgen_ctx *cx, uvgen_chart **charts, uint32_t *n_charts, 
     free(*charts);
     *charts = out;
     *n_charts = k;
-    out = NULL;
+    return 0;
+}
+
+/* Merges small charts into edge-adjacent ones, smallest first, each trying its neighbours by
+ * cost (normal deviation, then how little of its boundary they share). Rewrites cx->order
+ * and *charts (n_charts in and out) with the merged charts as contiguous ranges; they still
+ * need projecting. d: the density (0: estimate it for atlas W). */
+static int uvgen_merge(uvgen_ctx *cx, uvgen_chart **charts, uint32_t *n_charts, const uint32_t *adj_start,
+                       const uint32_t *adj, double d, uint32_t W, uint32_t pad, double cos_a) {
+    const uint32_t T = cx->m->n_triangles, n = *n_charts;
+    uvgen_merge_state st = {0};
+    int rc = -1;
+    if (uvgen_merge_state_alloc(&st, n, T) != 0) goto err;
+    double total_area = uvgen_merge_init(cx, &st, *charts, n, cos_a);
+    uint32_t alive = n;
+    for (int pass = 0; pass < UVGEN_MERGE_PASSES; pass++) {
+        double dd = d > 0 ? d : uvgen_density_estimate(st.w, st.h, st.alive, n, W, pad, total_area);
+        uint32_t ns = 0;
+        for (uint32_t i = 0; i < n; i++)
+            if (st.alive[i]) st.sorted[ns++] = (uvgen_keyed){st.area[i], i};
+        qsort(st.sorted, ns, sizeof *st.sorted, uvgen_keyed_cmp);
+        int64_t merged = uvgen_merge_pass(cx, &st, ns, adj_start, adj, dd, pad, cos_a);
+        if (merged < 0) goto err;
+        alive -= (uint32_t)merged;
+        lc_debug("uvgen", "merge pass %d at %.3g texels/m: %u of %u charts merged", pass, dd, (uint32_t)merged, ns);
+        if (merged * 100 < ns) break; /* converged */
+    }
+    if (uvgen_merge_collect(cx, &st, charts, n_charts, n, alive) != 0) goto err;
     rc = 0;
 err:
-    free(st.head);
-    free(st.tail);
-    free(st.pn);
-    free(st.area_n);
-    free(st.beyond);
-    free(st.merged);
-    free(st.slot);
-    free(st.slot_stamp);
-    free(st.next);
-    free(st.chart_of);
-    free(st.area);
-    free(st.nsum);
-    free(st.w);
-    free(st.h);
-    free(st.tri_a);
-    free(st.alive);
-    free(sorted);
-    free(cand);
-    free(out);
+    uvgen_merge_state_free(&st);
     return rc;
 }
 
@@ -1251,6 +1297,352 @@ static int uvgen_corner_cmp(const void *pa, const void *pb) {
     return (a->corner > b->corner) - (a->corner < b->corner);
 }
 
+/* Sets the message every allocation failure of lc_uvgen gives; returns -1. */
+static int uvgen_oom(const lc_mesh *mesh, char *err, size_t errlen) {
+    lc_set_err(err, errlen, "uvgen: out of memory for %u triangles", mesh->n_triangles);
+    return -1;
+}
+
+/* Unit normal per triangle into tri_n (degenerate ones flagged instead); returns the mesh's
+ * surface area. */
+static double uvgen_triangle_normals(const lc_mesh *mesh, double *tri_n, uint8_t *degen) {
+    double total_area = 0;
+    for (uint32_t t = 0; t < mesh->n_triangles; t++) {
+        double c[3], e2;
+        uvgen_tri_cross(mesh, t, c, &e2);
+        double l = sqrt(uvgen_dot(c, c));
+        total_area += 0.5 * l;
+        /* near-collinear triangles have no reliable normal: they join any neighbour chart */
+        if (!(l > 1e-12 * e2) || !(l > 0)) {
+            degen[t] = 1;
+            continue;
+        }
+        for (int k = 0; k < 3; k++) tri_n[3 * (size_t)t + k] = c[k] / l;
+    }
+    return total_area;
+}
+
+/* Grows chart c (c->start, c->ref set) by BFS from seed s over unassigned triangles within
+ * the chart angle, appending them to cx->order from c->start; *n_order is where it ends. On
+ * pass 0 first against the running area-weighted normal (charts follow gentle curvature up to
+ * twice the angle), kept only if every triangle is within the angle of the final normal;
+ * else regrown against the seed normal (the bound holds by construction). Pass 1 (degenerate
+ * seeds) takes only degenerate neighbours. */
+static void uvgen_grow_chart(const uvgen_ctx *cx, const uint32_t *adj_start, const uint32_t *adj, uint32_t *chart_of,
+                             uint32_t s, int pass, double cos_a, uint32_t chart, uvgen_chart *c, uint32_t *n_order) {
+    const lc_mesh *mesh = cx->m;
+    const double *tri_n = cx->tri_n;
+    const uint8_t *degen = cx->degen;
+    uint32_t *order = cx->order;
+    for (int mode = pass == 0 ? 0 : 1; mode < 2; mode++) {
+        *n_order = c->start;
+        chart_of[s] = chart;
+        order[(*n_order)++] = s;
+        double sum[3], avg[3];
+        uvgen_tri_cross(mesh, s, sum, NULL);
+        memcpy(avg, c->ref, sizeof avg);
+        for (uint32_t q = c->start; q < *n_order; q++) {
+            uint32_t t = order[q];
+            for (uint32_t a = adj_start[t]; a < adj_start[t + 1]; a++) {
+                uint32_t nb = adj[a];
+                if (chart_of[nb] != LC_NONE) continue;
+                if (!degen[nb]) {
+                    if (pass == 1 || uvgen_dot(tri_n + 3 * (size_t)nb, avg) < cos_a) continue;
+                    if (mode == 0) {
+                        double cr[3];
+                        uvgen_tri_cross(mesh, nb, cr, NULL);
+                        for (int k = 0; k < 3; k++) sum[k] += cr[k];
+                        memcpy(avg, sum, sizeof avg);
+                        if (!uvgen_normalize(avg)) memcpy(avg, c->ref, sizeof avg);
+                    }
+                }
+                chart_of[nb] = chart;
+                order[(*n_order)++] = nb;
+            }
+        }
+        if (mode == 1) break;
+        int ok = 1;
+        for (uint32_t q = c->start; q < *n_order && ok; q++) {
+            uint32_t t = order[q];
+            if (!degen[t] && uvgen_dot(tri_n + 3 * (size_t)t, avg) < cos_a) ok = 0;
+        }
+        if (ok) {
+            memcpy(c->ref, avg, sizeof c->ref);
+            break;
+        }
+        for (uint32_t q = c->start; q < *n_order; q++) chart_of[order[q]] = LC_NONE;
+    }
+    c->count = *n_order - c->start;
+}
+
+/* Stage 1, charts: BFS from the lowest unassigned triangle; non-degenerate seeds first. Fills
+ * chart_of and cx->order; *charts grows (capacity *cap_charts). -1 out of memory. */
+static int uvgen_grow_charts(const uvgen_ctx *cx, const uint32_t *adj_start, const uint32_t *adj, uint32_t *chart_of,
+                             double cos_a, uvgen_chart **charts, uint32_t *n_charts, uint32_t *cap_charts) {
+    const uint32_t T = cx->m->n_triangles;
+    uint32_t n_order = 0;
+    memset(chart_of, 0xFF, (size_t)T * sizeof *chart_of);
+    for (int pass = 0; pass < 2; pass++)
+        for (uint32_t s = 0; s < T; s++) {
+            if (chart_of[s] != LC_NONE || (pass == 0 && cx->degen[s])) continue;
+            uvgen_chart c = {0};
+            c.start = n_order;
+            if (pass == 0)
+                memcpy(c.ref, cx->tri_n + 3 * (size_t)s, sizeof c.ref);
+            else
+                c.ref[2] = 1;
+            uvgen_grow_chart(cx, adj_start, adj, chart_of, s, pass, cos_a, *n_charts, &c, &n_order);
+            if (*n_charts == *cap_charts) {
+                *cap_charts *= 2;
+                uvgen_chart *p = realloc(*charts, *cap_charts * sizeof *p);
+                if (!p) return -1;
+                *charts = p;
+            }
+            (*charts)[(*n_charts)++] = c;
+        }
+    return 0;
+}
+
+/* Stages 3 + 4 at a given density d: the atlas width is searched for a square-ish packing of
+ * the n charts (final placement in fin), *W x *H its size. -1 with err when none fits. */
+static int uvgen_pack_at_density(uvgen_chart *fin, uint32_t n, uvgen_item *items, uvgen_seg *sky, double d,
+                                 uint32_t pad, uint32_t *W, uint32_t *H, char *err, size_t errlen) {
+    double est = 0; /* texels incl. padding, to choose a square-ish width */
+    for (uint32_t i = 0; i < n; i++) est += (fin[i].w * d + 2 + pad) * (fin[i].h * d + 2 + pad);
+    if (est > (double)UVGEN_MAX_ATLAS * UVGEN_MAX_ATLAS) {
+        lc_set_err(err, errlen, "uvgen: texels_per_metre %g needs about %.0f texels, more than a %ux%u atlas; lower it",
+                   d, est, UVGEN_MAX_ATLAS, UVGEN_MAX_ATLAS);
+        return -1;
+    }
+    uint32_t best_w = 0, best_h = 0;
+    double try_w = sqrt(est) + pad;
+    for (uint32_t i = 0; i < n; i++) try_w = fmax(try_w, fin[i].w * d + 4 + 2 * pad);
+    for (int it = 0; it < 4; it++) {
+        uint32_t w = uvgen_round4(try_w);
+        uint32_t used = uvgen_pack(fin, n, items, sky, d, w, UVGEN_MAX_ATLAS, pad, 0);
+        uint32_t h = used == UINT32_MAX ? UINT32_MAX : uvgen_round4(used);
+        if (used == UINT32_MAX) { /* too wide a chart or too tall: widen */
+            try_w = w * 1.5;
+            continue;
+        }
+        if (!best_w || (uint64_t)w * h < (uint64_t)best_w * best_h ||
+            ((uint64_t)w * h == (uint64_t)best_w * best_h && abs((int)w - (int)h) < abs((int)best_w - (int)best_h))) {
+            best_w = w;
+            best_h = h;
+        }
+        if (h <= w + w / 8 && w <= h + h / 8) break; /* square enough */
+        try_w = sqrt((double)w * h);
+    }
+    if (!best_w || best_w > UVGEN_MAX_ATLAS || best_h > UVGEN_MAX_ATLAS) {
+        lc_set_err(err, errlen, "uvgen: texels_per_metre %g does not fit a %ux%u atlas; lower it", d, UVGEN_MAX_ATLAS,
+                   UVGEN_MAX_ATLAS);
+        return -1;
+    }
+    *W = best_w;
+    *H = best_h;
+    uvgen_pack(fin, n, items, sky, d, *W, *H, pad, 0); /* final placement */
+    return 0;
+}
+
+/* Stages 3 + 4 in an atlas of params->atlas_size (grown if the charts cannot fit it): the
+ * highest density that packs, by bisection; area = the larger of the charts' rects and the
+ * surface. *W x *H the atlas, *d the density. -1 with err when even the grown atlas is full. */
+static int uvgen_pack_in_atlas(uvgen_chart *fin, uint32_t n, uvgen_item *items, uvgen_seg *sky,
+                               const lc_uv_params *params, double area, uint32_t *W_out, uint32_t *H_out, double *d,
+                               char *err, size_t errlen) {
+    const uint32_t pad = params->padding;
+    uint32_t W, H;
+    W = H = params->atlas_size;
+    /* At 1e-4 of the ideal density every chart is a texel or two: if they do not fit
+     * then, no density does; grow the atlas (a bake with default settings must not fail
+     * on a scene with many small parts). Growing only until they barely fit would leave
+     * nothing but padding: a grown atlas keeps the requested atlas_size^2 texels free
+     * beside the charts' minimal footprints (rows above them), for their content. */
+    double hi = W / sqrt(area), lo = hi * 1e-4;
+    if (uvgen_pack(fin, n, items, sky, lo, W, H, pad, 1) == UINT32_MAX) {
+        for (;;) {
+            if (W >= UVGEN_GROW_MAX) {
+                lc_set_err(err, errlen,
+                           "uvgen: %u charts with padding %u cannot fit atlas_size %u, even grown to %u; raise "
+                           "chart_angle_deg or lower padding",
+                           n, pad, params->atlas_size, W);
+                return -1;
+            }
+            W = H = uvgen_round4(fmin(W * 1.25, UVGEN_GROW_MAX));
+            hi = W / sqrt(area);
+            lo = hi * 1e-4;
+            uint64_t room = ((uint64_t)params->atlas_size * params->atlas_size + W - 1) / W;
+            uint32_t max_h = W < UVGEN_GROW_MAX ? (uint32_t)(H > room ? H - room : 0) : H;
+            if (uvgen_pack(fin, n, items, sky, lo, W, max_h, pad, 1) != UINT32_MAX) break;
+        }
+    }
+    if (W != params->atlas_size)
+        lc_warn("uvgen",
+                "atlas grown from %u to %u to hold %u charts; raise --atlas-size or --chart-angle, or give the "
+                "asset a second UV set, to avoid this",
+                params->atlas_size, W, n);
+    if (uvgen_pack(fin, n, items, sky, hi, W, H, pad, 1) != UINT32_MAX) lo = hi;
+    for (int it = 0; it < 60 && hi > lo * 1.0005; it++) {
+        double mid = sqrt(lo * hi);
+        if (uvgen_pack(fin, n, items, sky, mid, W, H, pad, 1) != UINT32_MAX)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    *d = lo;
+    uvgen_pack(fin, n, items, sky, *d, W, H, pad, 1);
+    *W_out = W;
+    *H_out = H;
+    return 0;
+}
+
+/* The mesh's vertex arrays after the rewrite: one vertex per (original vertex, chart). */
+typedef struct {
+    float *pos, *nrm, *uv0, *uv1;
+    uint32_t *idx;
+    size_t nv;
+} uvgen_remesh;
+
+static void uvgen_remesh_free(uvgen_remesh *r) {
+    free(r->pos);
+    free(r->nrm);
+    free(r->uv0);
+    free(r->uv1);
+    free(r->idx);
+    memset(r, 0, sizeof *r);
+}
+
+/* Every triangle corner sorted by (vertex, chart, corner): a counting sort by vertex (stable:
+ * corners of a vertex stay in triangle order), then each vertex's short run by chart. -1 out
+ * of memory. */
+static int uvgen_sort_corners(const lc_mesh *mesh, const uint32_t *chart_of, uvgen_corner *corners) {
+    const size_t nc = 3 * (size_t)mesh->n_triangles;
+    uint32_t *vstart = calloc((size_t)mesh->n_vertices + 1, sizeof *vstart);
+    if (!vstart) return -1;
+    for (size_t i = 0; i < nc; i++) vstart[mesh->index[i] + 1]++;
+    for (uint32_t v = 0; v < mesh->n_vertices; v++) vstart[v + 1] += vstart[v];
+    for (size_t i = 0; i < nc; i++)
+        corners[vstart[mesh->index[i]]++] = (uvgen_corner){mesh->index[i], chart_of[i / 3], (uint32_t)i};
+    free(vstart);
+    for (size_t i = 0; i < nc;) {
+        size_t j = i + 1;
+        while (j < nc && corners[j].v == corners[i].v) j++;
+        for (size_t a = i + 1; a < j; a++) /* insertion sort: runs are a few corners */
+            for (size_t b = a; b > i && uvgen_corner_cmp(&corners[b - 1], &corners[b]) > 0; b--) {
+                uvgen_corner t = corners[b];
+                corners[b] = corners[b - 1];
+                corners[b - 1] = t;
+            }
+        i = j;
+    }
+    return 0;
+}
+
+/* Stage 5, rewrite: one vertex per (original vertex, chart), in (vertex, chart) order, its
+ * uv1 from the chart's placement at density d in the W x H atlas. -1 with err. */
+static int uvgen_split_vertices(const uvgen_ctx *cx, const uvgen_chart *fin, const uint32_t *chart_of, double d,
+                                uint32_t W, uint32_t H, uvgen_remesh *rm, char *err, size_t errlen) {
+    const lc_mesh *mesh = cx->m;
+    const size_t nc = 3 * (size_t)mesh->n_triangles;
+    int rc = -1;
+    uvgen_corner *corners = malloc(nc * sizeof *corners);
+    rm->idx = malloc(nc * sizeof *rm->idx);
+    if (!corners || !rm->idx || uvgen_sort_corners(mesh, chart_of, corners) != 0) {
+        uvgen_oom(mesh, err, errlen);
+        goto err;
+    }
+    size_t nv = 0;
+    for (size_t i = 0; i < nc; i++)
+        if (i == 0 || corners[i].v != corners[i - 1].v || corners[i].chart != corners[i - 1].chart) nv++;
+    if (nv > UINT32_MAX - 1) {
+        lc_set_err(err, errlen, "uvgen: splitting vertices along seams exceeds 2^32 vertices");
+        goto err;
+    }
+    rm->nv = nv;
+    rm->pos = malloc(3 * nv * sizeof *rm->pos);
+    rm->uv1 = malloc(2 * nv * sizeof *rm->uv1);
+    if (mesh->normal) rm->nrm = malloc(3 * nv * sizeof *rm->nrm);
+    if (mesh->uv0) rm->uv0 = malloc(2 * nv * sizeof *rm->uv0);
+    if (!rm->pos || !rm->uv1 || (mesh->normal && !rm->nrm) || (mesh->uv0 && !rm->uv0)) {
+        uvgen_oom(mesh, err, errlen);
+        goto err;
+    }
+    size_t cur = (size_t)-1;
+    for (size_t i = 0; i < nc; i++) {
+        const uvgen_corner *k = &corners[i];
+        if (i == 0 || k->v != corners[i - 1].v || k->chart != corners[i - 1].chart) {
+            cur++;
+            memcpy(rm->pos + 3 * cur, mesh->position + 3 * (size_t)k->v, 3 * sizeof(float));
+            if (rm->nrm) memcpy(rm->nrm + 3 * cur, mesh->normal + 3 * (size_t)k->v, 3 * sizeof(float));
+            if (rm->uv0) memcpy(rm->uv0 + 2 * cur, mesh->uv0 + 2 * (size_t)k->v, 2 * sizeof(float));
+            const uvgen_chart *c = &fin[k->chart];
+            double p[3];
+            uvgen_load(mesh, cx->weld[k->v], p);
+            double lu = uvgen_dot(p, c->U) - c->umin, lv = uvgen_dot(p, c->V) - c->vmin;
+            if (c->rot) {
+                double t = lu;
+                lu = c->h - lv;
+                lv = t;
+            }
+            double X = c->x + c->fx + lu * d, Y = c->y + c->fy + lv * d;
+            rm->uv1[2 * cur] = (float)fmin(fmax(X / W, 0.0), 1.0);
+            rm->uv1[2 * cur + 1] = (float)fmin(fmax(Y / H, 0.0), 1.0);
+        }
+        rm->idx[k->corner] = (uint32_t)cur;
+    }
+    rc = 0;
+err:
+    free(corners);
+    return rc;
+}
+
+/* Stage 6, usage: texels under the charts' conservative footprints, per chart over its own
+ * rect (footprints are disjoint) into *used. -1 out of memory. */
+static int uvgen_usage(const uvgen_chart *fin, uint32_t n, const uint32_t *order, const uvgen_remesh *rm, uint32_t W,
+                       uint32_t H, uint64_t *used) {
+    size_t max_rect = 1;
+    for (uint32_t i = 0; i < n; i++) {
+        size_t r = (size_t)fin[i].fw * fin[i].fh;
+        if (r > max_rect) max_rect = r;
+    }
+    uint8_t *bits = malloc(max_rect);
+    if (!bits) return -1;
+    *used = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        const uvgen_chart *c = &fin[i];
+        memset(bits, 0, (size_t)c->fw * c->fh);
+        for (uint32_t q = c->start; q < c->start + c->count; q++) {
+            uint32_t t = order[q];
+            double x[3], y[3];
+            for (int k = 0; k < 3; k++) {
+                uint32_t v = rm->idx[3 * (size_t)t + k];
+                x[k] = (double)rm->uv1[2 * (size_t)v] * W - c->x;
+                y[k] = (double)rm->uv1[2 * (size_t)v + 1] * H - c->y;
+            }
+            uvgen_conservative(x, y, bits, c->fw, c->fh);
+        }
+        for (size_t k = 0; k < (size_t)c->fw * c->fh; k++) *used += bits[k];
+    }
+    free(bits);
+    return 0;
+}
+
+/* The mesh takes the rewritten arrays (rm is left empty). */
+static void uvgen_remesh_install(lc_mesh *mesh, uvgen_remesh *rm) {
+    free(mesh->position);
+    free(mesh->normal);
+    free(mesh->uv0);
+    free(mesh->uv1);
+    free(mesh->index);
+    mesh->position = rm->pos;
+    mesh->normal = rm->nrm;
+    mesh->uv0 = rm->uv0;
+    mesh->uv1 = rm->uv1;
+    mesh->index = rm->idx;
+    mesh->n_vertices = (uint32_t)rm->nv;
+    memset(rm, 0, sizeof *rm);
+}
+
 int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char *err, size_t errlen) {
     if (uvgen_check(mesh, params, 0, err, errlen) != 0) return -1;
     const uint32_t T = mesh->n_triangles, pad = params->padding;
@@ -1258,13 +1650,11 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
     uint32_t *weld = NULL, *adj_start = NULL, *adj = NULL, *order = NULL, *chart_of = NULL;
     uint32_t *mark = NULL;
     double *tri_n = NULL, *cu = NULL, *cv = NULL;
-    uint8_t *degen = NULL, *bits = NULL;
+    uint8_t *degen = NULL;
     uvgen_chart *charts = NULL, *fin = NULL;
     uvgen_item *items = NULL;
     uvgen_seg *sky = NULL;
-    uvgen_corner *corners = NULL;
-    float *npos = NULL, *nnrm = NULL, *nuv0 = NULL, *nuv1 = NULL;
-    uint32_t *nidx = NULL;
+    uvgen_remesh rm = {0};
 
     weld = malloc((size_t)mesh->n_vertices * sizeof *weld);
     tri_n = calloc(3 * (size_t)T, sizeof *tri_n);
@@ -1277,94 +1667,22 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
     if (!weld || !tri_n || !degen || !order || !chart_of || !mark || !cu || !cv) goto oom;
     if (uvgen_weld(mesh, weld) != 0 || uvgen_adjacency(mesh, weld, &adj_start, &adj) != 0) goto oom;
 
-    double total_area = 0;
-    for (uint32_t t = 0; t < T; t++) {
-        double c[3], e2;
-        uvgen_tri_cross(mesh, t, c, &e2);
-        double l = sqrt(uvgen_dot(c, c));
-        total_area += 0.5 * l;
-        /* near-collinear triangles have no reliable normal: they join any neighbour chart */
-        if (!(l > 1e-12 * e2) || !(l > 0)) {
-            degen[t] = 1;
-            continue;
-        }
-        for (int k = 0; k < 3; k++) tri_n[3 * (size_t)t + k] = c[k] / l;
-    }
+    double total_area = uvgen_triangle_normals(mesh, tri_n, degen);
     if (!(total_area > 0)) {
         lc_set_err(err, errlen, "uvgen: the mesh has zero surface area (all %u triangles degenerate)", T);
         goto err;
     }
 
-    /* 1. charts: BFS from the lowest unassigned triangle; non-degenerate seeds first. */
-    uint32_t cap_charts = 64, n_charts = 0, n_order = 0;
+    /* 1. charts */
+    uvgen_ctx cx = {mesh, weld, tri_n, degen, order, cu, cv, 0.02};
+    uint32_t cap_charts = 64, n_charts = 0;
     charts = malloc(cap_charts * sizeof *charts);
     if (!charts) goto oom;
-    memset(chart_of, 0xFF, (size_t)T * sizeof *chart_of);
     double cos_a = cos(params->chart_angle_deg * M_PI / 180.0);
-    for (int pass = 0; pass < 2; pass++)
-        for (uint32_t s = 0; s < T; s++) {
-            if (chart_of[s] != LC_NONE || (pass == 0 && degen[s])) continue;
-            uvgen_chart c = {0};
-            c.start = n_order;
-            if (pass == 0)
-                memcpy(c.ref, tri_n + 3 * (size_t)s, sizeof c.ref);
-            else
-                c.ref[2] = 1;
-            /* First against the running area-weighted normal (charts follow gentle curvature
-             * up to twice the angle), kept only if every triangle is within the angle of the
-             * final normal; else regrown against the seed normal (the bound holds by
-             * construction). */
-            for (int mode = pass == 0 ? 0 : 1; mode < 2; mode++) {
-                n_order = c.start;
-                chart_of[s] = n_charts;
-                order[n_order++] = s;
-                double sum[3], avg[3];
-                uvgen_tri_cross(mesh, s, sum, NULL);
-                memcpy(avg, c.ref, sizeof avg);
-                for (uint32_t q = c.start; q < n_order; q++) {
-                    uint32_t t = order[q];
-                    for (uint32_t a = adj_start[t]; a < adj_start[t + 1]; a++) {
-                        uint32_t nb = adj[a];
-                        if (chart_of[nb] != LC_NONE) continue;
-                        if (!degen[nb]) {
-                            if (pass == 1 || uvgen_dot(tri_n + 3 * (size_t)nb, avg) < cos_a) continue;
-                            if (mode == 0) {
-                                double cr[3];
-                                uvgen_tri_cross(mesh, nb, cr, NULL);
-                                for (int k = 0; k < 3; k++) sum[k] += cr[k];
-                                memcpy(avg, sum, sizeof avg);
-                                if (!uvgen_normalize(avg)) memcpy(avg, c.ref, sizeof avg);
-                            }
-                        }
-                        chart_of[nb] = n_charts;
-                        order[n_order++] = nb;
-                    }
-                }
-                if (mode == 1) break;
-                int ok = 1;
-                for (uint32_t q = c.start; q < n_order && ok; q++) {
-                    uint32_t t = order[q];
-                    if (!degen[t] && uvgen_dot(tri_n + 3 * (size_t)t, avg) < cos_a) ok = 0;
-                }
-                if (ok) {
-                    memcpy(c.ref, avg, sizeof c.ref);
-                    break;
-                }
-                for (uint32_t q = c.start; q < n_order; q++) chart_of[order[q]] = LC_NONE;
-            }
-            c.count = n_order - c.start;
-            if (n_charts == cap_charts) {
-                cap_charts *= 2;
-                uvgen_chart *p = realloc(charts, cap_charts * sizeof *p);
-                if (!p) goto oom;
-                charts = p;
-            }
-            charts[n_charts++] = c;
-        }
+    if (uvgen_grow_charts(&cx, adj_start, adj, chart_of, cos_a, &charts, &n_charts, &cap_charts) != 0) goto oom;
 
     /* 2. project; split overlapping charts until none overlap (sub-charts are appended);
      * merge small charts into neighbours; project and check the merged ones the same way. */
-    uvgen_ctx cx = {mesh, weld, tri_n, degen, order, cu, cv, 0.02};
     uint32_t stamp = 0;
     if (uvgen_resolve(&cx, &charts, &n_charts, &cap_charts, adj_start, adj, mark, &stamp) != 0) goto oom;
     uint32_t n_grown = n_charts;
@@ -1388,185 +1706,16 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
     for (uint32_t i = 0; i < n_final; i++) rect_area += fin[i].w * fin[i].h;
     uint32_t W = 0, H = 0;
     double d = params->texels_per_metre;
-    if (d > 0) {
-        double est = 0; /* texels incl. padding, to choose a square-ish width */
-        for (uint32_t i = 0; i < n_final; i++) est += (fin[i].w * d + 2 + pad) * (fin[i].h * d + 2 + pad);
-        if (est > (double)UVGEN_MAX_ATLAS * UVGEN_MAX_ATLAS) {
-            lc_set_err(err, errlen,
-                       "uvgen: texels_per_metre %g needs about %.0f texels, more than a %ux%u atlas; lower it",
-                       d, est, UVGEN_MAX_ATLAS, UVGEN_MAX_ATLAS);
-            goto err;
-        }
-        uint32_t best_w = 0, best_h = 0;
-        double try_w = sqrt(est) + pad;
-        for (uint32_t i = 0; i < n_final; i++) try_w = fmax(try_w, fin[i].w * d + 4 + 2 * pad);
-        for (int it = 0; it < 4; it++) {
-            uint32_t w = uvgen_round4(try_w);
-            uint32_t used = uvgen_pack(fin, n_final, items, sky, d, w, UVGEN_MAX_ATLAS, pad, 0);
-            uint32_t h = used == UINT32_MAX ? UINT32_MAX : uvgen_round4(used);
-            if (used == UINT32_MAX) { /* too wide a chart or too tall: widen */
-                try_w = w * 1.5;
-                continue;
-            }
-            if (!best_w || (uint64_t)w * h < (uint64_t)best_w * best_h ||
-                ((uint64_t)w * h == (uint64_t)best_w * best_h && abs((int)w - (int)h) < abs((int)best_w - (int)best_h))) {
-                best_w = w;
-                best_h = h;
-            }
-            if (h <= w + w / 8 && w <= h + h / 8) break; /* square enough */
-            try_w = sqrt((double)w * h);
-        }
-        if (!best_w || best_w > UVGEN_MAX_ATLAS || best_h > UVGEN_MAX_ATLAS) {
-            lc_set_err(err, errlen, "uvgen: texels_per_metre %g does not fit a %ux%u atlas; lower it", d,
-                       UVGEN_MAX_ATLAS, UVGEN_MAX_ATLAS);
-            goto err;
-        }
-        W = best_w;
-        H = best_h;
-        uvgen_pack(fin, n_final, items, sky, d, W, H, pad, 0); /* final placement */
-    } else {
-        W = H = params->atlas_size;
-        /* At 1e-4 of the ideal density every chart is a texel or two: if they do not fit
-         * then, no density does; grow the atlas (a bake with default settings must not fail
-         * on a scene with many small parts). Growing only until they barely fit would leave
-         * nothing but padding: a grown atlas keeps the requested atlas_size^2 texels free
-         * beside the charts' minimal footprints (rows above them), for their content. */
-        double hi = W / sqrt(fmax(rect_area, total_area)), lo = hi * 1e-4;
-        if (uvgen_pack(fin, n_final, items, sky, lo, W, H, pad, 1) == UINT32_MAX) {
-            for (;;) {
-                if (W >= UVGEN_GROW_MAX) {
-                    lc_set_err(err, errlen,
-                               "uvgen: %u charts with padding %u cannot fit atlas_size %u, even grown to %u; raise "
-                               "chart_angle_deg or lower padding",
-                               n_final, pad, params->atlas_size, W);
-                    goto err;
-                }
-                W = H = uvgen_round4(fmin(W * 1.25, UVGEN_GROW_MAX));
-                hi = W / sqrt(fmax(rect_area, total_area));
-                lo = hi * 1e-4;
-                uint64_t room = ((uint64_t)params->atlas_size * params->atlas_size + W - 1) / W;
-                uint32_t max_h = W < UVGEN_GROW_MAX ? (uint32_t)(H > room ? H - room : 0) : H;
-                if (uvgen_pack(fin, n_final, items, sky, lo, W, max_h, pad, 1) != UINT32_MAX) break;
-            }
-        }
-        if (W != params->atlas_size)
-            lc_warn("uvgen",
-                    "atlas grown from %u to %u to hold %u charts; raise --atlas-size or --chart-angle, or give the "
-                    "asset a second UV set, to avoid this",
-                    params->atlas_size, W, n_final);
-        if (uvgen_pack(fin, n_final, items, sky, hi, W, H, pad, 1) != UINT32_MAX) lo = hi;
-        for (int it = 0; it < 60 && hi > lo * 1.0005; it++) {
-            double mid = sqrt(lo * hi);
-            if (uvgen_pack(fin, n_final, items, sky, mid, W, H, pad, 1) != UINT32_MAX)
-                lo = mid;
-            else
-                hi = mid;
-        }
-        d = lo;
-        uvgen_pack(fin, n_final, items, sky, d, W, H, pad, 1);
-    }
-
-    /* 5. rewrite: one vertex per (original vertex, chart), in (vertex, chart) order */
-    size_t nc = 3 * (size_t)T;
-    corners = malloc(nc * sizeof *corners);
-    nidx = malloc(nc * sizeof *nidx);
-    if (!corners || !nidx) goto oom;
-    {
-        /* counting sort by vertex (stable: corners of a vertex stay in triangle order), then
-         * each vertex's short run by chart */
-        uint32_t *vstart = calloc((size_t)mesh->n_vertices + 1, sizeof *vstart);
-        if (!vstart) goto oom;
-        for (size_t i = 0; i < nc; i++) vstart[mesh->index[i] + 1]++;
-        for (uint32_t v = 0; v < mesh->n_vertices; v++) vstart[v + 1] += vstart[v];
-        for (size_t i = 0; i < nc; i++)
-            corners[vstart[mesh->index[i]]++] = (uvgen_corner){mesh->index[i], chart_of[i / 3], (uint32_t)i};
-        free(vstart);
-        for (size_t i = 0; i < nc;) {
-            size_t j = i + 1;
-            while (j < nc && corners[j].v == corners[i].v) j++;
-            for (size_t a = i + 1; a < j; a++) /* insertion sort: runs are a few corners */
-                for (size_t b = a; b > i && uvgen_corner_cmp(&corners[b - 1], &corners[b]) > 0; b--) {
-                    uvgen_corner t = corners[b];
-                    corners[b] = corners[b - 1];
-                    corners[b - 1] = t;
-                }
-            i = j;
-        }
-    }
-    size_t nv = 0;
-    for (size_t i = 0; i < nc; i++)
-        if (i == 0 || corners[i].v != corners[i - 1].v || corners[i].chart != corners[i - 1].chart) nv++;
-    if (nv > UINT32_MAX - 1) {
-        lc_set_err(err, errlen, "uvgen: splitting vertices along seams exceeds 2^32 vertices");
+    if (d > 0 ? uvgen_pack_at_density(fin, n_final, items, sky, d, pad, &W, &H, err, errlen) != 0
+              : uvgen_pack_in_atlas(fin, n_final, items, sky, params, fmax(rect_area, total_area), &W, &H, &d, err,
+                                    errlen) != 0)
         goto err;
-    }
-    npos = malloc(3 * nv * sizeof *npos);
-    nuv1 = malloc(2 * nv * sizeof *nuv1);
-    if (mesh->normal) nnrm = malloc(3 * nv * sizeof *nnrm);
-    if (mesh->uv0) nuv0 = malloc(2 * nv * sizeof *nuv0);
-    if (!npos || !nuv1 || (mesh->normal && !nnrm) || (mesh->uv0 && !nuv0)) goto oom;
-    size_t cur = (size_t)-1;
-    for (size_t i = 0; i < nc; i++) {
-        const uvgen_corner *k = &corners[i];
-        if (i == 0 || k->v != corners[i - 1].v || k->chart != corners[i - 1].chart) {
-            cur++;
-            memcpy(npos + 3 * cur, mesh->position + 3 * (size_t)k->v, 3 * sizeof(float));
-            if (nnrm) memcpy(nnrm + 3 * cur, mesh->normal + 3 * (size_t)k->v, 3 * sizeof(float));
-            if (nuv0) memcpy(nuv0 + 2 * cur, mesh->uv0 + 2 * (size_t)k->v, 2 * sizeof(float));
-            const uvgen_chart *c = &fin[k->chart];
-            double p[3];
-            uvgen_load(mesh, weld[k->v], p);
-            double lu = uvgen_dot(p, c->U) - c->umin, lv = uvgen_dot(p, c->V) - c->vmin;
-            if (c->rot) {
-                double t = lu;
-                lu = c->h - lv;
-                lv = t;
-            }
-            double X = c->x + c->fx + lu * d, Y = c->y + c->fy + lv * d;
-            nuv1[2 * cur] = (float)fmin(fmax(X / W, 0.0), 1.0);
-            nuv1[2 * cur + 1] = (float)fmin(fmax(Y / H, 0.0), 1.0);
-        }
-        nidx[k->corner] = (uint32_t)cur;
-    }
 
-    /* 6. usage: conservative footprints, per chart over its own rect (footprints are disjoint) */
+    /* 5. rewrite; 6. usage */
+    if (uvgen_split_vertices(&cx, fin, chart_of, d, W, H, &rm, err, errlen) != 0) goto err;
     uint64_t used = 0;
-    size_t max_rect = 1;
-    for (uint32_t i = 0; i < n_final; i++) {
-        size_t r = (size_t)fin[i].fw * fin[i].fh;
-        if (r > max_rect) max_rect = r;
-    }
-    bits = malloc(max_rect);
-    if (!bits) goto oom;
-    for (uint32_t i = 0; i < n_final; i++) {
-        const uvgen_chart *c = &fin[i];
-        memset(bits, 0, (size_t)c->fw * c->fh);
-        for (uint32_t q = c->start; q < c->start + c->count; q++) {
-            uint32_t t = order[q];
-            double x[3], y[3];
-            for (int k = 0; k < 3; k++) {
-                uint32_t v = nidx[3 * (size_t)t + k];
-                x[k] = (double)nuv1[2 * (size_t)v] * W - c->x;
-                y[k] = (double)nuv1[2 * (size_t)v + 1] * H - c->y;
-            }
-            uvgen_conservative(x, y, bits, c->fw, c->fh);
-        }
-        for (size_t k = 0; k < (size_t)c->fw * c->fh; k++) used += bits[k];
-    }
-
-    free(mesh->position);
-    free(mesh->normal);
-    free(mesh->uv0);
-    free(mesh->uv1);
-    free(mesh->index);
-    mesh->position = npos;
-    mesh->normal = nnrm;
-    mesh->uv0 = nuv0;
-    mesh->uv1 = nuv1;
-    mesh->index = nidx;
-    mesh->n_vertices = (uint32_t)nv;
-    npos = nnrm = nuv0 = nuv1 = NULL;
-    nidx = NULL;
+    if (uvgen_usage(fin, n_final, order, &rm, W, H, &used) != 0) goto oom;
+    uvgen_remesh_install(mesh, &rm);
     if (stats) {
         stats->n_charts = n_final;
         stats->width = W;
@@ -1577,7 +1726,7 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
     rc = 0;
     if (0) {
     oom:
-        lc_set_err(err, errlen, "uvgen: out of memory for %u triangles", T);
+        uvgen_oom(mesh, err, errlen);
     }
 err:
     free(weld);
@@ -1590,17 +1739,11 @@ err:
     free(cu);
     free(cv);
     free(degen);
-    free(bits);
     free(charts);
     free(fin);
     free(items);
     free(sky);
-    free(corners);
-    free(npos);
-    free(nnrm);
-    free(nuv0);
-    free(nuv1);
-    free(nidx);
+    uvgen_remesh_free(&rm);
     return rc;
 }
 
