@@ -22,6 +22,7 @@
 
 #include "ctl.h"
 #include "ctl_image.h"
+#include "util/log.h"
 
 static volatile sig_atomic_t stream_stop = 0;
 
@@ -83,8 +84,10 @@ static int mkdir_p(const char *dir) {
 
 static int write_file(const char *path, const void *data, size_t len, char *err, size_t errlen) {
     FILE *f = fopen(path, "wb");
-    if (!f || fwrite(data, 1, len, f) != len || fclose(f) != 0) {
-        snprintf(err, errlen, "cannot write %s: %s", path, strerror(errno));
+    /* len 0 (an objects frame with no objects): data may be NULL, which fwrite must not get */
+    if (!f || (len && fwrite(data, 1, len, f) != len) || fclose(f) != 0) {
+        /* the path (up to 1200 bytes) may not fit the caller's message buffer: cut to fit */
+        lc_set_err(err, errlen, "cannot write %s: %s", path, strerror(errno));
         return -1;
     }
     return 0;
