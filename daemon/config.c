@@ -15,16 +15,47 @@
 #include "util/limits.h"
 #include "util/log.h"
 
-#ifndef LUCENT_DEFAULT_BAKE
-#define LUCENT_DEFAULT_BAKE "cornell.lcb"
+/* The default bake is found relative to the running executable: LUCENT_DEFAULT_BAKE_REL
+ * from the directory of /proc/self/exe (bin/lucentd -> ../share/lucent/cornell.lcb), so an
+ * installed prefix, a copied (relocated) one and the build tree, which mirrors the install
+ * layout, each serve their own Cornell box. LUCENT_DEFAULT_BAKE (the configured install
+ * path) when /proc/self/exe cannot be read. */
+#include <unistd.h>
+#ifndef LUCENT_DEFAULT_BAKE_REL
+#define LUCENT_DEFAULT_BAKE_REL "../share/lucent/cornell.lcb"
 #endif
+#ifndef LUCENT_DEFAULT_BAKE
+#define LUCENT_DEFAULT_BAKE "/usr/local/share/lucent/cornell.lcb"
+#endif
+static char config_default_bake[LC_CONFIG_PATH_MAX]; /* the "bake" option's default */
+
+static void config_resolve_default_bake(void) {
+    if (config_default_bake[0]) return;
+    char exe[LC_CONFIG_PATH_MAX];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe);
+    char *slash = NULL;
+    if (n > 0 && (size_t)n < sizeof exe) { /* else unreadable or cut */
+        exe[n] = 0;
+        slash = strrchr(exe, '/');
+    }
+    if (slash) {
+        /* the link is canonical (no symlinks, no ..): each leading ../ drops one directory */
+        size_t dir = (size_t)(slash - exe);
+        const char *rel = LUCENT_DEFAULT_BAKE_REL;
+        for (char *up; !strncmp(rel, "../", 3) && (up = memrchr(exe, '/', dir)); rel += 3) dir = (size_t)(up - exe);
+        if (snprintf(config_default_bake, sizeof config_default_bake, "%.*s/%s", (int)dir, exe, rel) <
+            (int)sizeof config_default_bake)
+            return;
+    }
+    snprintf(config_default_bake, sizeof config_default_bake, "%s", LUCENT_DEFAULT_BAKE);
+}
 
 #define OFF(f) offsetof(lc_config, f)
 static const lc_opt config_options[] = {
     {"config", LC_OPT_STRING, OFF(config_file), 0, LC_CONFIG_PATH_MAX, NULL, NULL,
      "JSON config file (keys are these option names; flags override it)", "FILE", NULL},
-    {"bake", LC_OPT_STRING, OFF(bake), 1, LC_CONFIG_PATH_MAX, LUCENT_DEFAULT_BAKE, NULL,
-     "bake file to serve (default: the embedded Cornell box)", "FILE", NULL},
+    {"bake", LC_OPT_STRING, OFF(bake), 1, LC_CONFIG_PATH_MAX, config_default_bake, NULL,
+     "bake file to serve (by default the Cornell box in ../share/lucent/ from lucentd's directory)", "FILE", NULL},
     {"listen", LC_OPT_STRING, OFF(listen), 1, 128, "127.0.0.1", NULL, "interface address to listen on", "ADDR",
      NULL},
     {"port", LC_OPT_INT, OFF(port), 0, 65535, LC_LIMIT_STR(LC_DEFAULT_PORT), NULL, "TCP port (0 = any free port, logged)", NULL, NULL},
@@ -90,7 +121,10 @@ static const lc_opt config_options[] = {
 };
 #undef OFF
 
-const lc_opt *lc_config_options(void) { return config_options; }
+const lc_opt *lc_config_options(void) {
+    config_resolve_default_bake();
+    return config_options;
+}
 
 /* Applies a JSON object of option names to values (strings, numbers, booleans). */
 static int config_apply_json(lc_config *c, const char *path, char *err, size_t errlen) {
@@ -150,6 +184,7 @@ static int config_apply_json(lc_config *c, const char *path, char *err, size_t e
 
 int lc_config_load(lc_config *c, int argc, char **argv, char *err, size_t errlen) {
     memset(c, 0, sizeof *c);
+    config_resolve_default_bake();
     if (lc_opt_defaults(config_options, c, err, errlen) != 0) return -1;
     /* First pass only to find --config; the file sits under the flags. */
     lc_config probe;
