@@ -468,23 +468,10 @@ static void test_truncation(void) {
     uint8_t *buf = bake_bytes(&b, &len);
     uint32_t n = hdr_of(buf)->section_count;
     size_t table_end = 64 + 48 * (size_t)n;
-    size_t cuts[512];
-    int nc = 0;
-    for (size_t k = 0; k <= 64; k++) cuts[nc++] = k;
-    cuts[nc++] = table_end - 1;
-    cuts[nc++] = table_end;
-    cuts[nc++] = table_end + 1;
-    for (uint32_t i = 0; i < n; i++) {
-        const lc_lcb_section *s = &table_of(buf)[i];
-        size_t ends[2] = {(size_t)s->offset, (size_t)(s->offset + s->size)};
-        for (int k = 0; k < 2; k++)
-            for (int d = -1; d <= 1; d++) cuts[nc++] = ends[k] + (size_t)d;
-    }
-    cuts[nc++] = len - 1;
+    /* every length short of the whole file: the header, the table, each section's first,
+     * middle and last byte, and the padding between sections */
     int tested = 0;
-    for (int k = 0; k < nc; k++) {
-        size_t cut = cuts[k];
-        if (cut >= len) continue;
+    for (size_t cut = 0; cut < len; cut++) {
         char label[64], want[8] = "";
         snprintf(label, sizeof label, "truncated at %zu of %zu", cut, len);
         const char *expect = "truncated";
@@ -504,9 +491,95 @@ static void test_truncation(void) {
         expect_fail(label, buf, cut, expect, want[0] ? want : NULL);
         tested++;
     }
-    CHECK(tested > 150, "only %d truncations", tested);
+    CHECK(tested == (int)len && len > 1000, "%d truncations of a %zu-byte file", tested, len);
     free(buf);
     bake_free(&b);
+}
+
+/* The same on a real bake (the build's cornell.lcb, from lucent-bake: every section kind a
+ * bake writes, at its real sizes), in place of one `lucent-bake verify` per case: truncated
+ * at 0, 1, the header and table ends and around every section's start and end, and 300 bit
+ * flips inside the header, the table and the sections, each rejected with a message naming
+ * where. Skipped (noted) when the build has no cornell.lcb. */
+static void test_real_bake(void) {
+    const char *bin = getenv("LUCENT_BINARY_DIR");
+    char path[1024];
+    snprintf(path, sizeof path, "%s/cornell.lcb", bin && *bin ? bin : ".");
+    FILE *fh = fopen(path, "rb");
+    if (!fh) {
+        fprintf(stderr, "note: %s not built; the real-bake truncations and flips are skipped\n", path);
+        return;
+    }
+    fseek(fh, 0, SEEK_END);
+    long flen = ftell(fh);
+    fseek(fh, 0, SEEK_SET);
+    size_t len = flen > 0 ? (size_t)flen : 0;
+    uint8_t *buf = malloc(len ? len : 1);
+    CHECK(buf && len > 4096 && fread(buf, 1, len, fh) == len, "read %s (%zu bytes)", path, len);
+    fclose(fh);
+    char err[512];
+    if (!buf || len <= 4096 || try_open(buf, len, err, sizeof err) != 0) {
+        CHECK(0, "%s does not open: %s", path, buf ? err : "");
+        free(buf);
+        return;
+    }
+    uint32_t n = hdr_of(buf)->section_count;
+    size_t table_end = 64 + 48 * (size_t)n;
+    size_t cuts[64 + 8 * LC_LCB_MAX_SECTIONS];
+    int nc = 0;
+    size_t fixed[] = {0, 1, 40, 63, 64, 65, table_end - 1, table_end, table_end + 1, len / 2, len - 1};
+    for (size_t k = 0; k < sizeof fixed / sizeof fixed[0]; k++) cuts[nc++] = fixed[k];
+    for (uint32_t i = 0; i < n && i < LC_LCB_MAX_SECTIONS; i++) {
+        const lc_lcb_section *s = &table_of(buf)[i];
+        size_t ends[2] = {(size_t)s->offset, (size_t)(s->offset + s->size)};
+        for (int k = 0; k < 2; k++)
+            for (int d = -1; d <= 1; d++) cuts[nc++] = ends[k] + (size_t)d;
+    }
+    int tested = 0;
+    for (int k = 0; k < nc; k++) {
+        size_t cut = cuts[k];
+        if (cut >= len) continue;
+        char label[80], want[8] = "";
+        snprintf(label, sizeof label, "cornell.lcb truncated at %zu of %zu", cut, len);
+        const char *expect = cut < 64 ? "header" : cut < table_end ? "section table" : "truncated";
+        for (uint32_t i = 0; cut >= table_end && i < n; i++) {
+            const lc_lcb_section *s = &table_of(buf)[i];
+            if (s->offset + s->size > cut) {
+                memcpy(want, s->id, 4);
+                break;
+            }
+        }
+        expect_fail(label, buf, cut, expect, want[0] ? want : NULL);
+        tested++;
+    }
+    CHECK(tested >= 6 * (int)n, "only %d truncations of %s", tested, path);
+    /* flips inside what the CRCs cover: the header, the table, the sections */
+    uint8_t *copy = malloc(len);
+    int flips = 0;
+    for (int it = 0; copy && it < 300; it++) {
+        uint32_t pick = (uint32_t)(rnd() % (n + 1));
+        size_t lo = 0, hi = table_end;
+        char id[5] = "";
+        if (pick < n) {
+            const lc_lcb_section *s = &table_of(buf)[pick];
+            lo = (size_t)s->offset;
+            hi = (size_t)(s->offset + s->size);
+            memcpy(id, s->id, 4);
+        }
+        if (hi <= lo) continue;
+        size_t off = lo + (size_t)(rnd() % (hi - lo));
+        uint8_t x = (uint8_t)(1u << (rnd() % 8));
+        memcpy(copy, buf, len);
+        copy[off] ^= x;
+        char label[80];
+        snprintf(label, sizeof label, "cornell.lcb flip 0x%02x at %zu", x, off);
+        if (id[0]) expect_fail(label, copy, len, id, "CRC");
+        else expect_fail(label, copy, len, off < 64 ? "header" : "section table", NULL);
+        flips++;
+    }
+    CHECK(flips > 250, "only %d flips of %s", flips, path);
+    free(copy);
+    free(buf);
 }
 
 static void test_flips(void) {
@@ -903,6 +976,7 @@ int main(void) {
     test_round_trip();
     test_determinism_and_api();
     test_truncation();
+    test_real_bake();
     test_flips();
     test_structure();
     test_semantic();
