@@ -35,22 +35,21 @@ import math
 import os
 import platform
 import shutil
-import struct
-import subprocess
 import sys
 import tempfile
-import threading
 import time
-import zlib
 
 try:
     import websockets
 except ImportError:  # pragma: no cover
     sys.exit("latency_bench: needs python3-websockets (apt install python3-websockets); run with /usr/bin/python3")
 
-HEADER = struct.Struct("<IHBBHHIQQQIIIIII")
-MAGIC = 0x3146434C
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "lib"))
+import lucent_testlib as lt  # noqa: E402
+
+HEADER = lt.HEADER
+MAGIC = lt.MAGIC
+REPO = lt.REPO
 
 TARGETS = [
     "Cornell, 10 clients: update->frame p50 <= 10 ms, p99 <= 30 ms",
@@ -93,77 +92,45 @@ def proc_stats(pid):
 
 
 class Daemon:
+    """lucentd started by tests/lib/lucent_testlib.py (free port, stderr kept in a file)."""
+
     def __init__(self, args, n_clients):
         self.state_dir = tempfile.mkdtemp(prefix="lucent-bench-")
-        self.stderr = open(os.path.join(self.state_dir, "lucentd.stderr"), "w+")
-        state = os.path.join(self.state_dir, "state")
-        cmd = [args.lucentd, "--port", "0", "--listen", "127.0.0.1", "--state-dir", state,
-               "--backend", args.backend, "--log-level", args.log_level,
-               "--max-clients", str(max(1000, n_clients + 10))]
-        if args.bake:
-            cmd += ["--bake", args.bake]
+        extra = ["--listen", "127.0.0.1", "--max-clients", str(max(1000, n_clients + 10))]
         if args.fsync:
-            cmd += ["--fsync", args.fsync]
-        cmd += ["--keyframe-interval", str(args.keyframe_interval)]
+            extra += ["--fsync", args.fsync]
+        extra += ["--keyframe-interval", str(args.keyframe_interval)]
         if args.threads is not None:
-            cmd += ["--threads", str(args.threads)]
-        for extra in args.daemon_arg:
-            cmd += extra.split()
-        self.cmd = cmd
-        self.p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self.stderr, text=True)
-        line = self.p.stdout.readline()
-        if "port=" not in line:
-            self.p.kill()
-            self.p.wait()
-            self.stderr.seek(0)
-            raise SystemExit("lucentd did not start: %r\n%s" % (line, self.stderr.read()[-2000:]))
-        self.port = int(line.strip().split("port=")[1].split()[0])
-        # Keep draining stdout so the daemon never blocks on a full pipe.
-        threading.Thread(target=lambda: [None for _ in self.p.stdout], daemon=True).start()
+            extra += ["--threads", str(args.threads)]
+        for more in args.daemon_arg:
+            extra += more.split()
+        try:
+            self.p, self.port = lt.start_lucentd(os.path.join(self.state_dir, "state"), *extra, bake=args.bake,
+                                                 lucentd=args.lucentd, backend=args.backend,
+                                                 log_level=args.log_level)
+        except lt.LucentdStartError as e:
+            shutil.rmtree(self.state_dir, ignore_errors=True)
+            raise SystemExit(str(e))
 
     def stats(self):
         return proc_stats(self.p.pid)
 
     def stop(self):
-        if self.p.poll() is None:
-            self.p.terminate()
-            try:
-                self.p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                self.p.kill()
-                self.p.wait()
-        self.stderr.seek(0)
-        log = self.stderr.read()
-        self.stderr.close()
+        rc = lt.stop(self.p)
+        log = self.p.log.text()
         shutil.rmtree(self.state_dir, ignore_errors=True)
-        return self.p.returncode, log
+        return rc, log
 
 
 def scrape_metrics(port):
-    import urllib.request
-    out = {}
     try:
-        body = urllib.request.urlopen("http://127.0.0.1:%d/metrics" % port, timeout=5).read().decode()
+        return lt.metrics(port)
     except Exception as e:  # pragma: no cover
         return {"error": str(e)}
-    for line in body.splitlines():
-        if line and not line.startswith("#"):
-            k, _, v = line.rpartition(" ")
-            try:
-                out[k] = float(v)
-            except ValueError:
-                pass
-    return out
 
 
 async def recv_json(ws, want, timeout=15):
-    while True:
-        m = await asyncio.wait_for(ws.recv(), timeout)
-        if isinstance(m, bytes):
-            continue
-        msg = json.loads(m)
-        if msg.get("type") in want:
-            return msg
+    return await lt.recv_json(ws, want, timeout)
 
 
 class Client:
@@ -188,6 +155,7 @@ class Client:
         self.first_frame = asyncio.get_running_loop().create_future()
         self.waiters = []  # (revision, future)
         self.record_from = 0.0
+        self.last_arrival = 0.0  # monotonic time of the last frame (recorded or not)
 
     async def connect(self, port, encoding, max_rate, token):
         self.ws = await websockets.connect("ws://127.0.0.1:%d/" % port, subprotocols=["lucent.v1"],
@@ -219,12 +187,12 @@ class Client:
                     continue
                 (magic, _ver, _stream, _enc, flags, _hs, tiles, rev, seq, _ts, _w, _h, _d, _tile, plen,
                  crc) = HEADER.unpack_from(m, 0)
-                if magic != MAGIC or len(m) != 64 + 4 * tiles + plen or (
-                        self.verify_crc and zlib.crc32(memoryview(m)[64:], zlib.crc32(memoryview(m)[:60])) != crc):
+                if magic != MAGIC or len(m) != 64 + 4 * tiles + plen or (self.verify_crc and lt.frame_crc(m) != crc):
                     self.bad += 1
                 if self.last_seq and seq != self.last_seq + 1:
                     self.seq_gaps += 1
                 self.last_seq = seq
+                self.last_arrival = t
                 if not self.first_frame.done():
                     self.first_frame.set_result(rev)
                 if t >= self.record_from:
@@ -310,6 +278,22 @@ class Controller:
         return t, fut
 
 
+async def settled(viewers, quiet=0.3, limit=20.0):
+    """Waits until no viewer has received a frame for `quiet` s: the progressive refinement
+    passes of the last change are over (they follow it back to back). Returns the wait in s;
+    raises WaitTimeout when frames keep coming for `limit` s."""
+    loop_start = time.monotonic()
+    while True:
+        now = time.monotonic()
+        last = max((c.last_arrival for c in viewers), default=0.0)
+        if now - last >= quiet:
+            return now - loop_start
+        if now - loop_start > limit:
+            raise lt.WaitTimeout("frames kept coming for %.0f s after the last change (no %.1f s quiet)" %
+                                 (limit, quiet))
+        await asyncio.sleep(max(0.01, quiet - (now - last)))
+
+
 def orbit_geometry(welcome):
     g = welcome["scene"]["grid"]
     ext = [g["cell"] * (d - 1) for d in g["dims"]]
@@ -360,7 +344,7 @@ async def run_n(args, n):
         _, fut = await ctl.send_light("warm", light_at(args, geom, angle))
         rev0 = await asyncio.wait_for(fut, 15)
         await asyncio.wait_for(asyncio.gather(*(c.wait_revision(rev0) for c in viewers)), 60)
-        await asyncio.sleep(0.5)  # let progressive refinement of the warm-up settle
+        await settled(viewers)  # the progressive refinement of the warm-up is over
 
         hwm0, rss0, cpu0 = daemon.stats()
         start = time.monotonic()
@@ -427,7 +411,8 @@ async def run_n(args, n):
         tiles = [b for c in clients for b in c.delta_tiles]
         frames = [len(c.revs) for c in clients]
 
-        # Small light moves (--small-move metres each, --small-moves of them, 1 s apart) after
+        # Small light moves (--small-move metres each, --small-moves of them, each once the frames
+        # of the one before have stopped: its refinement passes are over) after
         # the run: the frame that carries each move (the first one of its revision) at client 0
         # (whole-tile deltas) and at the observer (residual deltas). A delta counts as its size /
         # the mean keyframe of the plain clients; a keyframe sent because the delta would not be
@@ -435,7 +420,7 @@ async def run_n(args, n):
         # connection) says nothing about deltas and is left out.
         small = small_res = None
         if args.small_move > 0 and args.small_moves > 0:
-            await asyncio.sleep(0.5)
+            await settled(viewers)  # the run's last refinement passes are over
             base = light_at(args, geom, angle)
             c0 = clients[0]
             key_mean = (sum(key) / len(key)) if key else None
@@ -468,7 +453,7 @@ async def run_n(args, n):
                 r = await asyncio.wait_for(fut, 15)
                 got, got_res = await asyncio.gather(carrier(c0, r), carrier(observer, r))
                 if got is not None or got_res is not None:
-                    await asyncio.sleep(1.0)  # progressive refinement frames of the same move
+                    await settled([c0, observer])  # progressive refinement frames of the same move
                 moves.append(move_entry(got))
                 moves_res.append(move_entry(got_res))
             small, small_res = summary(moves), summary(moves_res)
@@ -625,7 +610,8 @@ def main():
     ap.add_argument("--small-move", type=float, default=0.005,
                     help="metres of each small move measured after the run (0 = skip; default %(default)s)")
     ap.add_argument("--small-moves", type=int, default=5,
-                    help="small moves after the run, 1 s apart (default %(default)s); the target uses their median")
+                    help="small moves after the run, each after the previous one's frames stopped (default "
+                         "%(default)s); the target uses their median")
     ap.add_argument("--keyframe-interval", type=int, default=30,
                     help="passed to lucentd; tells scheduled keyframes apart (default %(default)s)")
     ap.add_argument("--settle", type=float, default=5.0,

@@ -5,26 +5,27 @@ state.get, errors with codes and pointers, roles by token, kill -9 durability (s
 revision exactly as acknowledged), SIGTERM (close 1001, exit 0), /healthz and /metrics.
 Uses Python's websockets, a different implementation from the server's."""
 import asyncio
+import glob
 import json
 import ssl
-import time
 import os
 import signal
 import socket
-import base64
 import struct
 import subprocess
 import sys
 import tempfile
-import threading
+import time
 import urllib.request
-import zlib
 
 import websockets
 
-BIN = os.environ["LUCENT_BINARY_DIR"]
-LUCENTD = os.path.join(BIN, "bin", "lucentd")
-BAKE = os.path.join(BIN, "cornell.lcb")
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "lib"))
+import lucent_testlib as lt  # noqa: E402
+from lucent_testlib import parse_frame, recv_json  # noqa: E402
+
+LUCENTD = lt.LUCENTD
+BAKE = lt.CORNELL_LCB
 FAILS = []
 
 
@@ -34,67 +35,10 @@ def check(cond, msg):
         print("FAIL:", msg, file=sys.stderr)
 
 
-class Log:
-    """lucentd's stderr (one line per event), read on a thread so the daemon never blocks on a
-    full pipe, and echoed to ours as before."""
-
-    def __init__(self, stream):
-        self.lines, self.cv = [], threading.Condition()
-        threading.Thread(target=self._read, args=(stream,), daemon=True).start()
-
-    def _read(self, stream):
-        for line in stream:
-            sys.stderr.write(line)
-            with self.cv:
-                self.lines.append(line)
-                self.cv.notify_all()
-
-    def find(self, *parts):
-        """The first line containing every one of `parts`, or None."""
-        with self.cv:
-            return next((l for l in self.lines if all(p in l for p in parts)), None)
-
-    def wait(self, timeout, *parts):
-        """Blocks until a line contains every one of `parts`; None after `timeout` s."""
-        end = time.monotonic() + timeout
-        with self.cv:
-            while True:
-                line = next((l for l in self.lines if all(p in l for p in parts)), None)
-                if line is not None or time.monotonic() >= end:
-                    return line
-                self.cv.wait(end - time.monotonic())
-
-
 def start(state_dir, *extra, log_level=None):
-    """Starts lucentd on a free port. With log_level, its stderr is kept (p.log, a Log) so a
-    case can wait for a log line; otherwise it goes to ours."""
-    p = subprocess.Popen([LUCENTD, "--bake", BAKE, "--port", "0", "--state-dir", state_dir, "--backend", "cpu",
-                          "--log-level", log_level or "warn", *extra], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE if log_level else None, text=True)
-    p.log = Log(p.stderr) if log_level else None
-    line = p.stdout.readline()
-    if "port=" not in line:
-        p.kill()
-        raise SystemExit("lucentd did not start: %r" % line)
-    return p, int(line.strip().split("port=")[1])
-
-
-def parse_frame(data):
-    magic, ver, stream, enc, flags, hsize, tiles, rev, seq, ts, w, h, d, tile, plen, crc = struct.unpack_from(
-        "<IHBBHHIQQQIIIIII", data, 0)
-    return dict(magic=magic, version=ver, stream=stream, encoding=enc, flags=flags, header_size=hsize, tiles=tiles,
-                revision=rev, sequence=seq, width=w, height=h, depth=d, tile=tile, payload=plen, crc=crc,
-                crc_ok=zlib.crc32(data[:60] + data[64:]) == crc, length_ok=len(data) == 64 + 4 * tiles + plen)
-
-
-async def recv_json(ws, want_type=None, timeout=10):
-    while True:
-        m = await asyncio.wait_for(ws.recv(), timeout)
-        if isinstance(m, bytes):
-            continue
-        msg = json.loads(m)
-        if want_type is None or msg.get("type") == want_type:
-            return msg
+    """lucentd on a free port (tests/lib/lucent_testlib.py); its stderr is in STATE_DIR.err,
+    readable as p.log (printed by main() when a check fails)."""
+    return lt.start_lucentd(state_dir, *extra, log_level=log_level or "warn")
 
 
 async def recv_frame(ws, min_revision=0, timeout=15):
@@ -192,9 +136,9 @@ async def scenario(state_dir):
         ch = await recv_json(ws2, "changed")
         check(ch.get("revision") == final + 1 and ch.get("by") == "test", "changed broadcast: %r" % ch)
         # HTTP on the same port.
-        body = urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=5).read().decode()
-        check(body.startswith("ok"), "healthz: %r" % body)
-        metrics = urllib.request.urlopen("http://127.0.0.1:%d/metrics" % port, timeout=5).read().decode()
+        status, body = lt.healthz(port)
+        check(status == 200 and body.startswith("ok"), "healthz: %d %r" % (status, body))
+        status, metrics = lt.http_get(port, "/metrics")
         check("lucent_clients 2" in metrics and "lucent_errors_total{code=\"unknown_type\"} 1" in metrics and
               "lucent_relight_seconds_bucket{le=\"+Inf\"}" in metrics and "lucent_relight_seconds_count" in metrics,
               "metrics: %r" % metrics[:400])
@@ -320,11 +264,11 @@ async def scenario(state_dir):
         # SIGHUP reloads the tokens: the new one works, the old one no longer does.
         with open(cfg, "w") as fh:
             json.dump({"controller-tokens": ["ctl2"], "viewer-tokens": ["view"]}, fh)
-        p.send_signal(signal.SIGHUP)
-        # the reload is done when lucentd says so (server.c server_reload logs it after applying)
-        reloaded = await asyncio.get_running_loop().run_in_executor(
-            None, p.log.wait, 10, "SIGHUP: configuration reloaded")
-        check(reloaded is not None, "no 'SIGHUP: configuration reloaded' log line within 10 s of SIGHUP")
+        # the reload is done when lucent_config_reloads_total counts it (server.c server_reload
+        # counts after applying), and lucentd says so in its log
+        await asyncio.get_running_loop().run_in_executor(None, lt.reload, p, port)
+        check(p.log.find("SIGHUP: configuration reloaded") is not None,
+              "no 'SIGHUP: configuration reloaded' log line after the reload: %r" % p.log.tail(400))
         ws, welcome = await hello(port, token="ctl2")
         check(welcome.get("role") == "controller", "new token after SIGHUP: %r" % welcome)
         await ws.close()
@@ -353,8 +297,8 @@ async def scenario(state_dir):
         fh.write("secret")
     p, port = start(state_dir + "-http", "--www", www)
     try:
-        body = urllib.request.urlopen("http://127.0.0.1:%d/" % port, timeout=5).read().decode()
-        check("lucent viewer" in body, "static index: %r" % body)
+        status, body = lt.http_get(port, "/")
+        check(status == 200 and "lucent viewer" in body, "static index: %d %r" % (status, body))
         name = os.path.basename(state_dir) + "-secret.txt"
         for path in ["/../" + name, "/%2e%2e/" + name, "/..%2f" + name, "/./../" + name]:
             try:
@@ -364,8 +308,8 @@ async def scenario(state_dir):
                 check(e.code in (400, 403, 404), "traversal %s: HTTP %d" % (path, e.code))
             except Exception:
                 pass  # connection refused/closed is a refusal too
-        body = urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=5).read().decode()
-        check(body.startswith("ok"), "healthz beside static files: %r" % body)
+        status, body = lt.healthz(port)
+        check(status == 200 and body.startswith("ok"), "healthz beside static files: %d %r" % (status, body))
     finally:
         p.terminate()
         p.wait(timeout=20)
@@ -384,40 +328,22 @@ async def scenario(state_dir):
         w = await recv_json(ws)
         check(w.get("type") == "welcome", "welcome over wss: %r" % w)
         await ws.close()
-        body = urllib.request.urlopen("https://127.0.0.1:%d/healthz" % port, timeout=5, context=ctx).read().decode()
-        check(body.startswith("ok"), "healthz over https: %r" % body)
+        status, body = lt.http_get(port, "/healthz", context=ctx)
+        check(status == 200 and body.startswith("ok"), "healthz over https: %d %r" % (status, body))
     finally:
         p.terminate()
         p.wait(timeout=20)
-
-
-def raw_ws_client(port, messages):
-    """A client with a tiny receive buffer that sends `messages` and then never reads."""
-    sock = socket.socket()
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    sock.connect(("127.0.0.1", port))
-    key = base64.b64encode(os.urandom(16)).decode()
-    sock.sendall(("GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                  "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: lucent.v1\r\n\r\n"
-                  % key).encode())
-    resp = b""
-    while b"\r\n\r\n" not in resp:
-        resp += sock.recv(1)
-    assert b" 101 " in resp.split(b"\r\n")[0], resp
-    for m in messages:
-        data = json.dumps(m).encode()
-        mask = os.urandom(4)
-        hdr = bytes([0x81, 0x80 | len(data)]) if len(data) < 126 else bytes([0x81, 0xFE]) + struct.pack(">H", len(data))
-        sock.sendall(hdr + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(data)))
-    return sock
 
 
 async def slow_client_scenario(state_dir):
     """A client that never reads is dropped; the others keep getting the latest frames."""
     p, port = start(state_dir + "-slow", "--slow-timeout", "2", log_level="warn")
     try:
-        slow = raw_ws_client(port, [{"type": "hello", "client": "sloth"},
-                                    {"type": "subscribe", "stream": "lightmap", "encoding": "f32"}])
+        # a tiny receive buffer, and it never reads
+        slow = lt.RawWS(port, rcvbuf=4096)
+        check(slow.ok, "slow client upgrade: %r" % slow.status_line)
+        slow.send_json({"type": "hello", "client": "sloth"})
+        slow.send_json({"type": "subscribe", "stream": "lightmap", "encoding": "f32"})
         ws, _ = await hello(port, name="fast")
         await ws.send(json.dumps({"type": "subscribe", "stream": "lightmap", "encoding": "rgb9e5"}))
         await recv_json(ws, "ok")
@@ -447,11 +373,11 @@ async def slow_client_scenario(state_dir):
               "connected" % rev)
         check(dropped is not None, "lucentd did not log dropping the slow client within 20 s (%d updates)" % i)
         # The slow client was dropped: its socket reads EOF or a reset once drained.
-        slow.settimeout(5)
+        slow.s.settimeout(5)
         closed = False
         try:
             while True:
-                chunk = slow.recv(1 << 20)
+                chunk = slow.s.recv(1 << 20)
                 if not chunk:
                     closed = True
                     break
@@ -475,8 +401,17 @@ def main():
         print("SKIP: lucentd or the Cornell bake is not built")
         return 77
     with tempfile.TemporaryDirectory() as d:
-        asyncio.run(scenario(os.path.join(d, "state")))
-        asyncio.run(slow_client_scenario(os.path.join(d, "state")))
+        def logs():  # the daemons' stderr, for a failure
+            for err in sorted(glob.glob(os.path.join(d, "*.err"))):
+                print("--- %s (last 2000 bytes)\n%s" % (err, lt.DaemonLog(err).tail(2000)), file=sys.stderr)
+        try:
+            asyncio.run(scenario(os.path.join(d, "state")))
+            asyncio.run(slow_client_scenario(os.path.join(d, "state")))
+        except BaseException:
+            logs()
+            raise
+        if FAILS:
+            logs()
     print("%d failure(s)" % len(FAILS) if FAILS else "all checks passed")
     return 1 if FAILS else 0
 

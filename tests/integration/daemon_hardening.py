@@ -22,7 +22,6 @@ Uses raw sockets for the WebSocket side so a test controls exactly what is read 
 import base64
 import json
 import os
-import signal
 import shutil
 import socket
 import struct
@@ -30,14 +29,14 @@ import subprocess
 import sys
 import tempfile
 import time
-import urllib.error
-import urllib.request
 
-BIN = os.environ["LUCENT_BINARY_DIR"]
-SRC = os.environ["LUCENT_SOURCE_DIR"]
-LUCENTD = os.path.join(BIN, "bin", "lucentd")
-LUCENT_BAKE = os.environ.get("LUCENT_BAKE", os.path.join(BIN, "bin", "lucent-bake"))
-BAKE = os.path.join(BIN, "cornell.lcb")
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "lib"))
+import lucent_testlib as lt  # noqa: E402
+from lucent_testlib import RawWS, http_get, metric, stop  # noqa: E402
+
+LUCENTD = lt.LUCENTD
+LUCENT_BAKE = lt.LUCENT_BAKE
+BAKE = lt.CORNELL_LCB
 FAILS = []
 TMP = tempfile.mkdtemp(prefix="lucent-hardening-")
 
@@ -49,122 +48,9 @@ def check(cond, msg):
     return cond
 
 
-def start(state_dir, *extra, bake=BAKE, preexec=None, wrapper=()):
-    err = open(state_dir + ".err", "w")
-    p = subprocess.Popen([*wrapper, LUCENTD, "--bake", bake, "--port", "0", "--state-dir", state_dir, "--backend",
-                          "cpu", "--log-level", "warn", *extra], stdout=subprocess.PIPE, stderr=err, text=True,
-                         preexec_fn=preexec)
-    line = p.stdout.readline()
-    if "port=" not in line:
-        p.kill()
-        raise SystemExit("lucentd did not start: %r %s" % (line, open(state_dir + ".err").read()[-600:]))
-    return p, int(line.strip().split("port=")[1])
-
-
-def stop(p):
-    if p.poll() is None:
-        p.send_signal(signal.SIGTERM)
-        try:
-            p.wait(20)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
-
-
-class RawWS:
-    """A minimal RFC 6455 client: exact control of what is sent and when anything is read."""
-
-    def __init__(self, port, origin=None, host=None, timeout=10):
-        self.s = socket.create_connection(("127.0.0.1", port), timeout=timeout)
-        key = base64.b64encode(os.urandom(16)).decode()
-        req = ("GET / HTTP/1.1\r\nHost: %s\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-               "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: lucent.v1\r\n"
-               % (host or "127.0.0.1:%d" % port, key))
-        if origin:
-            req += "Origin: %s\r\n" % origin
-        self.s.sendall((req + "\r\n").encode())
-        head = b""
-        while b"\r\n\r\n" not in head:
-            chunk = self.s.recv(4096)
-            if not chunk:
-                break
-            head += chunk
-        self.status_line = head.split(b"\r\n", 1)[0].decode(errors="replace")
-        self.buf = head.split(b"\r\n\r\n", 1)[1] if b"\r\n\r\n" in head else b""
-        self.ok = " 101 " in self.status_line
-
-    def send_frame(self, opcode, payload):
-        mask = os.urandom(4)
-        n = len(payload)
-        hdr = bytes([0x80 | opcode])
-        if n < 126:
-            hdr += bytes([0x80 | n])
-        elif n < 65536:
-            hdr += bytes([0x80 | 126]) + struct.pack(">H", n)
-        else:
-            hdr += bytes([0x80 | 127]) + struct.pack(">Q", n)
-        masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
-        self.s.sendall(hdr + mask + masked)
-
-    def send_json(self, obj):
-        self.send_frame(1, json.dumps(obj).encode())
-
-    def _read(self, n):
-        while len(self.buf) < n:
-            chunk = self.s.recv(65536)
-            if not chunk:
-                raise ConnectionError("closed")
-            self.buf += chunk
-        out, self.buf = self.buf[:n], self.buf[n:]
-        return out
-
-    def recv_frame(self):
-        b0, b1 = self._read(2)
-        n = b1 & 0x7F
-        if n == 126:
-            n = struct.unpack(">H", self._read(2))[0]
-        elif n == 127:
-            n = struct.unpack(">Q", self._read(8))[0]
-        return b0 & 0x0F, self._read(n)
-
-    def recv_json(self, want=None):
-        while True:
-            op, data = self.recv_frame()
-            if op == 8:
-                raise ConnectionError("close %s" % (struct.unpack(">H", data[:2])[0] if len(data) >= 2 else None))
-            if op == 1:
-                m = json.loads(data)
-                if want is None or m.get("type") == want:
-                    return m
-
-    def hello(self, token=None):
-        msg = {"type": "hello", "id": 1, "protocol": "lucent/1", "client": "hardening"}
-        if token is not None:
-            msg["token"] = token
-        self.send_json(msg)
-        return self.recv_json()
-
-    def close(self):
-        try:
-            self.s.close()
-        except OSError:
-            pass
-
-
-def http_get(port, path):
-    try:
-        with urllib.request.urlopen("http://127.0.0.1:%d%s" % (port, path), timeout=10) as r:
-            return r.status, r.read().decode(errors="replace")
-    except urllib.error.HTTPError as e:
-        return e.code, e.read().decode(errors="replace")
-
-
-def metric(port, name):
-    _, text = http_get(port, "/metrics")
-    for line in text.splitlines():
-        if line.startswith(name + " "):
-            return float(line.split()[1])
-    return None
+def start(state_dir, *extra, bake=BAKE, preexec=None):
+    """lucentd on a free port (tests/lib/lucent_testlib.py); its stderr in STATE_DIR.err (p.log)."""
+    return lt.start_lucentd(state_dir, *extra, bake=bake, preexec=preexec)
 
 
 def rss_kb(pid):
@@ -190,8 +76,7 @@ def case_reload_rx():
         ws.send_json({"type": "ping", "id": 2, "t": 1})
         check(ws.recv_json().get("type") == "pong", "reload_rx: ping before the reload")
         json.dump({"max-message": 65536}, open(cfg, "w"))
-        p.send_signal(signal.SIGHUP)
-        time.sleep(0.5)  # SIGHUP has no acknowledgement; the log line is checked below
+        lt.reload(p, port)  # SIGHUP, then lucent_config_reloads_total counts it: the new limit is in force
         big = {"type": "ping", "id": 3, "t": 1, "pad": "x" * 20000}
         ws.send_json(big)
         reply = ws.recv_json()
@@ -303,14 +188,13 @@ def case_not_reading():
         except (OSError, ConnectionError):
             pass
         # The server must drop the session: within slow-timeout (3 s) + a tick.
-        dropped = False
-        t_end = time.monotonic() + 15
-        while time.monotonic() < t_end:
-            v = metric(port, "lucent_clients_dropped_total")
-            if v and v >= 1:
-                dropped = True
-                break
-            time.sleep(0.2)
+        try:
+            lt.wait_metric(port, "lucent_clients_dropped_total", lambda v: v is not None and v >= 1, 15,
+                           "not_reading: dropping the client that never reads")
+            dropped = True
+        except lt.WaitTimeout as e:
+            dropped = False
+            print(e, file=sys.stderr)
         check(dropped, "not_reading: a client that never reads is dropped (sent %d requests)" % sent)
         grown = rss_kb(p.pid) - before
         check(grown < 64 * 1024, "not_reading: RSS grew %d kB (cap 1 MiB of queued replies)" % grown)
@@ -335,7 +219,17 @@ def case_nofile():
                 socks.append(s)
             except OSError:
                 break
-        time.sleep(1.0)
+        # lucentd has taken what its descriptor budget allows: its descriptor count stopped
+        # growing (the same over 10 reads 30 ms apart)
+        seen = []
+
+        def fds_steady():
+            seen.append(len(os.listdir("/proc/%d/fd" % p.pid)))
+            return len(seen) >= 10 and len(set(seen[-10:])) == 1
+
+        lt.wait_for(fds_steady, 15, lambda: "nofile: lucentd's descriptor count settling (%r)" % seen[-10:], 0.03)
+        check(seen[-1] > 200, "nofile: lucentd holds only %d descriptors with 300 connections pending" % seen[-1])
+        # The subject: no spinning while the budget is used up, measured over 3 s.
         c0 = cpu_seconds(p.pid)
         time.sleep(3.0)
         used = cpu_seconds(p.pid) - c0
@@ -343,11 +237,26 @@ def case_nofile():
         for s in socks:
             s.close()
         socks = []
-        time.sleep(1.0)
-        ws = RawWS(port)
-        check(ws.hello().get("type") == "welcome", "nofile: a client is served once descriptors are free")
-        ws.close()
-        err = open(d + ".err").read()
+
+        def served():  # once lucentd has seen the closes, a new client gets its welcome
+            ws = None
+            try:
+                ws = RawWS(port, timeout=2)
+                return ws.hello().get("type") == "welcome"
+            except (OSError, ConnectionError):
+                return False
+            finally:
+                if ws:
+                    ws.close()
+
+        try:
+            lt.wait_for(served, 15, "nofile: a client served once the 300 connections are closed")
+            ok = True
+        except lt.WaitTimeout as e:
+            ok = False
+            print(e, file=sys.stderr)
+        check(ok, "nofile: a client is served once descriptors are free")
+        err = p.log.text()
         check(err.count("accept") < 10, "nofile: %d accept log lines" % err.count("accept"))
         check("max-clients 1000 lowered" in err, "nofile: the lowered --max-clients is logged")
     finally:
