@@ -7,37 +7,31 @@ if [ ! -x "$BIN/lucentd" ] || [ ! -x "$LIVE" ]; then echo "lucentd/client_live n
 PIDS=""
 trap 'for p in $PIDS; do kill "$p" 2>/dev/null; wait "$p" 2>/dev/null; done; rm -rf "$TMP"' EXIT
 
-# start_daemon NAME ARGS...: starts lucentd, sets DPID and PORT.
+# start_daemon NAME ARGS...: lib.sh's start_lucentd (state in $TMP/state-NAME); sets DPID and PORT.
 start_daemon() {
   local name="$1"; shift
-  "$BIN/lucentd" --state-dir "$TMP/state-$name" --backend cpu --log-level warn "$@" \
-    >"$TMP/$name.out" 2>"$TMP/$name.err" &
-  DPID=$!
+  if ! LUCENTD_START_TIMEOUT=15 start_lucentd "$TMP/state-$name" "$@"; then
+    fail "lucentd ($name) did not start"
+    finish
+  fi
+  DPID=$LUCENTD_PID
   PIDS="$PIDS $DPID"
-  PORT=""
-  for _ in $(seq 1 300); do
-    PORT="$(sed -n 's/^lucentd listening port=\([0-9]*\).*/\1/p' "$TMP/$name.out" 2>/dev/null)"
-    [ -n "$PORT" ] && return 0
-    kill -0 "$DPID" 2>/dev/null || break
-    sleep 0.05
-  done
-  fail "lucentd ($name) did not start: $(head -c 400 "$TMP/$name.err")"
-  finish
+  PORT=$LUCENTD_PORT
 }
 
-start_daemon plain --port 0
+start_daemon plain
 timeout 120 "$LIVE" basic "ws://127.0.0.1:$PORT/" || fail "basic"
 kill "$DPID"; wait "$DPID" 2>/dev/null
 
 printf '{"controller-tokens": ["good"]}\n' >"$TMP/tokens.json"
-start_daemon tokens --port 0 --config "$TMP/tokens.json"
+start_daemon tokens --config "$TMP/tokens.json"
 timeout 60 "$LIVE" refused "ws://127.0.0.1:$PORT/" wrong || fail "refused"
 kill "$DPID"; wait "$DPID" 2>/dev/null
 
 if command -v openssl >/dev/null; then
   openssl req -x509 -newkey rsa:2048 -nodes -keyout "$TMP/key.pem" -out "$TMP/cert.pem" -days 1 \
     -subj /CN=127.0.0.1 -addext "subjectAltName=IP:127.0.0.1" >/dev/null 2>&1 || fail "openssl req"
-  start_daemon tls --port 0 --tls-cert "$TMP/cert.pem" --tls-key "$TMP/key.pem"
+  start_daemon tls --tls-cert "$TMP/cert.pem" --tls-key "$TMP/key.pem"
   timeout 60 "$LIVE" tls "wss://127.0.0.1:$PORT/" || fail "tls"
   # lucentctl over wss: refused certificate without --insecure (exit 3), fine with it or the CA
   timeout 20 "$BIN/lucentctl" --url "wss://127.0.0.1:$PORT/" ping >/dev/null 2>"$TMP/ctl.err"; rc=$?
@@ -52,14 +46,16 @@ else
 fi
 
 # reconnect: the same port after a kill -9 and restart (state kept)
-start_daemon r1 --port 0
+start_daemon r1
 RPORT="$PORT"
 timeout 120 "$LIVE" reconnect "ws://127.0.0.1:$RPORT/" >"$TMP/live.out" 2>"$TMP/live.err" &
 LPID=$!
-for _ in $(seq 1 400); do grep -q READY "$TMP/live.out" && break; sleep 0.05; done
-grep -q READY "$TMP/live.out" || fail "reconnect client never got ready: $(head -c 400 "$TMP/live.err")"
+wait_for 20 "the reconnect client printing READY" grep -q READY "$TMP/live.out" ||
+  echo "client_live reconnect said: $(head -c 400 "$TMP/live.err")" >&2
 kill -9 "$DPID"; wait "$DPID" 2>/dev/null
-sleep 0.5   # the client retries against a closed port meanwhile
+# the client has noticed the loss and retries against the closed port (client_live logs
+# "connection event 2" = LC_CLIENT_RECONNECTING) before the daemon comes back
+wait_for 20 "the client noticing the lost connection (connection event 2)" grep -q "connection event 2" "$TMP/live.err"
 cp -r "$TMP/state-r1" "$TMP/state-r2"
 start_daemon r2 --port "$RPORT"
 wait "$LPID" || fail "reconnect: $(tail -c 600 "$TMP/live.err")"

@@ -21,22 +21,45 @@ expect_exit() {
 }
 finish() { if [ "$FAILS" -ne 0 ]; then echo "$FAILS failure(s)" >&2; exit 1; fi; echo "all checks passed"; exit 0; }
 CORNELL="$SRC/scenes/cornell-box/cornell-box.obj"
+# wait_for SECONDS WHAT CMD...: runs CMD every 50 ms until it succeeds (returns 0); after
+# SECONDS it records "FAIL: WHAT did not happen within SECONDS s" and returns 1. The way to
+# wait for an event (a log line, a file, a metric) instead of sleeping.
+wait_for() {
+  local secs="$1" what="$2"; shift 2
+  local end=$(($(date +%s%N) / 1000000 + ${secs%.*} * 1000))
+  until "$@" 2>/dev/null; do
+    if [ "$(($(date +%s%N) / 1000000))" -ge "$end" ]; then fail "$what did not happen within $secs s"; return 1; fi
+    sleep 0.05
+  done
+}
+# metric PORT NAME: prints one /metrics sample of the lucentd on PORT (NAME with its labels),
+# nothing when absent or unreachable. metric_ge PORT NAME N: the sample is >= N.
+metric() {
+  PYTHONPATH="$SRC/tests/lib" "$PY" -c 'import sys, lucent_testlib as lt
+v = lt.metric(int(sys.argv[1]), sys.argv[2])
+print("" if v is None else int(v) if v == int(v) else v)' "$1" "$2" 2>/dev/null
+}
+metric_ge() { local v; v="$(metric "$1" "$2")"; [ -n "$v" ] && "$PY" -c 'import sys; sys.exit(float(sys.argv[1]) < float(sys.argv[2]))' "$v" "$3"; }
 # start_lucentd DIR [ARGS...]: starts "$LUCENT_BINARY_DIR/bin/lucentd" on a free port with its
-# state in DIR (logs DIR.out, DIR.err); sets LUCENTD_PID and LUCENTD_PORT. Returns 1 (and
-# says why) when it does not come up within 10 s. The caller kills LUCENTD_PID.
+# state in DIR (logs DIR.out, DIR.err); sets LUCENTD_PID and LUCENTD_PORT (ARGS may name a
+# --port: the last one wins). LUCENTD_WRAP (an array, e.g. (valgrind --log-file=F)) goes
+# before the binary; LUCENTD_START_TIMEOUT (default 10 s) bounds the wait for its
+# "lucentd listening port=N" line. Returns 1 (and says why) when it does not come up. The
+# caller kills LUCENTD_PID (the wrapper's pid when there is one).
 start_lucentd() {
   local dir="$1"; shift
-  "${LUCENT_BINARY_DIR:?run through ctest}/bin/lucentd" --port 0 --state-dir "$dir" --backend cpu --log-level warn \
-    "$@" >"$dir.out" 2>"$dir.err" &
+  ${LUCENTD_WRAP[@]+"${LUCENTD_WRAP[@]}"} "${LUCENT_BINARY_DIR:?run through ctest}/bin/lucentd" --port 0 \
+    --state-dir "$dir" --backend cpu --log-level warn "$@" >"$dir.out" 2>"$dir.err" &
   LUCENTD_PID=$!
   LUCENTD_PORT=""
-  for _ in $(seq 1 200); do
+  local end=$(($(date +%s) + ${LUCENTD_START_TIMEOUT:-10}))
+  while [ "$(date +%s)" -le "$end" ]; do
     LUCENTD_PORT="$(sed -n 's/^lucentd listening port=\([0-9]*\).*/\1/p' "$dir.out")"
     [ -n "$LUCENTD_PORT" ] && return 0
     kill -0 "$LUCENTD_PID" 2>/dev/null || break
     sleep 0.05
   done
-  echo "FAIL: lucentd did not start: $(head -c 400 "$dir.err")" >&2
+  echo "FAIL: lucentd did not start within ${LUCENTD_START_TIMEOUT:-10} s: $(head -c 400 "$dir.err")" >&2
   return 1
 }
 # json_check FILE PYTHON_EXPR: evaluates the expression with `j` = the JSON in FILE (fails on

@@ -128,10 +128,8 @@ expect_exit 1 "unauthorized.*--token or LUCENT_TOKEN" $T "$CTL" --url "$U2" --to
 $T "$CTL" --url "$U2" --token ctl-secret script "$TMP/slow.jsonl" >"$TMP/slow.out" 2>"$TMP/slow.err" &
 SPID=$!
 # kill -9 once the script has had a few lines accepted (the daemon's journal says so)
-for _ in $(seq 1 100); do
-  [ "$(cat "$TMP/d2/journal.log" 2>/dev/null | wc -l)" -ge 2 ] && break
-  sleep 0.05
-done
+journal_lines_ge() { [ "$(cat "$1" 2>/dev/null | wc -l)" -ge "$2" ]; }
+wait_for 20 "two script lines reaching the journal" journal_lines_ge "$TMP/d2/journal.log" 2
 { kill -9 "$D2PID"; wait "$D2PID"; } 2>/dev/null # (quiet: no "Killed" job notice)
 D2PID=""
 rc=0
