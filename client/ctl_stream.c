@@ -230,9 +230,15 @@ static void usage_watch(FILE *o) {
             "  --max-rate HZ        ask the server for at most HZ frames per second\n"
             "  --count N            stop after N frames\n"
             "  --duration SECONDS   stop after this long (default: until Ctrl-C)\n"
+            "  --until-revision N   stop once a frame of revision N or later has come and then no\n"
+            "                       frame for --settle seconds (the idle refinement passes of that\n"
+            "                       revision are over); exit 3 if --duration ends first\n"
+            "  --settle SECONDS     quiet time that ends --until-revision (default 1)\n"
             "  --raw                also write the lightmap as raw float32 (.f32)\n"
             "  --exposure X         PNG exposure multiplier (default: from the first frame)\n"
-            "  --no-reconnect       exit 3 when the connection drops (default: reconnect with back-off)\n");
+            "  --no-reconnect       exit 3 when the connection drops (default: reconnect with back-off)\n"
+            "Once subscribed (the server answered ok: every later change reaches this watch) it prints\n"
+            "\"lucentctl: subscribed to STREAM\" on stderr, also with --json; scripts wait for that line.\n");
 }
 
 typedef struct watch_ctx {
@@ -241,7 +247,16 @@ typedef struct watch_ctx {
     unsigned long written, limit; /* limit: --count, 0 = none */
     int failed;
     char err[512];
+    unsigned long long until_rev; /* --until-revision (0 = none) */
+    int reached;                  /* a frame of until_rev or later was written */
+    double last_frame_s;          /* monotonic time of the last frame written */
 } watch_ctx;
+
+static double watch_now_s(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + (double)t.tv_nsec * 1e-9;
+}
 
 static void watch_on_frame(lc_client *c, const lc_client_frame *f, void *user) {
     (void)c;
@@ -254,6 +269,8 @@ static void watch_on_frame(lc_client *c, const lc_client_frame *f, void *user) {
         return;
     }
     w->written++;
+    w->last_frame_s = watch_now_s();
+    if (w->until_rev && f->revision >= w->until_rev) w->reached = 1;
     double age = frame_age_ms(f);
     fprintf(w->index,
             "{\"file\":\"%s\",\"stream\":\"%s\",\"encoding\":\"%s\",\"revision\":%llu,\"sequence\":%llu,"
@@ -290,7 +307,7 @@ int ctl_cmd_watch(int argc, char **argv) {
         return CTL_EXIT_OK;
     }
     int stream = 0, encoding = 0, raw = 0, reconnect = 1, residual = 0;
-    double max_rate = 0, duration = 0, exposure = 0, count = 0;
+    double max_rate = 0, duration = 0, exposure = 0, count = 0, until_rev = 0, settle = 0;
     const char *dir = NULL;
     for (int i = 1; i < argc; i++) {
         const char *k = argv[i];
@@ -315,7 +332,13 @@ int ctl_cmd_watch(int argc, char **argv) {
                 return ctl_usage_error("watch: --delta '%s' is not tiles or residual", v);
             residual = !strcmp(v, "residual");
         } else if (!strcmp(k, "--out")) dir = v;
-        else if (!strcmp(k, "--max-rate") || !strcmp(k, "--duration") || !strcmp(k, "--exposure") ||
+        else if (!strcmp(k, "--until-revision")) {
+            if (parse_positive(v, &until_rev) != 0 || until_rev != floor(until_rev) || until_rev > 9e15)
+                return ctl_usage_error("watch: --until-revision '%s' is not a whole number >= 1", v);
+        } else if (!strcmp(k, "--settle")) {
+            if (parse_positive(v, &settle) != 0 || settle > 3600)
+                return ctl_usage_error("watch: --settle '%s' is not a number of seconds in (0, 3600]", v);
+        } else if (!strcmp(k, "--max-rate") || !strcmp(k, "--duration") || !strcmp(k, "--exposure") ||
                  !strcmp(k, "--count")) {
             double x;
             if (parse_positive(v, &x) != 0) return ctl_usage_error("watch: %s '%s' is not a positive number", k, v);
@@ -331,6 +354,7 @@ int ctl_cmd_watch(int argc, char **argv) {
         return ctl_usage_error("watch: rgb9e5 is for the lightmap only (SH streams: rgba16f or f32)");
     if (residual && stream != LC_CLIENT_LIGHTMAP)
         return ctl_usage_error("watch: --delta is for the lightmap only (SH streams send keyframes)");
+    if (settle > 0 && until_rev <= 0) return ctl_usage_error("watch: --settle needs --until-revision");
     if (mkdir_p(dir) != 0) {
         fprintf(stderr, "lucentctl: cannot create %s: %s\n", dir, strerror(errno));
         return CTL_EXIT_USAGE;
@@ -343,6 +367,8 @@ int ctl_cmd_watch(int argc, char **argv) {
     w.so.raw = raw;
     w.so.exposure = exposure;
     w.limit = (unsigned long)count;
+    w.until_rev = (unsigned long long)until_rev;
+    if (settle <= 0) settle = 1.0;
     char path[1100];
     snprintf(path, sizeof path, "%s/frames.jsonl", dir);
     w.index = fopen(path, "a");
@@ -365,16 +391,27 @@ int ctl_cmd_watch(int argc, char **argv) {
         rc = r == 1 ? CTL_EXIT_REFUSED : CTL_EXIT_CONN;
         goto out;
     }
+    /* the event scripts wait for instead of sleeping: from here on every change reaches us */
+    fprintf(stderr, "lucentctl: subscribed to %s\n", stream_name(stream));
+    fflush(stderr);
     stream_install_signals();
-    struct timespec t0, t;
-    clock_gettime(CLOCK_MONOTONIC, &t0);
+    double t0 = watch_now_s();
     while (!stream_stop && !w.failed && (count <= 0 || w.written < (unsigned long)count)) {
         if (lc_client_poll(c, 50) != 0) {
             rc = CTL_EXIT_CONN;
             break;
         }
-        clock_gettime(CLOCK_MONOTONIC, &t);
-        if (duration > 0 && (double)(t.tv_sec - t0.tv_sec) + (t.tv_nsec - t0.tv_nsec) * 1e-9 >= duration) break;
+        double t = watch_now_s();
+        if (w.reached && t - w.last_frame_s >= settle) break; /* --until-revision: settled */
+        if (duration > 0 && t - t0 >= duration) {
+            if (w.until_rev) {
+                fprintf(stderr, "lucentctl: watch: %s revision %llu within --duration %g s\n",
+                        w.reached ? "frames still coming (no --settle quiet) after" : "no frame of", w.until_rev,
+                        duration);
+                rc = CTL_EXIT_CONN;
+            }
+            break;
+        }
     }
     if (w.failed) {
         fprintf(stderr, "lucentctl: %s\n", w.err);

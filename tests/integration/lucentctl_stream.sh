@@ -10,8 +10,9 @@ expect_exit 0 "" timeout 20 "$CTL" object set box --asset cube --position 0.3,0,
 # An independent client (Python) waits until idle refinement settles, then takes the f32
 # lightmap and shgrid payloads of a snapshot.
 cat >"$TMP/grab.py" <<'PY'
-import asyncio, json, struct, sys
+import asyncio, json, sys
 import websockets
+import lucent_testlib as lt
 async def main(url, out):
     async with websockets.connect(url, subprotocols=["lucent.v1"], max_size=None) as ws:
         await ws.send(json.dumps({"type": "hello", "client": "grab"}))
@@ -28,15 +29,15 @@ async def main(url, out):
         while len(got) < 2:
             m = await asyncio.wait_for(ws.recv(), 10)
             if isinstance(m, bytes):
-                stream, tiles, plen = m[6], struct.unpack_from("<I", m, 12)[0], struct.unpack_from("<I", m, 56)[0]
-                rev = struct.unpack_from("<Q", m, 16)[0]
-                got[stream] = (rev, m[64 + 4 * tiles:64 + 4 * tiles + plen])
+                f = lt.parse_frame(m)
+                assert f["crc_ok"] and f["length_ok"], f
+                got[f["stream"]] = (f["revision"], lt.frame_payload(m))
         open(out + ".lightmap", "wb").write(got[1][1])
         open(out + ".shgrid", "wb").write(got[2][1])
         print(got[1][0])
 asyncio.run(main(sys.argv[1], sys.argv[2]))
 PY
-REV="$(timeout 30 "$PY" "$TMP/grab.py" "$LUCENT_URL" "$TMP/py")" || fail "python client"
+REV="$(PYTHONPATH="$SRC/tests/lib" timeout 30 "$PY" "$TMP/grab.py" "$LUCENT_URL" "$TMP/py")" || fail "python client"
 
 expect_exit 0 "" timeout 30 "$CTL" snapshot --out "$TMP/snap" --encoding f32 --raw
 for f in lightmap.exr lightmap.png lightmap.f32 shgrid.json shgrid.bin objects.json objects.bin snapshot.json; do
@@ -62,12 +63,28 @@ fi
 expect_exit 0 "" timeout 30 "$CTL" --json snapshot --out "$TMP/snap2" --stream lightmap
 json_check "$TMP/out" "j['lightmap']['encoding'] == 'rgb9e5' and 'shgrid' not in j"
 
-# watch: frames while a light moves
+# move_light X: moves the key light, prints the revision lucentd acknowledged
+move_light() {
+  timeout 20 "$CTL" light set key --type point --position "$1",0.4,0.28 --intensity 0.5 |
+    sed -n 's/.*(revision \([0-9]*\)).*/\1/p'
+}
+# frames_reached FILE REV: FILE (a watch's frames.jsonl) has a frame of revision REV or later
+frames_reached() {
+  "$PY" -c 'import json, sys
+sys.exit(0 if any(json.loads(l)["revision"] >= int(sys.argv[2]) for l in open(sys.argv[1])) else 1)' "$1" "$2"
+}
+# watch_done_or_reached PID FILE REV: the watch exited, or it has the frame
+watch_done_or_reached() { ! kill -0 "$1" 2>/dev/null || frames_reached "$2" "$3"; }
+
+# watch: frames while a light moves (each move once the watch has the frame of the last)
 timeout 30 "$CTL" --json watch --stream lightmap --encoding rgba16f --out "$TMP/watch" --count 3 \
   >"$TMP/watch.out" 2>"$TMP/watch.err" &
 WPID=$!
-sleep 1
-for x in 0.2 0.25 0.3 0.35; do timeout 20 "$CTL" light set key --type point --position $x,0.4,0.28 --intensity 0.5 >/dev/null; sleep 0.3; done
+wait_for 20 "watch printing 'subscribed to lightmap'" grep -q "lucentctl: subscribed to lightmap" "$TMP/watch.err"
+for x in 0.2 0.25 0.3 0.35; do
+  rev="$(move_light $x)"
+  wait_for 20 "the watch's frame of revision $rev" watch_done_or_reached "$WPID" "$TMP/watch/frames.jsonl" "$rev"
+done
 wait "$WPID" || fail "watch exited $?: $(head -c 400 "$TMP/watch.err")"
 [ "$(ls "$TMP/watch"/lightmap-*.exr 2>/dev/null | wc -l)" = 3 ] || fail "watch wrote $(ls "$TMP/watch" | tr '\n' ' ')"
 [ "$(ls "$TMP/watch"/lightmap-*.png 2>/dev/null | wc -l)" = 3 ] || fail "watch PNGs"
@@ -82,20 +99,21 @@ assert all(rows[i]["revision"] <= rows[i + 1]["revision"] for i in range(2))
 PY
 [ "$(grep -c '"type":"frame"' "$TMP/watch.out")" = 3 ] || fail "watch --json lines: $(head -c 300 "$TMP/watch.out")"
 # watch with residual deltas (f32): the copy rebuilt from them ends within the server's
-# threshold (1% of the texel's brightest channel) of a fresh snapshot of the settled state
-# (the watch runs for a fixed 40 s, long enough for the moves and the idle refinement passes
-# of the last revision under ASan and load; it must end by itself: a SIGTERM to an ASan
-# process can hang LeakSanitizer's exit-time check. The revision checks below catch a watch
-# that ended too early.)
-timeout 120 "$CTL" watch --stream lightmap --encoding f32 --delta residual --raw --duration 40 --out "$TMP/wres" \
-  >"$TMP/wres.out" 2>"$TMP/wres.err" &
+# threshold (1% of the texel's brightest channel) of a fresh snapshot of the settled state.
+# Four moves follow, so the watch ends by itself (--until-revision: the last move's frame and
+# then 1 s without a frame, its refinement passes over); it must end by itself: a SIGTERM to an
+# ASan process can hang LeakSanitizer's exit-time check. --duration only caps it (exit 3).
+expect_exit 0 "" timeout 20 "$CTL" --json state
+FINAL="$("$PY" -c 'import json, sys; print(json.load(open(sys.argv[1]))["revision"] + 4)' "$TMP/out")"
+timeout 120 "$CTL" watch --stream lightmap --encoding f32 --delta residual --raw --until-revision "$FINAL" \
+  --duration 90 --out "$TMP/wres" >"$TMP/wres.out" 2>"$TMP/wres.err" &
 WPID=$!
-sleep 1
-for x in 0.3 0.303 0.306 0.2; do
-  RESREV="$(timeout 20 "$CTL" light set key --type point --position $x,0.4,0.28 --intensity 0.5 | sed -n 's/.*(revision \([0-9]*\)).*/\1/p')"
-  sleep 0.4
+wait_for 20 "watch --delta residual printing 'subscribed to lightmap'" grep -q "lucentctl: subscribed to lightmap" "$TMP/wres.err"
+for x in 0.3 0.303 0.306 0.2; do  # each move once the watch has the last one's frame
+  RESREV="$(move_light $x)"
+  wait_for 20 "the residual watch's frame of revision $RESREV" frames_reached "$TMP/wres/frames.jsonl" "$RESREV"
 done
-[ -n "$RESREV" ] || fail "light set printed no revision"
+[ "$RESREV" = "$FINAL" ] || fail "the moves ended at revision '$RESREV', expected $FINAL"
 wait "$WPID" || fail "watch --delta residual exited $?: $(head -c 400 "$TMP/wres.err")"
 expect_exit 0 "" timeout 30 "$CTL" snapshot --out "$TMP/snapres" --stream lightmap --encoding f32 --raw
 json_check "$TMP/snapres/snapshot.json" "j['lightmap']['revision'] == $RESREV"
@@ -118,6 +136,13 @@ expect_exit 0 "" timeout 30 "$CTL" watch --stream objects --out "$TMP/wobj" --co
 json_check "$TMP/wobj/objects-000001.json" "j['objects'][0]['id'] == 'box'"
 expect_exit 0 "" timeout 30 "$CTL" watch --stream shgrid --out "$TMP/wgrid" --duration 1
 ls "$TMP/wgrid"/shgrid-000001.bin >/dev/null 2>&1 || fail "watch --duration wrote no shgrid frame"
+# --until-revision: a revision that does not come fails clearly when --duration ends (exit 3);
+# one already there ends the watch after the first frame and --settle of quiet
+expect_exit 3 "no frame of revision 999999 within --duration 1 s" timeout 30 "$CTL" watch --stream lightmap \
+  --out "$TMP/wnever" --until-revision 999999 --duration 1
+expect_exit 0 "subscribed to objects" timeout 30 "$CTL" watch --stream objects --out "$TMP/wnow" \
+  --until-revision "$RESREV" --settle 0.2 --duration 20
+[ "$(wc -l <"$TMP/wnow/frames.jsonl")" = 1 ] || fail "watch --until-revision (reached at once): $(cat "$TMP/wnow/frames.jsonl")"
 
 # latency
 expect_exit 0 "" timeout 60 "$CTL" --json latency --count 5 --interval 0.05
@@ -132,6 +157,11 @@ json_check "$TMP/out" "'lucentctl-probe' not in [l['id'] for l in j['lights']]"
 
 # usage errors and help
 for c in watch snapshot latency; do expect_exit 0 "" timeout 10 "$CTL" $c --help; done
+"$CTL" watch --help >"$TMP/whelp" 2>&1
+grep -q -- "--until-revision N" "$TMP/whelp" && grep -q -- "--settle SECONDS" "$TMP/whelp" &&
+  grep -q "lucentctl: subscribed to STREAM" "$TMP/whelp" || fail "watch --help: $(head -c 600 "$TMP/whelp")"
+expect_exit 2 "settle needs --until-revision" timeout 10 "$CTL" watch --stream lightmap --out "$TMP/x" --settle 1
+expect_exit 2 "until-revision '1.5' is not a whole number" timeout 10 "$CTL" watch --stream lightmap --out "$TMP/x" --until-revision 1.5
 expect_exit 2 "stream is required" timeout 10 "$CTL" watch --out "$TMP/x"
 expect_exit 2 "out DIR is required" timeout 10 "$CTL" watch --stream lightmap
 expect_exit 2 "not lightmap" timeout 10 "$CTL" watch --stream nope --out "$TMP/x"
@@ -144,7 +174,7 @@ expect_exit 2 "unknown option" timeout 10 "$CTL" latency --frob 1
 expect_exit 3 "" timeout 20 "$CTL" --url ws://127.0.0.1:1/ snapshot --out "$TMP/none"
 timeout 30 "$CTL" watch --stream lightmap --out "$TMP/lost" --no-reconnect >/dev/null 2>"$TMP/lost.err" &
 WPID=$!
-sleep 1
+wait_for 20 "watch printing 'subscribed to lightmap'" grep -q "lucentctl: subscribed to lightmap" "$TMP/lost.err"
 kill -9 "$LUCENTD_PID"; wait "$LUCENTD_PID" 2>/dev/null
 RC=0; wait "$WPID" || RC=$?
 [ "$RC" = 3 ] || fail "watch after the server died exited $RC, expected 3: $(head -c 300 "$TMP/lost.err")"
