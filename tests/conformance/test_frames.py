@@ -43,9 +43,8 @@ async def test_subscribe_keyframe_idle(cfg):
     the current state, without any change being needed."""
     a = await controller(cfg)
     await nudge(cfg, a)
-    await settle([a], quiet=1.0)
-    await a.close()
-    await asyncio.sleep(0.5)
+    await settle([a], quiet=1.0)  # the change's relight and refinement frames are over: idle
+    await a.close()  # returns once the close handshake is done (the server has let `a` go)
     c = await open_client(cfg)
     try:
         rev = c.welcome["revision"]
@@ -103,10 +102,12 @@ async def test_frames_follow_changes(cfg):
         await c.expect_ok({"type": "subscribe", "stream": "shgrid", "encoding": "rgba16f"})
         await c.expect_ok({"type": "subscribe", "stream": "objects"})
         last = None
-        for i in range(8):
+        for i in range(8):  # each change once its lightmap frame came: frames for every revision
             last = await add_light(c, prefix, [0.1 + 0.05 * i, 0.4, 0.25], 0.3)
-            await asyncio.sleep(0.15)
-        for stream in ("lightmap", "shgrid", "objects"):
+            f = await c.recv_frame("lightmap", min_revision=last["revision"], timeout=max(cfg.timeout, 20))
+            assert f.revision == last["revision"], "lightmap frame %r for the change of revision %d" % (
+                f, last["revision"])
+        for stream in ("shgrid", "objects"):
             f = await c.recv_frame(stream, min_revision=last["revision"], timeout=max(cfg.timeout, 20))
             assert f.revision == last["revision"], f
         assert c.frames_seen >= 6
@@ -390,9 +391,9 @@ async def test_residual_deltas_rebuild_keyframe(cfg, encoding):
 
         await add_light(c, lid, RESIDUAL_MOVES[0], 0.2)
         last = await _drain_lightmap(c, take, quiet=1.0) or f
-        for pos in RESIDUAL_MOVES[1:-1]:
-            await add_light(c, lid, pos, 0.2)
-            await asyncio.sleep(0.3)
+        for pos in RESIDUAL_MOVES[1:-1]:  # each small move once the last one's frame came
+            ok = await add_light(c, lid, pos, 0.2)
+            last = await _lightmap_until(c, ok["revision"], take, "moving the light to %r" % (pos,))
         last = await _drain_lightmap(c, take, quiet=1.0) or last
         await add_light(c, lid, RESIDUAL_MOVES[-1], 0.2)
         last = await _drain_lightmap(c, take) or last
@@ -442,13 +443,15 @@ async def test_residual_deltas_several_clients(cfg):
         for j in (0, 1):
             f = await subscribe_keyframe(viewers[j], "lightmap", "rgb9e5", extra={"delta": "residual"})
             copies[j] = bytearray(f.payload())
-        await add_light(c, lid, RESIDUAL_MOVES[0], 0.2)
-        await asyncio.sleep(0.5)
+        ok = await add_light(c, lid, RESIDUAL_MOVES[0], 0.2)
+        for j in (0, 1):  # the first move reached the first two: the third joins with a different copy
+            await _lightmap_until(viewers[j], ok["revision"], taker(j), "client %d, placing the light" % j)
         f = await subscribe_keyframe(viewers[2], "lightmap", "rgb9e5", extra={"delta": "residual"})
         copies[2] = bytearray(f.payload())
-        for pos in RESIDUAL_MOVES[1:]:
-            await add_light(c, lid, pos, 0.2)
-            await asyncio.sleep(0.3)
+        for pos in RESIDUAL_MOVES[1:]:  # each move once every viewer has its frame
+            ok = await add_light(c, lid, pos, 0.2)
+            for j, v in enumerate(viewers):
+                await _lightmap_until(v, ok["revision"], taker(j), "client %d, moving the light to %r" % (j, pos))
         for j, v in enumerate(viewers):
             await _drain_lightmap(v, taker(j), quiet=1.0)
         for j, v in enumerate(viewers):
