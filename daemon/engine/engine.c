@@ -12,6 +12,7 @@
 #include <time.h>
 
 #include "engine/embree_device.h"
+#include "engine/scene_math.h"
 #include "engine/transport.h"
 #include "util/clock.h"
 #include "util/log.h"
@@ -83,21 +84,6 @@ static RTCScene engine_mesh_scene(RTCDevice dev, const void *vertices, size_t vs
     return sc;
 }
 
-/* Column-major 3x4 from translation, unit quaternion (x,y,z,w) and scale. */
-static void engine_trs(const lc_engine_object *o, float m[12]) {
-    float x = o->rotation[0], y = o->rotation[1], z = o->rotation[2], w = o->rotation[3];
-    float len = sqrtf(x * x + y * y + z * z + w * w);
-    x /= len, y /= len, z /= len, w /= len;
-    float r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
-                     {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
-                     {2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)}};
-    for (int col = 0; col < 3; col++)
-        for (int row = 0; row < 3; row++) m[col * 3 + row] = r[row][col] * o->scale[col];
-    m[9] = o->translation[0];
-    m[10] = o->translation[1];
-    m[11] = o->translation[2];
-}
-
 static void engine_build_top(lc_engine *e, const lc_engine_object *objects, uint32_t n) {
     if (e->top) rtcReleaseScene(e->top);
     e->top = rtcNewScene(e->device);
@@ -113,7 +99,7 @@ static void engine_build_top(lc_engine *e, const lc_engine_object *objects, uint
         RTCGeometry g = rtcNewGeometry(e->device, RTC_GEOMETRY_TYPE_INSTANCE);
         rtcSetGeometryInstancedScene(g, e->asset_scenes[objects[i].asset]);
         float m[12];
-        engine_trs(&objects[i], m);
+        lc_sm_object_matrix(&objects[i], m);
         rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, m);
         rtcCommitGeometry(g);
         rtcAttachGeometry(e->top, g);
@@ -335,15 +321,6 @@ typedef struct {
     uint32_t n_lights;
 } engine_direct_job;
 
-/* glTF KHR_lights_punctual range window: smooth falloff to zero at `range`. */
-static inline float engine_range_window(float d2, float range) {
-    if (range <= 0) return 1.0f;
-    float r = d2 / (range * range);
-    float w = 1.0f - r * r;
-    w = w < 0 ? 0 : w > 1 ? 1 : w;
-    return w * w;
-}
-
 static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread) {
     (void)thread;
     const engine_direct_job *job = ctx;
@@ -366,47 +343,15 @@ static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread)
                 for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn;
             } else if (l->type == LC_ENGINE_LIGHT_AREA) {
                 /* Stratified samples over the emitter, one shadow ray each. */
-                float dl = engine_len(l->direction);
-                float ln[3] = {l->direction[0] / dl, l->direction[1] / dl, l->direction[2] / dl};
-                float tx[3], ty[3], area;
-                if (l->shape == LC_AREA_QUAD) {
-                    float tl = engine_len(l->tangent);
-                    float t0[3] = {l->tangent[0] / tl, l->tangent[1] / tl, l->tangent[2] / tl};
-                    float dp = t0[0] * ln[0] + t0[1] * ln[1] + t0[2] * ln[2];
-                    for (int k = 0; k < 3; k++) tx[k] = t0[k] - dp * ln[k];
-                    float txl = engine_len(tx);
-                    for (int k = 0; k < 3; k++) tx[k] /= txl;
-                    ty[0] = ln[1] * tx[2] - ln[2] * tx[1];
-                    ty[1] = ln[2] * tx[0] - ln[0] * tx[2];
-                    ty[2] = ln[0] * tx[1] - ln[1] * tx[0];
-                    area = l->size[0] * l->size[1];
-                } else {
-                    float a[3] = {fabsf(ln[0]) < 0.9f ? 1.0f : 0.0f, fabsf(ln[0]) < 0.9f ? 0.0f : 1.0f, 0};
-                    float dp = a[0] * ln[0] + a[1] * ln[1];
-                    for (int k = 0; k < 3; k++) tx[k] = a[k] - dp * ln[k];
-                    float txl = engine_len(tx);
-                    for (int k = 0; k < 3; k++) tx[k] /= txl;
-                    ty[0] = ln[1] * tx[2] - ln[2] * tx[1];
-                    ty[1] = ln[2] * tx[0] - ln[0] * tx[2];
-                    ty[2] = ln[0] * tx[1] - ln[1] * tx[0];
-                    area = (float)M_PI * l->size[0] * l->size[0];
-                }
+                lc_sm_area_frame fr = lc_sm_area_frame_of(l);
+                const float *ln = fr.n;
                 lc_rng rng = lc_rng_seed(0xA5EA, ((uint64_t)li << 32) | s);
                 float sum = 0;
                 for (int j = 0; j < ENGINE_AREA_SAMPLES; j++) {
                     float u = ((float)(j % 4) + lc_rng_float(&rng)) * 0.25f;
                     float w = ((float)(j / 4) + lc_rng_float(&rng)) * 0.25f;
-                    float a, b;
-                    if (l->shape == LC_AREA_QUAD) {
-                        a = (u - 0.5f) * l->size[0];
-                        b = (w - 0.5f) * l->size[1];
-                    } else { /* concentric-ish: sqrt radius keeps the density uniform */
-                        float r = l->size[0] * sqrtf(u), phi = 2.0f * (float)M_PI * w;
-                        a = r * cosf(phi);
-                        b = r * sinf(phi);
-                    }
                     float p[3], d[3];
-                    for (int k = 0; k < 3; k++) p[k] = l->position[k] + a * tx[k] + b * ty[k];
+                    lc_sm_area_point(l, &fr, u, w, p);
                     for (int k = 0; k < 3; k++) d[k] = p[k] - org[k];
                     float d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
                     if (!(d2 > 1e-12f)) continue;
@@ -416,9 +361,9 @@ static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread)
                     float cos_l = -(ln[0] * d[0] + ln[1] * d[1] + ln[2] * d[2]);
                     if (cos_s <= 0 || cos_l <= 0) continue;
                     if (engine_occluded(e->top, org, d, dist * (1.0f - 1e-4f) - e->scene_eps)) continue;
-                    sum += cos_s * cos_l / d2 * engine_range_window(d2, l->range);
+                    sum += cos_s * cos_l / d2 * lc_sm_range_window(d2, l->range);
                 }
-                float g = scale * sum * area / ENGINE_AREA_SAMPLES;
+                float g = scale * sum * fr.area / ENGINE_AREA_SAMPLES;
                 for (int k = 0; k < 3; k++) acc[k] += g * l->color[k];
             } else { /* point, spot */
                 float d[3] = {l->position[0] - org[0], l->position[1] - org[1], l->position[2] - org[2]};
@@ -428,16 +373,8 @@ static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread)
                 for (int k = 0; k < 3; k++) d[k] /= dist;
                 float cosn = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
                 if (cosn <= 0) continue;
-                float att = engine_range_window(d2, l->range) / d2;
-                if (l->type == LC_ENGINE_LIGHT_SPOT) {
-                    float dl = engine_len(l->direction);
-                    float cd = -(d[0] * l->direction[0] + d[1] * l->direction[1] + d[2] * l->direction[2]) / dl;
-                    float co = cosf(l->outer_cone), ci = cosf(l->inner_cone);
-                    float sc = 1.0f / fmaxf(0.001f, ci - co);
-                    float t = (cd - co) * sc;
-                    t = t < 0 ? 0 : t > 1 ? 1 : t;
-                    att *= t * t;
-                }
+                float att = lc_sm_range_window(d2, l->range) / d2;
+                if (l->type == LC_ENGINE_LIGHT_SPOT) att *= lc_sm_spot_cone(l, d);
                 if (att <= 0) continue;
                 if (engine_occluded(e->top, org, d, dist * (1.0f - 1e-4f) - e->scene_eps)) continue;
                 for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn * att;
@@ -555,8 +492,8 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
             const lc_lcb_asset *a = &v->assets[st->objects[i].asset];
             float c[3], m[12];
             for (int k = 0; k < 3; k++) c[k] = 0.5f * (a->bounds_min[k] + a->bounds_max[k]);
-            engine_trs(&st->objects[i], m);
-            for (int k = 0; k < 3; k++) pos[3 * i + k] = m[k] * c[0] + m[3 + k] * c[1] + m[6 + k] * c[2] + m[9 + k];
+            lc_sm_object_matrix(&st->objects[i], m);
+            lc_sm_transform_point(m, c, pos + 3 * (size_t)i);
         }
         e->sky_valid = 0;
     }

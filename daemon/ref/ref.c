@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "engine/embree_device.h"
+#include "engine/scene_math.h"
 #include "util/clock.h"
 #include "util/crc32.h"
 #include "util/log.h"
@@ -344,14 +345,6 @@ static void ref_surface_at(const lc_ref *r, const ref_hit *h, const float dir[3]
 
 /* --- lights ------------------------------------------------------------------------------------ */
 
-static inline float ref_range_window(float d2, float range) {
-    if (range <= 0) return 1.0f;
-    float q = d2 / (range * range);
-    float w = 1.0f - q * q;
-    w = w < 0 ? 0 : w > 1 ? 1 : w;
-    return w * w;
-}
-
 /* Irradiance at org (already lifted off the surface) with normal n from the analytic lights,
  * shadowed (one sample per area light). Directions below the geometric plane ng do not count. */
 static void ref_direct(const lc_ref *r, const float org[3], const float n[3], const float ng[3], lc_rng *rng,
@@ -369,35 +362,11 @@ static void ref_direct(const lc_ref *r, const float org[3], const float n[3], co
             if (ref_occluded(r, org, w, INFINITY)) continue;
             for (int k = 0; k < 3; k++) out[k] += scale * l->color[k] * cosn;
         } else if (l->type == LC_ENGINE_LIGHT_AREA) {
-            float dl = ref_len(l->direction);
-            float ln[3] = {l->direction[0] / dl, l->direction[1] / dl, l->direction[2] / dl};
-            float tx[3], ty[3], area;
-            if (l->shape == LC_AREA_QUAD) {
-                float tl = ref_len(l->tangent);
-                float t0[3] = {l->tangent[0] / tl, l->tangent[1] / tl, l->tangent[2] / tl};
-                float dp = ref_dot(t0, ln);
-                for (int k = 0; k < 3; k++) tx[k] = t0[k] - dp * ln[k];
-                ref_normalize(tx);
-                area = l->size[0] * l->size[1];
-            } else {
-                float a[3] = {fabsf(ln[0]) < 0.9f ? 1.0f : 0.0f, fabsf(ln[0]) < 0.9f ? 0.0f : 1.0f, 0};
-                float dp = ref_dot(a, ln);
-                for (int k = 0; k < 3; k++) tx[k] = a[k] - dp * ln[k];
-                ref_normalize(tx);
-                area = (float)M_PI * l->size[0] * l->size[0];
-            }
-            ref_cross(ln, tx, ty);
-            float u = lc_rng_float(rng), w = lc_rng_float(rng), a, b;
-            if (l->shape == LC_AREA_QUAD) {
-                a = (u - 0.5f) * l->size[0];
-                b = (w - 0.5f) * l->size[1];
-            } else {
-                float rr = l->size[0] * sqrtf(u), phi = 2.0f * (float)M_PI * w;
-                a = rr * cosf(phi);
-                b = rr * sinf(phi);
-            }
+            lc_sm_area_frame fr = lc_sm_area_frame_of(l);
+            const float *ln = fr.n;
+            float u = lc_rng_float(rng), w = lc_rng_float(rng);
             float p[3], d[3];
-            for (int k = 0; k < 3; k++) p[k] = l->position[k] + a * tx[k] + b * ty[k];
+            lc_sm_area_point(l, &fr, u, w, p);
             for (int k = 0; k < 3; k++) d[k] = p[k] - org[k];
             float d2 = ref_dot(d, d);
             if (!(d2 > 1e-12f)) continue;
@@ -407,7 +376,7 @@ static void ref_direct(const lc_ref *r, const float org[3], const float n[3], co
             if (cos_s <= 0 || cos_l <= 0 || ref_dot(ng, d) <= 0) continue;
             (*rays)++;
             if (ref_occluded(r, org, d, dist * (1.0f - 1e-4f) - r->eps)) continue;
-            float g = scale * area * cos_s * cos_l / d2 * ref_range_window(d2, l->range);
+            float g = scale * fr.area * cos_s * cos_l / d2 * lc_sm_range_window(d2, l->range);
             for (int k = 0; k < 3; k++) out[k] += g * l->color[k];
         } else { /* point, spot */
             float d[3] = {l->position[0] - org[0], l->position[1] - org[1], l->position[2] - org[2]};
@@ -417,16 +386,8 @@ static void ref_direct(const lc_ref *r, const float org[3], const float n[3], co
             for (int k = 0; k < 3; k++) d[k] /= dist;
             float cosn = ref_dot(n, d);
             if (cosn <= 0 || ref_dot(ng, d) <= 0) continue;
-            float att = ref_range_window(d2, l->range) / d2;
-            if (l->type == LC_ENGINE_LIGHT_SPOT) {
-                float dl = ref_len(l->direction);
-                float cd = -ref_dot(d, l->direction) / dl;
-                float co = cosf(l->outer_cone), ci = cosf(l->inner_cone);
-                float sc = 1.0f / fmaxf(0.001f, ci - co);
-                float t = (cd - co) * sc;
-                t = t < 0 ? 0 : t > 1 ? 1 : t;
-                att *= t * t;
-            }
+            float att = lc_sm_range_window(d2, l->range) / d2;
+            if (l->type == LC_ENGINE_LIGHT_SPOT) att *= lc_sm_spot_cone(l, d);
             if (att <= 0) continue;
             (*rays)++;
             if (ref_occluded(r, org, d, dist * (1.0f - 1e-4f) - r->eps)) continue;
@@ -716,19 +677,6 @@ void lc_ref_release(lc_ref *r) {
     free(r);
 }
 
-/* Column-major 3x4 from translation, unit quaternion and scale (the engine's engine_trs). */
-static void ref_trs(const lc_engine_object *o, float m[12]) {
-    float x = o->rotation[0], y = o->rotation[1], z = o->rotation[2], w = o->rotation[3];
-    float len = sqrtf(x * x + y * y + z * z + w * w);
-    x /= len, y /= len, z /= len, w /= len;
-    float rm[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
-                      {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
-                      {2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)}};
-    for (int col = 0; col < 3; col++)
-        for (int row = 0; row < 3; row++) m[col * 3 + row] = rm[row][col] * o->scale[col];
-    m[9] = o->translation[0], m[10] = o->translation[1], m[11] = o->translation[2];
-}
-
 static int ref_build_objects(lc_ref *r, const lc_engine_state *st) {
     const lc_lcb_view *v = r->v;
     uint64_t nv = 0, nt = 0;
@@ -749,14 +697,13 @@ static int ref_build_objects(lc_ref *r, const lc_engine_state *st) {
         if (!o->visible) continue;
         const lc_lcb_asset *a = &v->assets[o->asset];
         float m[12];
-        ref_trs(o, m);
+        lc_sm_object_matrix(o, m);
         float det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[3] * (m[1] * m[8] - m[2] * m[7]) +
                     m[6] * (m[1] * m[5] - m[2] * m[4]);
         for (uint32_t k = 0; k < a->vertex_count; k++) {
             const lc_lcb_asset_vertex *av = &v->asset_vertices[a->first_vertex + k];
             float *p = r->obj_pos + 4 * (size_t)(bv + k);
-            for (int c = 0; c < 3; c++)
-                p[c] = m[c] * av->position[0] + m[3 + c] * av->position[1] + m[6 + c] * av->position[2] + m[9 + c];
+            lc_sm_transform_point(m, av->position, p);
             p[3] = 0;
             memcpy(r->obj_alb + 3 * (size_t)(bv + k), av->albedo, 3 * sizeof(float));
         }
