@@ -15,6 +15,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "lucent_client.h"
 
@@ -59,6 +60,29 @@ static void on_connection(lc_client *c, int event, const char *reason, void *use
         n->after_reconnect = 0;
     }
     if (event == LC_CLIENT_RECONNECTING) n->reconnecting++;
+}
+
+static double now_ms(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec * 1e3 + (double)t.tv_nsec / 1e6;
+}
+
+/* Services `c` until no frame has come for quiet_ms (the idle refinement passes of the last
+ * change are over): 0, or -1 when frames still come after limit_ms. */
+static int settle(lc_client *c, const counters *n, double quiet_ms, double limit_ms) {
+    double start = now_ms(), last = start;
+    int seen = n->frames;
+    while (now_ms() - start < limit_ms) {
+        lc_client_poll(c, 20);
+        if (n->frames != seen) {
+            seen = n->frames;
+            last = now_ms();
+        } else if (now_ms() - last >= quiet_ms) {
+            return 0;
+        }
+    }
+    return -1;
 }
 
 static uint64_t revision_of(const char *reply) {
@@ -126,7 +150,7 @@ static int test_basic(const char *url) {
         EXPECT(f.encoding == encs[e] && f.revision >= rev, "frame header enc %d rev %llu", f.encoding,
                (unsigned long long)f.revision);
         /* let refinement settle, then snapshot to compare like with like */
-        lc_client_poll(view, 1500);
+        EXPECT(settle(view, &b, 500, 20000) == 0, "enc %d: frames still coming 20 s after the change", encs[e]);
         EXPECT(lc_client_request(view, "{\"type\":\"snapshot\"}", NULL, 5000, err, sizeof err) == 0, "snapshot");
         ok = lc_client_wait_frame(view, LC_CLIENT_LIGHTMAP, rev, 1, 10000, &f, err, sizeof err) == 0;
         EXPECT(ok && f.keyframe, "snapshot keyframe: %s", err);
@@ -158,17 +182,18 @@ static int test_basic(const char *url) {
                "frame for revision %llu: %s", (unsigned long long)rev, err);
     }
     /* a change far below the delta threshold: a delta frame (with no tiles or few) */
-    lc_client_poll(view, 1500);
+    EXPECT(settle(view, &b, 500, 20000) == 0, "frames still coming 20 s after the moves");
     EXPECT(set_light(ctl, 0.15, 2.002, &rev) == 0, "tiny change");
     lc_client_frame tiny;
     EXPECT(lc_client_wait_frame(view, LC_CLIENT_LIGHTMAP, rev, 0, 10000, &tiny, err, sizeof err) == 0, "tiny frame: %s",
            err);
-    lc_client_poll(view, 300);
+    /* `changed` goes out with each ok, before that change's frame: all 7 are here by now */
+    for (double t0 = now_ms(); b.changed < changed0 + 7 && now_ms() - t0 < 5000;) lc_client_poll(view, 20);
     EXPECT(b.changed >= changed0 + 7, "changed callbacks %d -> %d", changed0, b.changed);
     lc_client_stats st;
     lc_client_get_stats(view, &st);
     EXPECT(st.deltas > 0 && st.bad_frames == 0, "deltas %lu bad %lu", st.deltas, st.bad_frames);
-    lc_client_poll(view, 1500); /* refinement settles */
+    EXPECT(settle(view, &b, 500, 20000) == 0, "frames still coming 20 s after the tiny change"); /* refinement over */
     lc_client_frame f;
     EXPECT(lc_client_latest_frame(view, LC_CLIENT_LIGHTMAP, &f) == 0, "latest frame");
     float *copy = malloc(f.value_count * sizeof *copy);
@@ -201,8 +226,8 @@ static int test_basic(const char *url) {
     EXPECT(lc_client_subscribe(view, LC_CLIENT_OBJECTS, LC_CLIENT_RGBA16F, 0, err, sizeof err) == 0, "objects: %s", err);
     EXPECT(lc_client_wait_frame(view, LC_CLIENT_OBJECTS, 0, 0, 10000, &f, err, sizeof err) == 0, "objects frame: %s", err);
     /* unsubscribe stops frames */
+    /* unsubscribe returns with its ok: every lightmap frame sent before it has been taken */
     EXPECT(lc_client_unsubscribe(view, LC_CLIENT_LIGHTMAP, err, sizeof err) == 0, "unsubscribe");
-    lc_client_poll(view, 200);
     int frames_before = b.frames;
     uint64_t last_lm = 0;
     if (lc_client_latest_frame(view, LC_CLIENT_LIGHTMAP, &f) == 0) last_lm = f.sequence;
