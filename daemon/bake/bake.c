@@ -501,130 +501,198 @@ static cJSON *bake_settings_json(const lc_bake_settings *s) {
 
 /* --- the pipeline --------------------------------------------------------------------------- */
 
-int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, size_t errlen) {
-    int rc = 1;
-    lc_scene scene;
-    memset(&scene, 0, sizeof scene);
-    lc_rt *rt = NULL;
-    lc_lightmap lm;
-    memset(&lm, 0, sizeof lm);
-    lc_lcb_cache *caches = NULL;
-    uint32_t n_caches = 0, n_texel_caches = 0, *cell_cache = NULL;
-    lc_lcb_surfel *surfels = NULL;
-    uint32_t *surfel_tri = NULL, *perm = NULL, *tri_sorted = NULL, *seen = NULL, n_surfels = 0;
-    lc_hierarchy hier;
-    memset(&hier, 0, sizeof hier);
-    lc_lcb_link *links = NULL;
-    uint16_t *link_sh = NULL;
-    lc_lcb_material *mats = NULL;
-    lc_lcb_vertex *verts = NULL;
-    lc_lcb_triangle *tris = NULL;
-    bake_assets assets;
-    memset(&assets, 0, sizeof assets);
-    cJSON *meta = NULL;
-    char *meta_text = NULL;
-    lc_lcb_writer *w = NULL;
-    lc_bake_report local_report;
-    lc_bake_report *r = report ? report : &local_report;
-    memset(r, 0, sizeof *r);
+/* Everything one bake builds, stage by stage (ARCHITECTURE.md, "The bake pipeline"); each
+ * stage reads what the ones before it left here. bake_job_release frees it all. */
+typedef struct bake_job {
+    const lc_bake_settings *s;
+    lc_scene scene;                 /* 1. import */
+    lc_uv_stats uvs;                /* 2. lightmap UVs */
+    lc_rt *rt;                      /* 3. ray tracing structure */
+    lc_lightmap lm;                 /* 4. texel caches ... */
+    lc_lcb_cache *caches;           /* ... then the grid caches after them (5) */
+    uint32_t n_caches, n_texel_caches;
+    lc_grid grid;                   /* 5. grid caches */
+    uint32_t *cell_cache;
+    lc_relocate_stats rs;           /* 6. relocation */
+    lc_lcb_surfel *surfels;         /* 7. surfels (8 reorders them) */
+    uint32_t *surfel_tri, n_surfels;
+    lc_hierarchy hier;              /* 8. hierarchy */
+    uint32_t *perm, *tri_sorted;
+    lc_lcb_link *links;             /* 9. links */
+    uint16_t *link_sh;
+    uint64_t n_links;
+    uint32_t *seen;                 /* per surfel: caches that see it (--exposure only) */
+    lc_link_stats ls;
+    lc_exposure_stats es;
+    bake_assets assets;             /* 10. dynamic-object assets */
+    lc_lcb_material *mats;          /* 11. the file's sections */
+    lc_lcb_vertex *verts;
+    lc_lcb_triangle *tris;
+    cJSON *meta;
+    char *meta_text;
+    lc_lcb_writer *w;
+} bake_job;
 
-    lc_parallel_set_threads(s->threads);
-    lc_progress_set_enabled(!s->quiet);
-    double t_start = (lc_clock_ms() * 1e-3), t0 = t_start;
+static void bake_job_release(bake_job *b) {
+    lc_lcb_writer_release(b->w);
+    cJSON_free(b->meta_text);
+    cJSON_Delete(b->meta);
+    bake_assets_release(&b->assets);
+    free(b->mats);
+    free(b->verts);
+    free(b->tris);
+    free(b->links);
+    free(b->link_sh);
+    lc_hierarchy_release(&b->hier);
+    free(b->perm);
+    free(b->tri_sorted);
+    free(b->seen);
+    free(b->surfel_tri);
+    free(b->surfels);
+    free(b->cell_cache);
+    free(b->caches);
+    lc_lightmap_release(&b->lm);
+    lc_rt_release(b->rt);
+    lc_scene_release(&b->scene);
+}
 
-    /* 1. import */
+/* The message of every allocation failure in the pipeline; returns the bake's failure code. */
+static int bake_oom(char *err, size_t errlen) {
+    lc_set_err(err, errlen, "out of memory (lower --surfels, --links or --atlas-size)");
+    return 1;
+}
+
+/* Each stage returns 0, 1 (bad input / failure) or 3 (cannot write output), with err set. */
+
+static int bake_import_scene(bake_job *b, char *err, size_t errlen) {
+    const lc_bake_settings *s = b->s;
     lc_import_params ip = {.scale = s->scale, .flip_winding = s->flip_winding};
-    if (lc_scene_import(s->input, &ip, &scene, err, errlen) != 0) goto err;
-    if (scene.n_degenerate_dropped)
-        lc_warn("bake", "%u degenerate or non-finite triangles dropped", scene.n_degenerate_dropped);
+    if (lc_scene_import(s->input, &ip, &b->scene, err, errlen) != 0) return 1;
+    if (b->scene.n_degenerate_dropped)
+        lc_warn("bake", "%u degenerate or non-finite triangles dropped", b->scene.n_degenerate_dropped);
     if (!s->quiet)
         lc_info("bake", "imported %s: %u triangles, %u materials, %u textures, %u lights", s->input,
-                scene.mesh.n_triangles, scene.n_materials, scene.n_textures, scene.n_lights);
-    bake_stage(r, "import", &t0, s->quiet);
+                b->scene.mesh.n_triangles, b->scene.n_materials, b->scene.n_textures, b->scene.n_lights);
+    return 0;
+}
 
-    /* 2. lightmap UVs */
+/* Generated charts, or the asset's own second UV set measured. */
+static int bake_lightmap_uv(bake_job *b, char *err, size_t errlen) {
+    const lc_bake_settings *s = b->s;
     lc_uv_params uvp = {.texels_per_metre = s->texel_density,
                         .atlas_size = s->texel_density > 0 ? 0 : (uint32_t)s->atlas_size,
                         .padding = (uint32_t)s->padding,
                         .chart_angle_deg = s->chart_angle};
-    lc_uv_stats uvs;
-    memset(&uvs, 0, sizeof uvs);
-    if (scene.has_lightmap_uv) {
-        if (lc_uvgen_measure(&scene.mesh, &uvp, &uvs, err, errlen) != 0) goto err;
-    } else if (lc_uvgen(&scene.mesh, &uvp, &uvs, err, errlen) != 0) {
-        goto err;
+    if (b->scene.has_lightmap_uv) {
+        if (lc_uvgen_measure(&b->scene.mesh, &uvp, &b->uvs, err, errlen) != 0) return 1;
+    } else if (lc_uvgen(&b->scene.mesh, &uvp, &b->uvs, err, errlen) != 0) {
+        return 1;
     }
     if (!s->quiet)
-        lc_info("bake", "lightmap %ux%u, %u charts, %.1f texels/m, atlas usage %.1f%%", uvs.width, uvs.height,
-                uvs.n_charts, uvs.texels_per_metre, uvs.usage * 100);
-    bake_stage(r, "lightmap-uv", &t0, s->quiet);
+        lc_info("bake", "lightmap %ux%u, %u charts, %.1f texels/m, atlas usage %.1f%%", b->uvs.width, b->uvs.height,
+                b->uvs.n_charts, b->uvs.texels_per_metre, b->uvs.usage * 100);
+    return 0;
+}
 
-    /* 3. ray tracing structure */
-    rt = lc_rt_create(&scene.mesh, s->threads, err, errlen);
-    if (!rt) goto err;
-    bake_stage(r, "bvh", &t0, s->quiet);
+static int bake_bvh(bake_job *b, char *err, size_t errlen) {
+    b->rt = lc_rt_create(&b->scene.mesh, b->s->threads, err, errlen);
+    return b->rt ? 0 : 1;
+}
 
-    /* 4. texel caches, dilation */
-    if (lc_texels_rasterize(&scene, uvs.width, uvs.height, &lm, &caches, &n_caches, err, errlen) != 0) goto err;
-    if (n_caches == 0) {
+/* Texel caches, then seam dilation. */
+static int bake_texel_caches(bake_job *b, char *err, size_t errlen) {
+    if (lc_texels_rasterize(&b->scene, b->uvs.width, b->uvs.height, &b->lm, &b->caches, &b->n_caches, err, errlen) !=
+        0)
+        return 1;
+    if (b->n_caches == 0) {
         lc_set_err(err, errlen, "no lightmap texel is covered; raise --atlas-size or --texel-density");
-        goto err;
+        return 1;
     }
-    lc_texels_dilate(&lm, (uint32_t)s->dilate);
-    n_texel_caches = n_caches;
-    bake_stage(r, "texels", &t0, s->quiet);
+    lc_texels_dilate(&b->lm, (uint32_t)b->s->dilate);
+    b->n_texel_caches = b->n_caches;
+    return 0;
+}
 
-    /* 5. grid caches */
-    lc_grid grid;
-    if (lc_grid_layout(scene.bounds_min, scene.bounds_max, s->grid_cell, (uint32_t)s->grid_max_dim,
-                       (uint32_t)s->grid_max_samples, &grid, err, errlen) != 0)
-        goto err;
-    if (lc_grid_place(&grid, &caches, &n_caches, &cell_cache, err, errlen) != 0) goto err;
-    bake_stage(r, "grid", &t0, s->quiet);
+static int bake_grid_caches(bake_job *b, char *err, size_t errlen) {
+    const lc_bake_settings *s = b->s;
+    if (lc_grid_layout(b->scene.bounds_min, b->scene.bounds_max, s->grid_cell, (uint32_t)s->grid_max_dim,
+                       (uint32_t)s->grid_max_samples, &b->grid, err, errlen) != 0)
+        return 1;
+    return lc_grid_place(&b->grid, &b->caches, &b->n_caches, &b->cell_cache, err, errlen) != 0 ? 1 : 0;
+}
 
-    /* 6. move caches out of geometry */
-    lc_relocate_params rp = {.rays = (uint32_t)s->reloc_rays,
+/* Moves caches out of geometry. */
+static int bake_relocate(bake_job *b, char *err, size_t errlen) {
+    (void)err, (void)errlen;
+    lc_relocate_params rp = {.rays = (uint32_t)b->s->reloc_rays,
                              .texel_fraction = 0.6,
                              .grid_fraction = 0.8,
-                             .offset = s->reloc_offset,
-                             .seed = (uint64_t)s->seed};
-    lc_relocate_stats rs;
-    memset(&rs, 0, sizeof rs);
-    lc_relocate_caches(rt, caches, n_caches, &rp, &rs);
-    bake_stage(r, "relocate", &t0, s->quiet);
+                             .offset = b->s->reloc_offset,
+                             .seed = (uint64_t)b->s->seed};
+    lc_relocate_caches(b->rt, b->caches, b->n_caches, &rp, &b->rs);
+    return 0;
+}
 
-    /* 7. surfels */
+static int bake_surfels(bake_job *b, char *err, size_t errlen) {
+    const lc_bake_settings *s = b->s;
     lc_surfel_params sp = {.target_count = (uint32_t)s->surfels,
                            .relax_iterations = (uint32_t)s->relax,
                            .seed = (uint64_t)s->seed};
-    if (lc_surfels_generate(&scene, &sp, &surfels, &surfel_tri, &n_surfels, err, errlen) != 0) goto err;
-    int64_t n_buried = s->drop_buried ? bake_drop_buried(rt, surfels, surfel_tri, &n_surfels) : 0;
-    if (n_buried < 0) goto oom;
+    if (lc_surfels_generate(&b->scene, &sp, &b->surfels, &b->surfel_tri, &b->n_surfels, err, errlen) != 0) return 1;
+    int64_t n_buried = s->drop_buried ? bake_drop_buried(b->rt, b->surfels, b->surfel_tri, &b->n_surfels) : 0;
+    if (n_buried < 0) return bake_oom(err, errlen);
     if (!s->quiet && n_buried > 0)
-        lc_info("bake", "dropped %lld buried surfels (inside geometry), %u left", (long long)n_buried, n_surfels);
-    bake_stage(r, "surfels", &t0, s->quiet);
+        lc_info("bake", "dropped %lld buried surfels (inside geometry), %u left", (long long)n_buried, b->n_surfels);
+    return 0;
+}
 
-    /* 8. hierarchy (reorders surfels) */
-    if (lc_hierarchy_build(surfels, n_surfels, (lc_hierarchy_method)s->hierarchy, &hier, &perm, err, errlen) != 0)
-        goto err;
-    tri_sorted = malloc((size_t)n_surfels * sizeof *tri_sorted);
-    if (!tri_sorted) goto oom;
-    for (uint32_t i = 0; i < n_surfels; i++) tri_sorted[i] = surfel_tri[perm[i]];
-    bake_surfel_caches(&scene, &lm, &grid, cell_cache, caches, surfels, tri_sorted, n_surfels);
-    bake_stage(r, "hierarchy", &t0, s->quiet);
+/* The surfel tree (it reorders the surfels; their triangles follow), then each surfel's
+ * nearest cache. */
+static int bake_hierarchy(bake_job *b, char *err, size_t errlen) {
+    if (lc_hierarchy_build(b->surfels, b->n_surfels, (lc_hierarchy_method)b->s->hierarchy, &b->hier, &b->perm, err,
+                           errlen) != 0)
+        return 1;
+    b->tri_sorted = malloc((size_t)b->n_surfels * sizeof *b->tri_sorted);
+    if (!b->tri_sorted) return bake_oom(err, errlen);
+    for (uint32_t i = 0; i < b->n_surfels; i++) b->tri_sorted[i] = b->surfel_tri[b->perm[i]];
+    bake_surfel_caches(&b->scene, &b->lm, &b->grid, b->cell_cache, b->caches, b->surfels, b->tri_sorted,
+                       b->n_surfels);
+    return 0;
+}
 
-    /* 9. links */
-    uint64_t n_links = (uint64_t)n_caches * (uint64_t)s->links;
-    if (n_links > (1ull << 31) / sizeof(lc_lcb_link)) {
-        lc_set_err(err, errlen, "%u caches x %d links is over 2 GiB of links; lower --links or --atlas-size",
-                   n_caches, s->links);
-        goto err;
+/* Links come used-first, padding after; records each cache's count so runtimes can stop
+ * early. 1 with err if a used link follows padding. */
+static int bake_link_counts(bake_job *b, char *err, size_t errlen) {
+    const uint32_t per_cache = (uint32_t)b->s->links;
+    for (uint32_t c = 0; c < b->n_caches; c++) {
+        const lc_lcb_link *cl = b->links + (size_t)c * per_cache;
+        uint32_t used = 0;
+        while (used < per_cache && cl[used].factor > 0) used++;
+        for (uint32_t j = used; j < per_cache; j++)
+            if (cl[j].factor > 0) {
+                lc_set_err(err, errlen, "internal error: cache %u has a used link after padding", c);
+                return 1;
+            }
+        b->caches[c].link_count = used;
     }
-    links = calloc(n_links, sizeof *links);
-    if (!links) goto oom;
+    return 0;
+}
+
+/* Per cache, a cut of the tree by visible solid angle; then, with --exposure, the surfel
+ * areas weighed by how many caches see them. */
+static int bake_links(bake_job *b, char *err, size_t errlen) {
+    const lc_bake_settings *s = b->s;
+    b->n_links = (uint64_t)b->n_caches * (uint64_t)s->links;
+    if (b->n_links > (1ull << 31) / sizeof(lc_lcb_link)) {
+        lc_set_err(err, errlen, "%u caches x %d links is over 2 GiB of links; lower --links or --atlas-size",
+                   b->n_caches, s->links);
+        return 1;
+    }
+    b->links = calloc(b->n_links, sizeof *b->links);
+    if (!b->links) return bake_oom(err, errlen);
     if (s->link_sh) {
-        link_sh = calloc(n_links * (uint64_t)s->bands * s->bands, sizeof *link_sh);
-        if (!link_sh) goto oom;
+        b->link_sh = calloc(b->n_links * (uint64_t)s->bands * s->bands, sizeof *b->link_sh);
+        if (!b->link_sh) return bake_oom(err, errlen);
     }
     lc_link_params lp = {.links_per_cache = (uint32_t)s->links,
                          .node_samples = (uint32_t)s->node_samples,
@@ -633,68 +701,90 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
                          .seed = (uint64_t)s->seed,
                          .probe_rays = (uint32_t)s->probe_rays};
     if (s->exposure) {
-        seen = calloc(n_surfels ? n_surfels : 1, sizeof *seen);
-        if (!seen) goto oom;
-        lp.surfel_seen = seen;
+        b->seen = calloc(b->n_surfels ? b->n_surfels : 1, sizeof *b->seen);
+        if (!b->seen) return bake_oom(err, errlen);
+        lp.surfel_seen = b->seen;
     }
-    lc_link_stats ls;
-    memset(&ls, 0, sizeof ls);
-    if (lc_links_build(rt, surfels, n_surfels, &hier, caches, n_caches, &lp, links, link_sh, &ls) != 0) {
+    if (lc_links_build(b->rt, b->surfels, b->n_surfels, &b->hier, b->caches, b->n_caches, &lp, b->links, b->link_sh,
+                       &b->ls) != 0) {
         lc_set_err(err, errlen, "link generation failed (out of memory?)");
-        goto err;
+        return 1;
     }
-    /* Links come used-first, padding after; record the count so runtimes can stop early. */
-    for (uint32_t c = 0; c < n_caches; c++) {
-        const lc_lcb_link *cl = links + (size_t)c * s->links;
-        uint32_t used = 0;
-        while (used < (uint32_t)s->links && cl[used].factor > 0) used++;
-        for (uint32_t j = used; j < (uint32_t)s->links; j++)
-            if (cl[j].factor > 0) {
-                lc_set_err(err, errlen, "internal error: cache %u has a used link after padding", c);
-                goto err;
-            }
-        caches[c].link_count = used;
-    }
-    lc_exposure_stats es;
-    memset(&es, 0, sizeof es);
-    if (seen && lc_exposure_apply(seen, surfels, n_surfels, &hier, links, n_links, link_sh,
-                                  link_sh ? (uint32_t)(s->bands * s->bands) : 0, &es) != 0) {
+    if (bake_link_counts(b, err, errlen) != 0) return 1;
+    if (b->seen && lc_exposure_apply(b->seen, b->surfels, b->n_surfels, &b->hier, b->links, b->n_links, b->link_sh,
+                                     b->link_sh ? (uint32_t)(s->bands * s->bands) : 0, &b->es) != 0) {
         lc_set_err(err, errlen, "exposure: no cache sees any surfel (or out of memory); bake with --exposure false");
-        goto err;
+        return 1;
     }
-    if (!s->quiet && seen)
-        lc_info("bake", "exposure: %u surfels (%.2f%% of the area) seen by no cache", es.unseen,
-                100.0 * es.unseen_area / lc_mesh_total_area(&scene.mesh));
-    bake_stage(r, "links", &t0, s->quiet);
+    if (!s->quiet && b->seen)
+        lc_info("bake", "exposure: %u surfels (%.2f%% of the area) seen by no cache", b->es.unseen,
+                100.0 * b->es.unseen_area / lc_mesh_total_area(&b->scene.mesh));
+    return 0;
+}
 
-    /* 10. assets */
-    if (bake_assets_import(s, &assets, err, errlen) != 0) goto err;
-    bake_stage(r, "assets", &t0, s->quiet);
+static int bake_dynamic_assets(bake_job *b, char *err, size_t errlen) {
+    return bake_assets_import(b->s, &b->assets, err, errlen) != 0 ? 1 : 0;
+}
 
-    /* 11. write */
-    const lc_mesh *m = &scene.mesh;
-    mats = calloc(scene.n_materials ? scene.n_materials : 1, sizeof *mats);
-    verts = calloc(m->n_vertices, sizeof *verts);
-    tris = calloc(m->n_triangles, sizeof *tris);
-    if (!mats || !verts || !tris) goto oom;
-    for (uint32_t i = 0; i < scene.n_materials; i++) {
-        snprintf(mats[i].name, sizeof mats[i].name, "%s", scene.materials[i].name);
-        memcpy(mats[i].base_color, scene.materials[i].base_color, sizeof mats[i].base_color);
-        memcpy(mats[i].emission, scene.materials[i].emission, sizeof mats[i].emission);
-        mats[i].flags = scene.materials[i].base_texture >= 0 ? 1u : 0u;
+/* The mesh and materials in the file's record layouts. */
+static int bake_geometry_sections(bake_job *b, char *err, size_t errlen) {
+    const lc_scene *scene = &b->scene;
+    const lc_mesh *m = &scene->mesh;
+    b->mats = calloc(scene->n_materials ? scene->n_materials : 1, sizeof *b->mats);
+    b->verts = calloc(m->n_vertices, sizeof *b->verts);
+    b->tris = calloc(m->n_triangles, sizeof *b->tris);
+    if (!b->mats || !b->verts || !b->tris) return bake_oom(err, errlen);
+    for (uint32_t i = 0; i < scene->n_materials; i++) {
+        lc_lcb_material *mt = &b->mats[i];
+        snprintf(mt->name, sizeof mt->name, "%s", scene->materials[i].name);
+        memcpy(mt->base_color, scene->materials[i].base_color, sizeof mt->base_color);
+        memcpy(mt->emission, scene->materials[i].emission, sizeof mt->emission);
+        mt->flags = scene->materials[i].base_texture >= 0 ? 1u : 0u;
     }
     for (uint32_t i = 0; i < m->n_vertices; i++) {
-        memcpy(verts[i].position, m->position + 3 * (size_t)i, sizeof verts[i].position);
-        memcpy(verts[i].normal, m->normal + 3 * (size_t)i, sizeof verts[i].normal);
-        memcpy(verts[i].uv1, m->uv1 + 2 * (size_t)i, sizeof verts[i].uv1);
+        memcpy(b->verts[i].position, m->position + 3 * (size_t)i, sizeof b->verts[i].position);
+        memcpy(b->verts[i].normal, m->normal + 3 * (size_t)i, sizeof b->verts[i].normal);
+        memcpy(b->verts[i].uv1, m->uv1 + 2 * (size_t)i, sizeof b->verts[i].uv1);
     }
     for (uint32_t i = 0; i < m->n_triangles; i++) {
-        memcpy(tris[i].v, m->index + 3 * (size_t)i, sizeof tris[i].v);
-        tris[i].material = m->material[i];
+        memcpy(b->tris[i].v, m->index + 3 * (size_t)i, sizeof b->tris[i].v);
+        b->tris[i].material = m->material[i];
     }
+    return 0;
+}
 
-    meta = cJSON_CreateObject();
-    if (!meta) goto oom;
+/* META's lists: the scene's lights (the daemon's initial state), emitters and assets. */
+static void bake_meta_lists(const bake_job *b, cJSON *meta) {
+    const lc_scene *scene = &b->scene;
+    cJSON_AddItemToObject(meta, "lights", bake_lights_json(scene));
+    cJSON *jem = cJSON_AddArrayToObject(meta, "emitters");
+    for (uint32_t i = 0; i < scene->n_materials; i++) {
+        const float *e = scene->materials[i].emission;
+        if (e[0] <= 0 && e[1] <= 0 && e[2] <= 0) continue;
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "material", scene->materials[i].name);
+        cJSON_AddItemToObject(o, "emission", bake_vec3(e));
+        cJSON_AddItemToArray(jem, o);
+    }
+    cJSON *ja = cJSON_AddArrayToObject(meta, "assets");
+    for (uint32_t i = 0; i < b->assets.n_assets; i++) {
+        const lc_lcb_asset *a = &b->assets.assets[i];
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "name", a->name);
+        cJSON_AddNumberToObject(o, "triangles", a->triangle_count);
+        cJSON_AddItemToObject(o, "bounds_min", bake_vec3(a->bounds_min));
+        cJSON_AddItemToObject(o, "bounds_max", bake_vec3(a->bounds_max));
+        cJSON_AddItemToArray(ja, o);
+    }
+}
+
+/* META: what was baked from what, with which settings, and what came out of each stage. */
+static int bake_meta(bake_job *b, char *err, size_t errlen) {
+    const lc_bake_settings *s = b->s;
+    const lc_scene *scene = &b->scene;
+    const lc_mesh *m = &scene->mesh;
+    cJSON *meta = b->meta = cJSON_CreateObject();
+    if (!meta) return bake_oom(err, errlen);
     cJSON_AddStringToObject(meta, "format", "lucent-bake");
     cJSON_AddStringToObject(meta, "generator", "lucent-bake " LC_BAKE_VERSION);
     cJSON_AddStringToObject(meta, "source", s->input);
@@ -704,150 +794,151 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
     cJSON *js = cJSON_AddObjectToObject(meta, "scene");
     cJSON_AddNumberToObject(js, "triangles", m->n_triangles);
     cJSON_AddNumberToObject(js, "vertices", m->n_vertices);
-    cJSON_AddNumberToObject(js, "materials", scene.n_materials);
-    cJSON_AddNumberToObject(js, "textures", scene.n_textures);
-    cJSON_AddNumberToObject(js, "degenerate_dropped", scene.n_degenerate_dropped);
+    cJSON_AddNumberToObject(js, "materials", scene->n_materials);
+    cJSON_AddNumberToObject(js, "textures", scene->n_textures);
+    cJSON_AddNumberToObject(js, "degenerate_dropped", scene->n_degenerate_dropped);
     cJSON_AddNumberToObject(js, "area", area);
-    cJSON_AddItemToObject(js, "bounds_min", bake_vec3(scene.bounds_min));
-    cJSON_AddItemToObject(js, "bounds_max", bake_vec3(scene.bounds_max));
+    cJSON_AddItemToObject(js, "bounds_min", bake_vec3(scene->bounds_min));
+    cJSON_AddItemToObject(js, "bounds_max", bake_vec3(scene->bounds_max));
     cJSON *jl = cJSON_AddObjectToObject(meta, "lightmap");
-    cJSON_AddNumberToObject(jl, "width", lm.width);
-    cJSON_AddNumberToObject(jl, "height", lm.height);
-    cJSON_AddNumberToObject(jl, "texels_per_metre", uvs.texels_per_metre);
-    cJSON_AddNumberToObject(jl, "usage", uvs.usage);
-    cJSON_AddNumberToObject(jl, "charts", uvs.n_charts);
-    cJSON_AddNumberToObject(jl, "covered", lm.n_covered);
-    cJSON_AddNumberToObject(jl, "dilated", lm.n_dilated);
-    cJSON_AddStringToObject(jl, "uv_source", scene.has_lightmap_uv ? "asset" : "generated");
+    cJSON_AddNumberToObject(jl, "width", b->lm.width);
+    cJSON_AddNumberToObject(jl, "height", b->lm.height);
+    cJSON_AddNumberToObject(jl, "texels_per_metre", b->uvs.texels_per_metre);
+    cJSON_AddNumberToObject(jl, "usage", b->uvs.usage);
+    cJSON_AddNumberToObject(jl, "charts", b->uvs.n_charts);
+    cJSON_AddNumberToObject(jl, "covered", b->lm.n_covered);
+    cJSON_AddNumberToObject(jl, "dilated", b->lm.n_dilated);
+    cJSON_AddStringToObject(jl, "uv_source", scene->has_lightmap_uv ? "asset" : "generated");
     cJSON *jg = cJSON_AddObjectToObject(meta, "grid");
-    cJSON_AddItemToObject(jg, "origin", bake_vec3(grid.origin));
-    cJSON_AddNumberToObject(jg, "cell", grid.cell);
-    double dims[3] = {grid.dims[0], grid.dims[1], grid.dims[2]};
+    cJSON_AddItemToObject(jg, "origin", bake_vec3(b->grid.origin));
+    cJSON_AddNumberToObject(jg, "cell", b->grid.cell);
+    double dims[3] = {b->grid.dims[0], b->grid.dims[1], b->grid.dims[2]};
     cJSON_AddItemToObject(jg, "dims", cJSON_CreateDoubleArray(dims, 3));
     cJSON *jsu = cJSON_AddObjectToObject(meta, "surfels");
-    cJSON_AddNumberToObject(jsu, "count", n_surfels);
+    cJSON_AddNumberToObject(jsu, "count", b->n_surfels);
     double surfel_area = 0; /* exposure keeps the sum */
-    for (uint32_t i = 0; i < n_surfels; i++) surfel_area += surfels[i].area;
-    cJSON_AddNumberToObject(jsu, "area", n_surfels ? surfel_area / n_surfels : 0); /* mean: the nominal area */
-    cJSON_AddBoolToObject(jsu, "exposure", seen != NULL);
-    cJSON_AddNumberToObject(jsu, "unseen", es.unseen);
+    for (uint32_t i = 0; i < b->n_surfels; i++) surfel_area += b->surfels[i].area;
+    cJSON_AddNumberToObject(jsu, "area", b->n_surfels ? surfel_area / b->n_surfels : 0); /* mean: the nominal area */
+    cJSON_AddBoolToObject(jsu, "exposure", b->seen != NULL);
+    cJSON_AddNumberToObject(jsu, "unseen", b->es.unseen);
     cJSON *jh = cJSON_AddObjectToObject(meta, "hierarchy");
     cJSON_AddStringToObject(jh, "method", s->hierarchy == LC_HIERARCHY_AAC ? "aac" : "kdtree");
-    cJSON_AddNumberToObject(jh, "nodes", hier.n_nodes);
-    cJSON_AddNumberToObject(jh, "levels", hier.n_levels);
-    cJSON_AddNumberToObject(jh, "quality", lc_hierarchy_quality(surfels, &hier));
+    cJSON_AddNumberToObject(jh, "nodes", b->hier.n_nodes);
+    cJSON_AddNumberToObject(jh, "levels", b->hier.n_levels);
+    cJSON_AddNumberToObject(jh, "quality", lc_hierarchy_quality(b->surfels, &b->hier));
     cJSON *jc = cJSON_AddObjectToObject(meta, "caches");
-    cJSON_AddNumberToObject(jc, "count", n_caches);
-    cJSON_AddNumberToObject(jc, "texel", n_texel_caches);
-    cJSON_AddNumberToObject(jc, "grid", n_caches - n_texel_caches);
-    cJSON_AddNumberToObject(jc, "moved", rs.moved);
-    cJSON_AddNumberToObject(jc, "inside", rs.inside);
+    cJSON_AddNumberToObject(jc, "count", b->n_caches);
+    cJSON_AddNumberToObject(jc, "texel", b->n_texel_caches);
+    cJSON_AddNumberToObject(jc, "grid", b->n_caches - b->n_texel_caches);
+    cJSON_AddNumberToObject(jc, "moved", b->rs.moved);
+    cJSON_AddNumberToObject(jc, "inside", b->rs.inside);
     cJSON *jk = cJSON_AddObjectToObject(meta, "links");
     cJSON_AddNumberToObject(jk, "per_cache", s->links);
     cJSON_AddNumberToObject(jk, "sh_bands", s->link_sh ? s->bands : 0);
-    cJSON_AddNumberToObject(jk, "mean_used", ls.mean_links_used);
-    cJSON_AddNumberToObject(jk, "mean_solid_angle", ls.mean_solid_angle);
-    cJSON_AddNumberToObject(jk, "rays", (double)ls.rays);
-    cJSON_AddItemToObject(meta, "lights", bake_lights_json(&scene));
-    cJSON *jem = cJSON_AddArrayToObject(meta, "emitters");
-    for (uint32_t i = 0; i < scene.n_materials; i++) {
-        const float *e = scene.materials[i].emission;
-        if (e[0] <= 0 && e[1] <= 0 && e[2] <= 0) continue;
-        cJSON *o = cJSON_CreateObject();
-        cJSON_AddStringToObject(o, "material", scene.materials[i].name);
-        cJSON_AddItemToObject(o, "emission", bake_vec3(e));
-        cJSON_AddItemToArray(jem, o);
-    }
-    cJSON *ja = cJSON_AddArrayToObject(meta, "assets");
-    for (uint32_t i = 0; i < assets.n_assets; i++) {
-        cJSON *o = cJSON_CreateObject();
-        cJSON_AddStringToObject(o, "name", assets.assets[i].name);
-        cJSON_AddNumberToObject(o, "triangles", assets.assets[i].triangle_count);
-        cJSON_AddItemToObject(o, "bounds_min", bake_vec3(assets.assets[i].bounds_min));
-        cJSON_AddItemToObject(o, "bounds_max", bake_vec3(assets.assets[i].bounds_max));
-        cJSON_AddItemToArray(ja, o);
-    }
-    meta_text = cJSON_PrintUnformatted(meta);
-    if (!meta_text) goto oom;
+    cJSON_AddNumberToObject(jk, "mean_used", b->ls.mean_links_used);
+    cJSON_AddNumberToObject(jk, "mean_solid_angle", b->ls.mean_solid_angle);
+    cJSON_AddNumberToObject(jk, "rays", (double)b->ls.rays);
+    bake_meta_lists(b, meta);
+    b->meta_text = cJSON_PrintUnformatted(meta);
+    return b->meta_text ? 0 : bake_oom(err, errlen);
+}
 
-    w = lc_lcb_writer_create();
-    if (!w) goto oom;
+/* The .lcb's sections (borrowed from the job until the write returns). */
+static int bake_add_sections(bake_job *b, char *err, size_t errlen) {
+    const lc_bake_settings *s = b->s;
+    const lc_mesh *m = &b->scene.mesh;
+    lc_lcb_writer *w = b->w = lc_lcb_writer_create();
+    if (!w) return bake_oom(err, errlen);
     int add_rc = 0;
-    add_rc |= lc_lcb_writer_add(w, "META", 1, meta_text, strlen(meta_text));
-    add_rc |= lc_lcb_writer_add(w, "MATL", sizeof(lc_lcb_material), mats, scene.n_materials);
-    add_rc |= lc_lcb_writer_add(w, "VERT", sizeof(lc_lcb_vertex), verts, m->n_vertices);
-    add_rc |= lc_lcb_writer_add(w, "TRIS", sizeof(lc_lcb_triangle), tris, m->n_triangles);
-    add_rc |= lc_lcb_writer_add(w, "SURF", sizeof(lc_lcb_surfel), surfels, n_surfels);
-    add_rc |= lc_lcb_writer_add(w, "NODE", sizeof(lc_lcb_node), hier.nodes, hier.n_nodes);
-    add_rc |= lc_lcb_writer_add(w, "LEVL", sizeof(uint32_t), hier.levels, (uint64_t)hier.n_levels + 1);
-    add_rc |= lc_lcb_writer_add(w, "CACH", sizeof(lc_lcb_cache), caches, n_caches);
-    add_rc |= lc_lcb_writer_add(w, "LMAP", sizeof(uint32_t), lm.texel_cache, (uint64_t)lm.width * lm.height);
-    add_rc |= lc_lcb_writer_add(w, "GRID", sizeof(uint32_t), cell_cache,
-                                (uint64_t)grid.dims[0] * grid.dims[1] * grid.dims[2]);
-    add_rc |= lc_lcb_writer_add(w, "LINK", sizeof(lc_lcb_link), links, n_links);
-    if (link_sh) add_rc |= lc_lcb_writer_add(w, "LKSH", sizeof(uint16_t), link_sh, n_links * s->bands * s->bands);
-    if (assets.n_assets) {
-        add_rc |= lc_lcb_writer_add(w, "ASET", sizeof(lc_lcb_asset), assets.assets, assets.n_assets);
-        add_rc |= lc_lcb_writer_add(w, "AVRT", sizeof(lc_lcb_asset_vertex), assets.vertices, assets.n_vertices);
-        add_rc |= lc_lcb_writer_add(w, "AIDX", 3 * sizeof(uint32_t), assets.indices, assets.n_triangles);
+    add_rc |= lc_lcb_writer_add(w, "META", 1, b->meta_text, strlen(b->meta_text));
+    add_rc |= lc_lcb_writer_add(w, "MATL", sizeof(lc_lcb_material), b->mats, b->scene.n_materials);
+    add_rc |= lc_lcb_writer_add(w, "VERT", sizeof(lc_lcb_vertex), b->verts, m->n_vertices);
+    add_rc |= lc_lcb_writer_add(w, "TRIS", sizeof(lc_lcb_triangle), b->tris, m->n_triangles);
+    add_rc |= lc_lcb_writer_add(w, "SURF", sizeof(lc_lcb_surfel), b->surfels, b->n_surfels);
+    add_rc |= lc_lcb_writer_add(w, "NODE", sizeof(lc_lcb_node), b->hier.nodes, b->hier.n_nodes);
+    add_rc |= lc_lcb_writer_add(w, "LEVL", sizeof(uint32_t), b->hier.levels, (uint64_t)b->hier.n_levels + 1);
+    add_rc |= lc_lcb_writer_add(w, "CACH", sizeof(lc_lcb_cache), b->caches, b->n_caches);
+    add_rc |= lc_lcb_writer_add(w, "LMAP", sizeof(uint32_t), b->lm.texel_cache, (uint64_t)b->lm.width * b->lm.height);
+    add_rc |= lc_lcb_writer_add(w, "GRID", sizeof(uint32_t), b->cell_cache,
+                                (uint64_t)b->grid.dims[0] * b->grid.dims[1] * b->grid.dims[2]);
+    add_rc |= lc_lcb_writer_add(w, "LINK", sizeof(lc_lcb_link), b->links, b->n_links);
+    if (b->link_sh)
+        add_rc |= lc_lcb_writer_add(w, "LKSH", sizeof(uint16_t), b->link_sh, b->n_links * s->bands * s->bands);
+    if (b->assets.n_assets) {
+        add_rc |= lc_lcb_writer_add(w, "ASET", sizeof(lc_lcb_asset), b->assets.assets, b->assets.n_assets);
+        add_rc |= lc_lcb_writer_add(w, "AVRT", sizeof(lc_lcb_asset_vertex), b->assets.vertices, b->assets.n_vertices);
+        add_rc |= lc_lcb_writer_add(w, "AIDX", 3 * sizeof(uint32_t), b->assets.indices, b->assets.n_triangles);
     }
     if (add_rc) {
         lc_set_err(err, errlen, "internal error assembling the bake file sections");
-        goto err;
+        return 1;
     }
-    if (lc_lcb_writer_write(w, s->output, err, errlen) != 0) {
-        rc = 3;
-        goto err;
-    }
-    if (s->glb[0] && lc_glb_write(s->glb, &scene, err, errlen) != 0) {
-        rc = 3;
-        goto err;
-    }
-    bake_stage(r, "write", &t0, s->quiet);
+    return 0;
+}
 
+/* The .lcb (atomic) and, unless turned off, the .glb. */
+static int bake_write(bake_job *b, char *err, size_t errlen) {
+    int rc;
+    if ((rc = bake_geometry_sections(b, err, errlen)) != 0 || (rc = bake_meta(b, err, errlen)) != 0 ||
+        (rc = bake_add_sections(b, err, errlen)) != 0)
+        return rc;
+    if (lc_lcb_writer_write(b->w, b->s->output, err, errlen) != 0) return 3;
+    if (b->s->glb[0] && lc_glb_write(b->s->glb, &b->scene, err, errlen) != 0) return 3;
+    return 0;
+}
+
+/* The pipeline, in order; each stage's time goes into the report under its name. */
+static const struct {
+    const char *name;
+    int (*run)(bake_job *b, char *err, size_t errlen);
+} bake_stages[] = {
+    {"import", bake_import_scene},  {"lightmap-uv", bake_lightmap_uv}, {"bvh", bake_bvh},
+    {"texels", bake_texel_caches},  {"grid", bake_grid_caches},        {"relocate", bake_relocate},
+    {"surfels", bake_surfels},      {"hierarchy", bake_hierarchy},     {"links", bake_links},
+    {"assets", bake_dynamic_assets}, {"write", bake_write},
+};
+_Static_assert(sizeof bake_stages / sizeof bake_stages[0] == BAKE_N_STAGES, "BAKE_N_STAGES counts the stages");
+
+/* What a finished bake reports besides its stage times. */
+static void bake_report_totals(const bake_job *b, lc_bake_report *r, double t_start) {
+    const lc_bake_settings *s = b->s;
     struct stat st;
     r->file_bytes = stat(s->output, &st) == 0 ? (unsigned long long)st.st_size : 0;
     r->total_seconds = (lc_clock_ms() * 1e-3) - t_start;
     struct rusage ru;
     getrusage(RUSAGE_SELF, &ru);
     r->peak_rss_kib = ru.ru_maxrss;
-    r->triangles = m->n_triangles;
-    r->surfels = n_surfels;
-    r->caches = n_caches;
-    r->texel_caches = n_texel_caches;
-    r->grid_caches = n_caches - n_texel_caches;
+    r->triangles = b->scene.mesh.n_triangles;
+    r->surfels = b->n_surfels;
+    r->caches = b->n_caches;
+    r->texel_caches = b->n_texel_caches;
+    r->grid_caches = b->n_caches - b->n_texel_caches;
     r->links_per_cache = (unsigned)s->links;
-    r->charts = uvs.n_charts;
-    r->lightmap_width = lm.width;
-    r->lightmap_height = lm.height;
-    r->atlas_usage = uvs.usage;
-    r->texel_density = uvs.texels_per_metre;
-    rc = 0;
-    goto done;
-oom:
-    lc_set_err(err, errlen, "out of memory (lower --surfels, --links or --atlas-size)");
-err:
-done:
-    lc_lcb_writer_release(w);
-    cJSON_free(meta_text);
-    cJSON_Delete(meta);
-    bake_assets_release(&assets);
-    free(mats);
-    free(verts);
-    free(tris);
-    free(links);
-    free(link_sh);
-    lc_hierarchy_release(&hier);
-    free(perm);
-    free(tri_sorted);
-    free(seen);
-    free(surfel_tri);
-    free(surfels);
-    free(cell_cache);
-    free(caches);
-    lc_lightmap_release(&lm);
-    lc_rt_release(rt);
-    lc_scene_release(&scene);
+    r->charts = b->uvs.n_charts;
+    r->lightmap_width = b->lm.width;
+    r->lightmap_height = b->lm.height;
+    r->atlas_usage = b->uvs.usage;
+    r->texel_density = b->uvs.texels_per_metre;
+}
+
+int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, size_t errlen) {
+    bake_job b;
+    memset(&b, 0, sizeof b);
+    b.s = s;
+    lc_bake_report local_report;
+    lc_bake_report *r = report ? report : &local_report;
+    memset(r, 0, sizeof *r);
+
+    lc_parallel_set_threads(s->threads);
+    lc_progress_set_enabled(!s->quiet);
+    double t_start = (lc_clock_ms() * 1e-3), t0 = t_start;
+    int rc = 0;
+    for (size_t i = 0; i < BAKE_N_STAGES && rc == 0; i++) {
+        rc = bake_stages[i].run(&b, err, errlen);
+        if (rc == 0) bake_stage(r, bake_stages[i].name, &t0, s->quiet);
+    }
+    if (rc == 0) bake_report_totals(&b, r, t_start);
+    bake_job_release(&b);
     return rc;
 }
 
