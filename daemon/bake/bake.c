@@ -27,6 +27,7 @@
 #include "util/log.h"
 #include "util/parallel.h"
 #include "util/progress.h"
+#include "util/ray_offset.h"
 #include "util/vec.h"
 
 #define LC_BAKE_VERSION "0.1.0"
@@ -391,7 +392,7 @@ static void bake_buried_range(void *arg, size_t begin, size_t end, int thread) {
         lc_v3_basis(n, &t, &b);
         float pm = fmaxf(fabsf(x->position[0]), fmaxf(fabsf(x->position[1]), fabsf(x->position[2])));
         float org[3];
-        lc_v3_store(org, lc_v3_add(lc_v3_load(x->position), lc_v3_scale(n, 1e-4f + 1e-6f * pm)));
+        lc_v3_store(org, lc_v3_add(lc_v3_load(x->position), lc_v3_scale(n, lc_ray_lift_point(pm))));
         uint32_t back = 0;
         for (uint32_t j = 0; j < R; j++) {
             float z = 1.0f - ((float)j + 0.5f) / (float)R, r = sqrtf(fmaxf(0.0f, 1 - z * z));

@@ -9,6 +9,7 @@
 #include "util/log.h"
 #include "util/parallel.h"
 #include "util/progress.h"
+#include "util/ray_offset.h"
 #include "util/rng.h"
 #include "util/sh.h"
 #include "util/vec.h"
@@ -26,9 +27,6 @@
  * Measured (moderate, 128 links): Cornell lightmap mean 6.49% -> 6.28%; Sponza p95 67% ->
  * 61%, grid p95 53% -> 44%. */
 #define LINKS_SPREAD_K 1.0
-
-/* Ray-origin lift off a texel cache's surface (plus 1e-6 x the largest coordinate). */
-#define LINKS_EPS_BASE 1e-4f
 
 /* Stream salts: refinement and the final estimate use independent jitter. */
 #define LINKS_PASS_REFINE 0x5EF1E5ull
@@ -114,7 +112,6 @@ typedef struct {
     uint32_t *used;         /* per cache: links with factor > 0 */
     double *omega;          /* per cache: sum of link solid angles */
     uint64_t *rays;         /* per cache */
-    float eps_base;
     lc_progress *progress;
     links_hash hash;
 } links_ctx;
@@ -492,7 +489,7 @@ static int links_cache_setup(const links_ctx *ctx, uint32_t ci, links_cache *lc)
     n = nlen > 1e-6f ? lc_v3_scale(n, 1.0f / nlen) : lc_v3(0, 0, 0);
     float pm = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
     /* Texel caches sit on their surface: lift the ray origin off it (float noise grows with |p|). */
-    float lift = ctx->eps_base + 1e-6f * pm;
+    float lift = lc_ray_lift_point(pm);
     lc_v3_store(lc->p, p);
     lc_v3_store(lc->n, n);
     lc_v3_store(lc->org, lc_v3_add(p, lc_v3_scale(n, lift)));
@@ -644,7 +641,7 @@ int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_sur
     }
     const uint32_t L = params->links_per_cache;
     const size_t nsh = link_sh ? (size_t)params->sh_bands * params->sh_bands : 0;
-    ctx = (links_ctx){rt, surfels, n_surfels, h, caches, params, links, link_sh, NULL, NULL, NULL, NULL, LINKS_EPS_BASE, NULL,
+    ctx = (links_ctx){rt, surfels, n_surfels, h, caches, params, links, link_sh, NULL, NULL, NULL, NULL, NULL,
                       {{0, 0, 0}, 0, 0, NULL, NULL, NULL, NULL}};
     ctx.scratch = calloc((size_t)threads, sizeof *ctx.scratch);
     ctx.used = calloc(n_caches ? n_caches : 1, sizeof *ctx.used);
@@ -746,7 +743,6 @@ int lc_links_gather_bound(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_
                           .probe_rays = probe_rays};
     links_ctx ctx = {0};
     ctx.rt = rt, ctx.surfels = surfels, ctx.n_surfels = n_surfels, ctx.caches = caches, ctx.prm = &prm;
-    ctx.eps_base = LINKS_EPS_BASE;
     ctx.scratch = calloc((size_t)threads, sizeof *ctx.scratch);
     if (!ctx.scratch) goto oom;
     for (int t = 0; t < threads; t++) {

@@ -7,6 +7,7 @@
 
 #include "util/log.h"
 #include "util/parallel.h"
+#include "util/ray_offset.h"
 #include "util/rng.h"
 #include "util/vec.h"
 
@@ -115,11 +116,11 @@ void lc_relocate_caches(const lc_rt *rt, lc_lcb_cache *caches, uint32_t n, const
         goto err;
     }
     /* Ray offset: 0.1 mm, grown with the scene's coordinate magnitude so it stays above float
-     * precision for large scenes. */
+     * precision for large scenes (lc_ray_lift_relocate). */
     const lc_mesh *mesh = lc_rt_mesh(rt);
     float amax = 0;
     for (uint32_t v = 0; v < 3 * mesh->n_vertices; v++) amax = fmaxf(amax, fabsf(mesh->position[v]));
-    reloc_ctx ctx = {rt, caches, params, outcome, fmaxf(1e-4f, amax * 1e-5f)};
+    reloc_ctx ctx = {rt, caches, params, outcome, lc_ray_lift_relocate(amax)};
     lc_parallel_for(n, 64, reloc_range, &ctx);
     if (stats)
         for (uint32_t i = 0; i < n; i++) {

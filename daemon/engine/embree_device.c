@@ -5,6 +5,7 @@
 #include <stdio.h>
 
 #include "util/log.h"
+#include "util/ray_offset.h"
 
 static void embree_device_error(void *user, enum RTCError code, const char *str) {
     lc_error((const char *)user, "embree error %d: %s", (int)code, str ? str : "");
@@ -26,5 +27,5 @@ float lc_embree_scene_epsilon(const lc_lcb_view *v) {
     float extent = 0;
     for (uint32_t i = 0; i < v->n_vertices; i++)
         for (int k = 0; k < 3; k++) extent = fmaxf(extent, fabsf(v->vertices[i].position[k]));
-    return 1e-4f + 2e-6f * extent;
+    return lc_ray_lift_scene(extent);
 }

@@ -11,7 +11,8 @@
  * under `module` (a string that outlives the device). NULL with err set on failure. */
 RTCDevice lc_embree_device_new(int threads, const char *module, char *err, size_t errlen);
 
-/* Ray start offset for the bake: 1e-4 m plus a few float ulps of the scene's extent. */
+/* The runtime ray lift for this bake: lc_ray_lift_scene (util/ray_offset.h) of the largest
+ * |vertex coordinate| of the static mesh; the engine and the reference both take it. */
 float lc_embree_scene_epsilon(const lc_lcb_view *v);
 
 #endif

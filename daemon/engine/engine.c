@@ -17,6 +17,7 @@
 #include "util/clock.h"
 #include "util/log.h"
 #include "util/parallel.h"
+#include "util/ray_offset.h"
 #include "util/rng.h"
 #include "util/sh.h"
 
@@ -28,7 +29,7 @@ struct lc_engine {
     const lc_lcb_view *v;
     const lc_transport_ops *ops;
     void *impl;
-    float scene_eps; /* ray offset scaled to the scene */
+    float scene_eps; /* ray offset scaled to the scene (lc_ray_lift_scene) */
     /* Embree: static geometry in its own scene, each asset in its own scene, and a top
      * scene of instances rebuilt when the objects change. */
     RTCDevice device;
@@ -360,7 +361,7 @@ static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread)
                     float cos_s = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
                     float cos_l = -(ln[0] * d[0] + ln[1] * d[1] + ln[2] * d[2]);
                     if (cos_s <= 0 || cos_l <= 0) continue;
-                    if (engine_occluded(e->top, org, d, dist * (1.0f - 1e-4f) - e->scene_eps)) continue;
+                    if (engine_occluded(e->top, org, d, lc_ray_shadow_tfar(dist, e->scene_eps))) continue;
                     sum += cos_s * cos_l / d2 * lc_sm_range_window(d2, l->range);
                 }
                 float g = scale * sum * fr.area / ENGINE_AREA_SAMPLES;
@@ -376,7 +377,7 @@ static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread)
                 float att = lc_sm_range_window(d2, l->range) / d2;
                 if (l->type == LC_ENGINE_LIGHT_SPOT) att *= lc_sm_spot_cone(l, d);
                 if (att <= 0) continue;
-                if (engine_occluded(e->top, org, d, dist * (1.0f - 1e-4f) - e->scene_eps)) continue;
+                if (engine_occluded(e->top, org, d, lc_ray_shadow_tfar(dist, e->scene_eps))) continue;
                 for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn * att;
             }
         }

@@ -16,6 +16,7 @@
 #include "util/log.h"
 #include "util/parallel.h"
 #include "util/progress.h"
+#include "util/ray_offset.h"
 #include "util/rng.h"
 #include "util/sh.h"
 
@@ -25,7 +26,7 @@
 struct lc_ref {
     const lc_lcb *bake;
     const lc_lcb_view *v;
-    float eps; /* ray offset scaled to the scene, as the engine's */
+    float eps; /* ray offset scaled to the scene, as the engine's (lc_ray_lift_scene) */
     float surfel_area; /* mean surfel area: the bake's spacing (exposure reweighs surfels, not the sum) */
     /* State (copied). */
     lc_engine_light *lights;
@@ -375,7 +376,7 @@ static void ref_direct(const lc_ref *r, const float org[3], const float n[3], co
             float cos_s = ref_dot(n, d), cos_l = -ref_dot(ln, d);
             if (cos_s <= 0 || cos_l <= 0 || ref_dot(ng, d) <= 0) continue;
             (*rays)++;
-            if (ref_occluded(r, org, d, dist * (1.0f - 1e-4f) - r->eps)) continue;
+            if (ref_occluded(r, org, d, lc_ray_shadow_tfar(dist, r->eps))) continue;
             float g = scale * fr.area * cos_s * cos_l / d2 * lc_sm_range_window(d2, l->range);
             for (int k = 0; k < 3; k++) out[k] += g * l->color[k];
         } else { /* point, spot */
@@ -390,7 +391,7 @@ static void ref_direct(const lc_ref *r, const float org[3], const float n[3], co
             if (l->type == LC_ENGINE_LIGHT_SPOT) att *= lc_sm_spot_cone(l, d);
             if (att <= 0) continue;
             (*rays)++;
-            if (ref_occluded(r, org, d, dist * (1.0f - 1e-4f) - r->eps)) continue;
+            if (ref_occluded(r, org, d, lc_ray_shadow_tfar(dist, r->eps))) continue;
             for (int k = 0; k < 3; k++) out[k] += scale * l->color[k] * cosn * att;
         }
     }
@@ -427,7 +428,7 @@ static int ref_emit_sample(const lc_ref *r, const float org[3], const float *n, 
     if (n && ref_dot(n, d) <= 0) return 0;
     if (ng && ref_dot(ng, d) <= 0) return 0;
     (*rays)++;
-    if (ref_occluded(r, org, d, dist * (1.0f - 1e-4f) - r->eps)) return 0;
+    if (ref_occluded(r, org, d, lc_ray_shadow_tfar(dist, r->eps))) return 0;
     *le = r->emission + 3 * (size_t)r->v->triangles[t].material;
     *pdf = r->emit_pdf[t] * d2 / cos_l;
     return 1;
