@@ -136,11 +136,20 @@ static void tcpu_texel_weights(const lc_lcb_view *v, const float cone[256][8], f
 
 #define TCPU_BLOCK 16
 
+/* The gather's AVX2 clone is picked by an ifunc resolver at load time; ThreadSanitizer's
+ * instrumentation of that resolver runs before its runtime is up and crashes, so the TSan
+ * build keeps one plain version. */
+#if defined(__SANITIZE_THREAD__)
+#define TCPU_CLONES
+#else
+#define TCPU_CLONES __attribute__((target_clones("avx2", "default")))
+#endif
+
 /* Blocked gather for bands <= 4, the common case: links in blocks of 16 as structure-of-
  * arrays so the octahedral decode, the SH basis and the accumulation vectorise; per-lane
  * partial sums avoid float reductions (which the compiler may not reorder). Built for AVX2
  * and a baseline, chosen at load time. Writes acc[channel][coefficient]. */
-__attribute__((target_clones("avx2", "default"))) static void
+TCPU_CLONES static void
 tcpu_gather_blocked(const tcpu *t, const lc_lcb_link *lk, uint32_t used, int bands, int ncc, float acc[3][16]) {
     float lane[3][16][TCPU_BLOCK];
     memset(lane, 0, sizeof lane);
