@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages lucent builds and tests with, if missing.
 # Runs `apt-get update` at most once; safe to run repeatedly.
+#   --build   only what building needs (deploy/Containerfile's build stage)
 set -euo pipefail
 
 packages=(
@@ -9,8 +10,16 @@ packages=(
   libcjson-dev libwebsockets-dev libssl-dev libpng-dev zlib1g-dev
   libepoxy-dev libegl-dev libegl1-mesa-dev libgl1-mesa-dri libgl-dev
   liblapacke-dev libblas-dev
-  python3-websockets python3-pytest python3-jsonschema jq
 )
+if [ "${1:-}" != "--build" ]; then
+  packages+=(
+    python3-websockets python3-pytest python3-jsonschema jq
+    # scripts/fuzz.sh: clang + its libFuzzer/sanitizer runtimes, llvm-symbolizer for the reports
+    clang libclang-rt-14-dev llvm
+    # promtool (checks lucentd's /metrics text)
+    prometheus
+  )
+fi
 
 missing=()
 for p in "${packages[@]}"; do
