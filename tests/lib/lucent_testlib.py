@@ -264,7 +264,8 @@ def healthz(port):
 
 
 def wait_metric(port, name, pred, timeout=10.0, what=None):
-    """Polls /metrics until pred(value) holds for sample `name` (None when absent); returns the value."""
+    """Polls /metrics until pred(value) holds for sample `name` (None when absent); returns the value.
+    WaitTimeout after `timeout` s names `what` (a string or a callable) and the last value."""
     box = []
 
     def cond():
@@ -272,7 +273,8 @@ def wait_metric(port, name, pred, timeout=10.0, what=None):
         box[:] = [v]
         return pred(v) and (v if v else True)
 
-    wait_for(cond, timeout, lambda: "%s (%s is %r)" % (what or "the metric's condition", name, box[0] if box else None))
+    wait_for(cond, timeout, lambda: "%s (%s is %r)" % (_describe(what) or "the metric's condition", name,
+                                                         box[0] if box else None))
     return box[0]
 
 
@@ -283,7 +285,7 @@ def reload(p, port, timeout=10.0):
         raise AssertionError("/metrics has no lucent_config_reloads_total")
     p.send_signal(signal.SIGHUP)
     return wait_metric(port, "lucent_config_reloads_total", lambda v: v is not None and v > before, timeout,
-                       "lucentd applying the SIGHUP (log: %r)" % p.log.tail(300))
+                       lambda: "lucentd applying the SIGHUP (log: %r)" % p.log.tail(300))
 
 # --------------------------------------------------------------------------- WebSocket
 
