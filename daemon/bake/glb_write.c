@@ -235,13 +235,9 @@ err:
     return NULL;
 }
 
-int lc_glb_write(const char *path, const lc_scene *scene, char *err, size_t errlen) {
-    cJSON *root = NULL;
-    char *json = NULL;
-    unsigned char *file = NULL;
-    uint32_t *map = NULL, *stamp = NULL, *per_mat = NULL;
-    glb_buf bin = {0};
-    int rc = -1;
+/* Refuses what the writer could not index safely: no path or scene, a mesh with arrays
+ * missing, indices or materials out of range. -1 with err. */
+static int glb_check_scene(const char *path, const lc_scene *scene, char *err, size_t errlen) {
     if (!path || !scene) {
         lc_set_err(err, errlen, "glb write: no output path or scene given");
         return -1;
@@ -267,6 +263,113 @@ int lc_glb_write(const char *path, const lc_scene *scene, char *err, size_t errl
                        m->material[t], scene->n_materials);
             return -1;
         }
+    return 0;
+}
+
+/* The mesh of the primitives, the node showing it and the scene of that node. prims is
+ * always taken (added to root or freed): an empty scene gets neither mesh nor node and is
+ * still a valid file. -1 out of memory. */
+static int glb_add_mesh(cJSON *root, cJSON *prims) {
+    int n_prims = cJSON_GetArraySize(prims);
+    if (n_prims > 0) {
+        cJSON *meshes = cJSON_AddArrayToObject(root, "meshes");
+        cJSON *mesh = cJSON_CreateObject();
+        if (!meshes || !mesh) {
+            cJSON_Delete(mesh), cJSON_Delete(prims);
+            return -1;
+        }
+        cJSON_AddItemToArray(meshes, mesh);
+        cJSON_AddItemToObject(mesh, "primitives", prims);
+        cJSON *nodes = cJSON_AddArrayToObject(root, "nodes");
+        cJSON *node = cJSON_CreateObject();
+        if (!nodes || !node) {
+            cJSON_Delete(node);
+            return -1;
+        }
+        cJSON_AddItemToArray(nodes, node);
+        if (!cJSON_AddStringToObject(node, "name", "lucent") || !cJSON_AddNumberToObject(node, "mesh", 0)) return -1;
+    } else {
+        cJSON_Delete(prims);
+    }
+    cJSON *scenes = cJSON_AddArrayToObject(root, "scenes");
+    cJSON *sc = cJSON_CreateObject();
+    if (!scenes || !sc) {
+        cJSON_Delete(sc);
+        return -1;
+    }
+    cJSON_AddItemToArray(scenes, sc);
+    cJSON *sn = cJSON_AddArrayToObject(sc, "nodes");
+    if (!sn) return -1;
+    if (n_prims > 0) {
+        cJSON *zero = cJSON_CreateNumber(0);
+        if (!zero) return -1;
+        cJSON_AddItemToArray(sn, zero);
+    }
+    return cJSON_AddNumberToObject(root, "scene", 0) ? 0 : -1;
+}
+
+/* What follows the scene: the extension list when an emitter needed its strength, and the
+ * BIN chunk's one buffer. -1 out of memory. */
+static int glb_add_tail(cJSON *root, int uses_strength, size_t bin_len) {
+    if (uses_strength) {
+        cJSON *used = cJSON_AddArrayToObject(root, "extensionsUsed");
+        cJSON *name = cJSON_CreateString("KHR_materials_emissive_strength");
+        if (!used || !name) {
+            cJSON_Delete(name);
+            return -1;
+        }
+        cJSON_AddItemToArray(used, name);
+    }
+    if (bin_len) {
+        cJSON *buffers = cJSON_AddArrayToObject(root, "buffers");
+        cJSON *b0 = cJSON_CreateObject();
+        if (!buffers || !b0) {
+            cJSON_Delete(b0);
+            return -1;
+        }
+        cJSON_AddItemToArray(buffers, b0);
+        if (!cJSON_AddNumberToObject(b0, "byteLength", (double)bin_len)) return -1;
+    }
+    return 0;
+}
+
+/* The GLB container in *file (*total bytes): header, the JSON chunk padded with spaces (as
+ * the spec asks), the BIN chunk padded with zeros. -1 with err. */
+static int glb_pack(const char *path, const char *json, const glb_buf *bin, unsigned char **file, size_t *total,
+                    char *err, size_t errlen) {
+    size_t jlen = strlen(json), jpad = (jlen + 3) & ~(size_t)3, bpad = (bin->len + 3) & ~(size_t)3;
+    *total = 12 + 8 + jpad + (bin->len ? 8 + bpad : 0);
+    if (*total > GLB_MAX_BYTES) {
+        lc_set_err(err, errlen, "%s: the GLB would be %zu bytes, over the format's 4 GiB limit", path, *total);
+        return -1;
+    }
+    unsigned char *p = *file = malloc(*total);
+    if (!p) {
+        lc_set_err(err, errlen, "%s: out of memory building the glTF", path);
+        return -1;
+    }
+    put_u32(p, GLB_MAGIC), put_u32(p + 4, 2), put_u32(p + 8, (uint32_t)*total), p += 12;
+    put_u32(p, (uint32_t)jpad), put_u32(p + 4, GLB_CHUNK_JSON), p += 8;
+    memcpy(p, json, jlen);
+    memset(p + jlen, ' ', jpad - jlen);
+    p += jpad;
+    if (bin->len) {
+        put_u32(p, (uint32_t)bpad), put_u32(p + 4, GLB_CHUNK_BIN), p += 8;
+        memcpy(p, bin->data, bin->len);
+        memset(p + bin->len, 0, bpad - bin->len);
+    }
+    return 0;
+}
+
+int lc_glb_write(const char *path, const lc_scene *scene, char *err, size_t errlen) {
+    cJSON *root = NULL;
+    char *json = NULL;
+    unsigned char *file = NULL;
+    uint32_t *map = NULL, *stamp = NULL, *per_mat = NULL;
+    glb_buf bin = {0};
+    int rc = -1;
+    if (glb_check_scene(path, scene, err, errlen) != 0) return -1;
+    const lc_mesh *m = &scene->mesh;
 
     per_mat = calloc(scene->n_materials ? scene->n_materials : 1, sizeof *per_mat);
     map = malloc((size_t)(m->n_vertices ? m->n_vertices : 1) * sizeof *map);
@@ -307,83 +410,12 @@ int lc_glb_write(const char *path, const lc_scene *scene, char *err, size_t errl
         }
         cJSON_AddItemToArray(prims, p);
     }
-    int n_prims = cJSON_GetArraySize(prims);
-    if (n_prims > 0) {
-        cJSON *meshes = cJSON_AddArrayToObject(root, "meshes");
-        cJSON *mesh = cJSON_CreateObject();
-        if (!meshes || !mesh) {
-            cJSON_Delete(mesh), cJSON_Delete(prims);
-            goto oom;
-        }
-        cJSON_AddItemToArray(meshes, mesh);
-        cJSON_AddItemToObject(mesh, "primitives", prims);
-        cJSON *nodes = cJSON_AddArrayToObject(root, "nodes");
-        cJSON *node = cJSON_CreateObject();
-        if (!nodes || !node) {
-            cJSON_Delete(node);
-            goto oom;
-        }
-        cJSON_AddItemToArray(nodes, node);
-        if (!cJSON_AddStringToObject(node, "name", "lucent") || !cJSON_AddNumberToObject(node, "mesh", 0)) goto oom;
-    } else {
-        cJSON_Delete(prims); /* an empty scene is still a valid file */
-    }
-    cJSON *scenes = cJSON_AddArrayToObject(root, "scenes");
-    cJSON *sc = cJSON_CreateObject();
-    if (!scenes || !sc) {
-        cJSON_Delete(sc);
-        goto oom;
-    }
-    cJSON_AddItemToArray(scenes, sc);
-    cJSON *sn = cJSON_AddArrayToObject(sc, "nodes");
-    if (!sn) goto oom;
-    if (n_prims > 0) { /* prims belongs to root (or is freed) by now */
-        cJSON *zero = cJSON_CreateNumber(0);
-        if (!zero) goto oom;
-        cJSON_AddItemToArray(sn, zero);
-    }
-    if (!cJSON_AddNumberToObject(root, "scene", 0)) goto oom;
-    if (uses_strength) {
-        cJSON *used = cJSON_AddArrayToObject(root, "extensionsUsed");
-        cJSON *name = cJSON_CreateString("KHR_materials_emissive_strength");
-        if (!used || !name) {
-            cJSON_Delete(name);
-            goto oom;
-        }
-        cJSON_AddItemToArray(used, name);
-    }
-    if (bin.len) {
-        cJSON *buffers = cJSON_AddArrayToObject(root, "buffers");
-        cJSON *b0 = cJSON_CreateObject();
-        if (!buffers || !b0) {
-            cJSON_Delete(b0);
-            goto oom;
-        }
-        cJSON_AddItemToArray(buffers, b0);
-        if (!cJSON_AddNumberToObject(b0, "byteLength", (double)bin.len)) goto oom;
-    }
+    if (glb_add_mesh(root, prims) != 0 || glb_add_tail(root, uses_strength, bin.len) != 0) goto oom;
 
     json = cJSON_PrintUnformatted(root);
     if (!json) goto oom;
-    size_t jlen = strlen(json), jpad = (jlen + 3) & ~(size_t)3, bpad = (bin.len + 3) & ~(size_t)3;
-    size_t total = 12 + 8 + jpad + (bin.len ? 8 + bpad : 0);
-    if (total > GLB_MAX_BYTES) {
-        lc_set_err(err, errlen, "%s: the GLB would be %zu bytes, over the format's 4 GiB limit", path, total);
-        goto out;
-    }
-    file = malloc(total);
-    if (!file) goto oom;
-    unsigned char *p = file;
-    put_u32(p, GLB_MAGIC), put_u32(p + 4, 2), put_u32(p + 8, (uint32_t)total), p += 12;
-    put_u32(p, (uint32_t)jpad), put_u32(p + 4, GLB_CHUNK_JSON), p += 8;
-    memcpy(p, json, jlen);
-    memset(p + jlen, ' ', jpad - jlen); /* the spec pads JSON with spaces */
-    p += jpad;
-    if (bin.len) {
-        put_u32(p, (uint32_t)bpad), put_u32(p + 4, GLB_CHUNK_BIN), p += 8;
-        memcpy(p, bin.data, bin.len);
-        memset(p + bin.len, 0, bpad - bin.len);
-    }
+    size_t total;
+    if (glb_pack(path, json, &bin, &file, &total, err, errlen) != 0) goto out;
     rc = lc_fs_write_atomic(path, file, total, err, errlen);
     goto out;
 oom:
