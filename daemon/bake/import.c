@@ -811,30 +811,17 @@ static int convert_lights(const struct aiScene *ai, const char *path, double sca
 
 /* ---- entry point ------------------------------------------------------------------------- */
 
-int lc_scene_import(const char *path, const lc_import_params *params, lc_scene *out, char *err, size_t errlen) {
-    const struct aiScene *ai = NULL;
-    imp_geo g;
-    imp_tex_ctx tc;
-    lc_scene s;
-    imp_gltf_strength *strengths = NULL;
-    uint32_t n_strengths = 0;
-    memset(&g, 0, sizeof g);
-    memset(&tc, 0, sizeof tc);
-    memset(&s, 0, sizeof s);
-    if (out) memset(out, 0, sizeof *out);
-    if (!path || !*path || !out) {
-        lc_set_err(err, errlen, "scene import: no input path or output given");
-        return -1;
-    }
-    double scale = params ? params->scale : 1.0;
+/* What is checked before Assimp sees the file: a valid scale, a supported extension, a
+ * non-empty regular file. Sets *is_gltf / *is_glb. -1 with err. */
+static int imp_check_input(const char *path, double scale, int *is_gltf, int *is_glb, char *err, size_t errlen) {
     if (!isfinite(scale) || !(scale > 0)) {
         lc_set_err(err, errlen, "%s: scale %g is invalid; give a finite scale > 0 (e.g. 0.003 for millimetre-ish units)",
                    path, scale);
         return -1;
     }
     const char *ext = path_ext(path);
-    int is_gltf = !strcasecmp(ext, "gltf"), is_glb = !strcasecmp(ext, "glb");
-    if (!is_gltf && !is_glb && strcasecmp(ext, "obj") && strcasecmp(ext, "ply")) {
+    *is_gltf = !strcasecmp(ext, "gltf"), *is_glb = !strcasecmp(ext, "glb");
+    if (!*is_gltf && !*is_glb && strcasecmp(ext, "obj") && strcasecmp(ext, "ply")) {
         lc_set_err(err, errlen, "%s: unsupported format '.%s'; convert it to glTF 2.0 (.gltf/.glb), OBJ or PLY",
                    path, ext);
         return -1;
@@ -852,63 +839,83 @@ int lc_scene_import(const char *path, const lc_import_params *params, lc_scene *
         lc_set_err(err, errlen, "%s: the file is empty", path);
         return -1;
     }
+    return 0;
+}
 
+/* Assimp's import of path: triangulated, identical vertices joined, normals generated where
+ * the file has none. NULL with err. */
+static const struct aiScene *imp_read(const char *path, char *err, size_t errlen) {
     /* Generated normals smooth only across edges flatter than 60 degrees: Assimp's default
      * (175) rounds the corners of boxes, tilting texel and surfel normals at hard edges. */
     struct aiPropertyStore *props = aiCreatePropertyStore();
     if (!props) {
         lc_set_err(err, errlen, "%s: out of memory", path);
-        goto err;
+        return NULL;
     }
     aiSetImportPropertyFloat(props, AI_CONFIG_PP_GSN_MAX_SMOOTHING_ANGLE, 60.0f);
-    ai = aiImportFileExWithProperties(path,
-                                      aiProcess_Triangulate | aiProcess_GenSmoothNormals |
-                                          aiProcess_JoinIdenticalVertices | aiProcess_SortByPType |
-                                          aiProcess_ValidateDataStructure,
-                                      NULL, props);
+    const struct aiScene *ai = aiImportFileExWithProperties(path,
+                                                            aiProcess_Triangulate | aiProcess_GenSmoothNormals |
+                                                                aiProcess_JoinIdenticalVertices |
+                                                                aiProcess_SortByPType | aiProcess_ValidateDataStructure,
+                                                            NULL, props);
     aiReleasePropertyStore(props);
     if (!ai) {
         lc_set_err(err, errlen, "%s: Assimp could not import it: %s", path, aiGetErrorString());
-        goto err;
+        return NULL;
     }
     if ((ai->mFlags & AI_SCENE_FLAGS_INCOMPLETE) || !ai->mRootNode) {
         lc_set_err(err, errlen, "%s: Assimp returned an incomplete scene (no geometry tree); check the file", path);
-        goto err;
+        aiReleaseImport(ai);
+        return NULL;
     }
+    return ai;
+}
 
-    /* materials first: triangles index them */
-    s.n_materials = ai->mNumMaterials ? ai->mNumMaterials : 1;
-    s.materials = calloc(s.n_materials, sizeof *s.materials);
-    if (!s.materials) {
-        lc_set_err(err, errlen, "%s: out of memory for %u materials", path, s.n_materials);
-        goto err;
+/* The scene's materials, first because triangles index them (at least one: a file without
+ * any gets a default), their textures loaded through tc (relative to the model's
+ * directory). -1 with err. */
+static int imp_materials(const struct aiScene *ai, const char *path, int is_gltf, int is_glb, lc_scene *s,
+                         imp_tex_ctx *tc, char *err, size_t errlen) {
+    s->n_materials = ai->mNumMaterials ? ai->mNumMaterials : 1;
+    s->materials = calloc(s->n_materials, sizeof *s->materials);
+    if (!s->materials) {
+        lc_set_err(err, errlen, "%s: out of memory for %u materials", path, s->n_materials);
+        return -1;
     }
-    tc.ai = ai, tc.model = path, tc.s = &s;
-    {
-        const char *slash = strrchr(path, '/');
-        if (!slash)
-            snprintf(tc.dir, sizeof tc.dir, ".");
-        else if (slash == path)
-            snprintf(tc.dir, sizeof tc.dir, "/");
-        else if ((size_t)(slash - path) >= sizeof tc.dir) {
-            lc_set_err(err, errlen, "%s: directory path longer than %d bytes", path, IMPORT_PATH_MAX - 1);
-            goto err;
-        } else
-            snprintf(tc.dir, sizeof tc.dir, "%.*s", (int)(slash - path), path);
-    }
-    if (is_gltf || is_glb) strengths = gltf_emissive_strengths(path, is_glb, &n_strengths);
-    for (uint32_t i = 0; i < s.n_materials; i++) {
-        lc_material *m = &s.materials[i];
+    tc->ai = ai, tc->model = path, tc->s = s;
+    const char *slash = strrchr(path, '/');
+    if (!slash)
+        snprintf(tc->dir, sizeof tc->dir, ".");
+    else if (slash == path)
+        snprintf(tc->dir, sizeof tc->dir, "/");
+    else if ((size_t)(slash - path) >= sizeof tc->dir) {
+        lc_set_err(err, errlen, "%s: directory path longer than %d bytes", path, IMPORT_PATH_MAX - 1);
+        return -1;
+    } else
+        snprintf(tc->dir, sizeof tc->dir, "%.*s", (int)(slash - path), path);
+    uint32_t n_strengths = 0;
+    imp_gltf_strength *strengths = is_gltf || is_glb ? gltf_emissive_strengths(path, is_glb, &n_strengths) : NULL;
+    for (uint32_t i = 0; i < s->n_materials; i++) {
+        lc_material *m = &s->materials[i];
         snprintf(m->name, sizeof m->name, "material%u", i);
         m->base_color[0] = m->base_color[1] = m->base_color[2] = 0.8f;
         m->base_texture = -1;
         if (i < ai->mNumMaterials && ai->mMaterials && ai->mMaterials[i])
-            convert_material(&tc, ai->mMaterials[i], i, m, gltf_strength_for(ai, i, strengths, n_strengths));
+            convert_material(tc, ai->mMaterials[i], i, m, gltf_strength_for(ai, i, strengths, n_strengths));
     }
+    free(strengths);
+    return 0;
+}
 
-    /* geometry: count, allocate, fill, clean */
-    g.ai = ai, g.path = path, g.scale = scale, g.flip_winding = params ? params->flip_winding != 0 : 0;
-    g.n_materials = s.n_materials;
+/* The mesh: the node tree walked twice (count, allocate, fill), then degenerate and
+ * non-finite triangles dropped, unused vertices compacted, broken normals fixed. The scene
+ * takes the arrays. -1 with err. */
+static int imp_geometry(const struct aiScene *ai, const char *path, double scale, int flip_winding, lc_scene *s,
+                        char *err, size_t errlen) {
+    imp_geo g;
+    memset(&g, 0, sizeof g);
+    g.ai = ai, g.path = path, g.scale = scale, g.flip_winding = flip_winding;
+    g.n_materials = s->n_materials;
     imp_mat4 id = mat_identity();
     if (walk_nodes(&g, ai->mRootNode, &id, 0, err, errlen) < 0) goto err;
     if (g.count_t == 0) {
@@ -939,26 +946,42 @@ int lc_scene_import(const char *path, const lc_import_params *params, lc_scene *
         lc_set_err(err, errlen, "%s: out of memory while cleaning the mesh", path);
         goto err;
     }
-    s.mesh.n_vertices = g.nv, s.mesh.n_triangles = g.nt;
-    s.mesh.position = g.pos, s.mesh.normal = g.nrm, s.mesh.uv0 = g.uv0, s.mesh.uv1 = g.uv1;
-    s.mesh.index = g.idx, s.mesh.material = g.mat;
-    memset(&g, 0, sizeof g); /* ownership moved to the scene */
-    s.has_lightmap_uv = s.mesh.uv1 != NULL;
-    s.n_degenerate_dropped = dropped;
+    s->mesh.n_vertices = g.nv, s->mesh.n_triangles = g.nt;
+    s->mesh.position = g.pos, s->mesh.normal = g.nrm, s->mesh.uv0 = g.uv0, s->mesh.uv1 = g.uv1;
+    s->mesh.index = g.idx, s->mesh.material = g.mat;
+    s->has_lightmap_uv = s->mesh.uv1 != NULL;
+    s->n_degenerate_dropped = dropped;
+    return 0;
+err:
+    free(g.pos), free(g.nrm), free(g.uv0), free(g.uv1), free(g.idx), free(g.mat);
+    return -1;
+}
 
+int lc_scene_import(const char *path, const lc_import_params *params, lc_scene *out, char *err, size_t errlen) {
+    const struct aiScene *ai = NULL;
+    imp_tex_ctx tc;
+    lc_scene s;
+    memset(&tc, 0, sizeof tc);
+    memset(&s, 0, sizeof s);
+    if (out) memset(out, 0, sizeof *out);
+    if (!path || !*path || !out) {
+        lc_set_err(err, errlen, "scene import: no input path or output given");
+        return -1;
+    }
+    double scale = params ? params->scale : 1.0;
+    int is_gltf = 0, is_glb = 0;
+    if (imp_check_input(path, scale, &is_gltf, &is_glb, err, errlen) != 0) return -1;
+    if (!(ai = imp_read(path, err, errlen))) goto err;
+    if (imp_materials(ai, path, is_gltf, is_glb, &s, &tc, err, errlen) != 0) goto err;
+    if (imp_geometry(ai, path, scale, params ? params->flip_winding != 0 : 0, &s, err, errlen) != 0) goto err;
     if (convert_lights(ai, path, scale, &s, err, errlen) < 0) goto err;
     lc_scene_update_bounds(&s);
     snprintf(s.source, sizeof s.source, "%s", path);
-
-    free(strengths);
     free(tc.keys);
     aiReleaseImport(ai);
     *out = s;
     return 0;
-
 err:
-    free(g.pos), free(g.nrm), free(g.uv0), free(g.uv1), free(g.idx), free(g.mat);
-    free(strengths);
     free(tc.keys);
     lc_scene_release(&s);
     if (ai) aiReleaseImport(ai);
