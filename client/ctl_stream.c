@@ -636,57 +636,180 @@ static double latency_viewer_delay(const latency_viewer *v, uint64_t want, doubl
     return -1;
 }
 
-int ctl_cmd_latency(int argc, char **argv) {
-    if (ctl_wants_help(argc, argv)) {
-        usage_latency(stdout);
-        return CTL_EXIT_OK;
-    }
-    double count = 20, interval = 0.1, clients = 1;
-    const char *light = "lucentctl-probe";
+/* The flags of `lucentctl latency`. */
+typedef struct latency_opts {
+    double count, interval, clients; /* whole numbers but count and clients, checked */
+    const char *light;
+} latency_opts;
+
+/* Parses the flags into o: CTL_EXIT_OK, or CTL_EXIT_USAGE with the error printed. */
+static int latency_parse(int argc, char **argv, latency_opts *o) {
+    o->count = 20, o->interval = 0.1, o->clients = 1;
+    o->light = "lucentctl-probe";
     for (int i = 1; i < argc; i++) {
         const char *k = argv[i];
         if (i + 1 >= argc) return ctl_usage_error("latency: %s needs a value", k);
         const char *v = argv[++i];
         if (!strcmp(k, "--count")) {
-            if (parse_positive(v, &count) != 0 || count != floor(count) || count > 100000)
+            if (parse_positive(v, &o->count) != 0 || o->count != floor(o->count) || o->count > 100000)
                 return ctl_usage_error("latency: --count '%s' is not a whole number in 1..100000", v);
         } else if (!strcmp(k, "--interval")) {
-            if (parse_positive(v, &interval) != 0 || interval > 60)
+            if (parse_positive(v, &o->interval) != 0 || o->interval > 60)
                 return ctl_usage_error("latency: --interval '%s' is not in (0, 60] seconds", v);
         } else if (!strcmp(k, "--light")) {
             if (!*v || strlen(v) > 64) return ctl_usage_error("latency: --light '%s' must be 1..64 bytes", v);
-            light = v;
+            o->light = v;
         } else if (!strcmp(k, "--clients")) {
-            if (parse_positive(v, &clients) != 0 || clients != floor(clients) || clients > 1000)
+            if (parse_positive(v, &o->clients) != 0 || o->clients != floor(o->clients) || o->clients > 1000)
                 return ctl_usage_error("latency: --clients '%s' is not a whole number in 1..1000", v);
         } else
             return ctl_usage_error("latency: unknown option '%s'", k);
     }
-    int n = (int)count, rc = CTL_EXIT_OK, n_viewers = (int)clients - 1;
-    double *ping = calloc((size_t)n, sizeof *ping), *ack = calloc((size_t)n, sizeof *ack),
-           *frame = calloc((size_t)n * (size_t)clients, sizeof *frame), *t_send = calloc((size_t)n, sizeof *t_send);
-    uint64_t *want_rev = calloc((size_t)n, sizeof *want_rev);
+    return CTL_EXIT_OK;
+}
+
+/* What one run measures (milliseconds), and what each update waited for. */
+typedef struct latency_samples {
+    double *ping, *ack, *frame; /* frame: this connection's, then every viewer's */
+    double *t_send;             /* when each acknowledged update was sent (monotonic ms) */
+    uint64_t *want_rev;         /* the revision each acknowledged update made */
+    int n_ping, n_ack, n_frame;
+} latency_samples;
+
+/* Round trips of up to 20 pings. CTL_EXIT_OK or CTL_EXIT_CONN (printed). */
+static int latency_pings(lc_client *c, int n, latency_samples *ls) {
+    char err[512];
+    for (int i = 0; i < n && i < 20; i++) {
+        double t0 = mono_ms();
+        if (lc_client_request(c, "{\"type\":\"ping\",\"t\":0}", NULL, 0, err, sizeof err) != 0) {
+            fprintf(stderr, "lucentctl: ping: %s\n", err);
+            return CTL_EXIT_CONN;
+        }
+        ls->ping[ls->n_ping++] = mono_ms() - t0;
+    }
+    return CTL_EXIT_OK;
+}
+
+/* Where the probe light goes: the middle of the welcome's SH grid, which is inside the
+ * scene's bounds; (0, 1, 0) without a grid. */
+static void latency_probe_position(lc_client *c, double centre[3]) {
+    centre[0] = 0, centre[1] = 1, centre[2] = 0;
+    const cJSON *pos = NULL;
+    cJSON *wel = cJSON_Parse(lc_client_welcome(c));
+    const cJSON *grid = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(wel, "scene"), "grid");
+    if ((pos = cJSON_GetObjectItemCaseSensitive(grid, "origin")) && cJSON_GetArraySize(pos) == 3) {
+        const cJSON *cell = cJSON_GetObjectItemCaseSensitive(grid, "cell"), *dims = cJSON_GetObjectItemCaseSensitive(grid, "dims");
+        for (int k = 0; k < 3; k++)
+            centre[k] = cJSON_GetArrayItem(pos, k)->valuedouble +
+                        0.5 * (cJSON_IsNumber(cell) ? cell->valuedouble : 0) *
+                            (cJSON_GetArraySize(dims) == 3 ? cJSON_GetArrayItem(dims, k)->valuedouble - 1 : 0);
+    }
+    cJSON_Delete(wel);
+}
+
+/* The updates, o->interval apart (until the count or a signal): each a light.set of the
+ * probe timed to its ok and to this connection's first lightmap frame of its revision.
+ * CTL_EXIT_OK, or CTL_EXIT_REFUSED / CTL_EXIT_CONN (printed). */
+static int latency_updates(lc_client *c, const latency_opts *o, const double centre[3], latency_samples *ls) {
+    char err[512], req[512];
+    lc_client_frame f;
+    double next = mono_ms();
+    for (int i = 0; i < (int)o->count && !stream_stop; i++) {
+        while (mono_ms() < next) lc_client_poll(c, (int)fmax(1, next - mono_ms()));
+        next += o->interval * 1000.0;
+        /* alternate the intensity so every update changes the lightmap */
+        snprintf(req, sizeof req,
+                 "{\"type\":\"light.set\",\"light\":{\"id\":\"%s\",\"type\":\"point\",\"position\":[%.6g,%.6g,%.6g],"
+                 "\"color\":[1,1,1],\"intensity\":%g}}",
+                 o->light, centre[0], centre[1], centre[2], (i % 2) ? 0.5 : 1.0);
+        double t0 = mono_ms();
+        char *reply = NULL;
+        int r = lc_client_request(c, req, &reply, 0, err, sizeof err);
+        double t_ok = mono_ms();
+        if (r != 0) {
+            if (r == 1) ctl_print_server_error(reply);
+            else fprintf(stderr, "lucentctl: %s\n", err);
+            free(reply);
+            return r == 1 ? CTL_EXIT_REFUSED : CTL_EXIT_CONN;
+        }
+        cJSON *rj = cJSON_Parse(reply);
+        free(reply);
+        const cJSON *rev = cJSON_GetObjectItemCaseSensitive(rj, "revision");
+        uint64_t want = cJSON_IsNumber(rev) ? (uint64_t)rev->valuedouble : 0;
+        cJSON_Delete(rj);
+        ls->t_send[ls->n_ack] = t0;
+        ls->want_rev[ls->n_ack] = want;
+        ls->ack[ls->n_ack++] = t_ok - t0;
+        if (lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, want, 0, CTL_TIMEOUT_MS, &f, err, sizeof err) == 0)
+            ls->frame[ls->n_frame++] = mono_ms() - t0;
+        else
+            fprintf(stderr, "lucentctl: no frame for revision %llu: %s\n", (unsigned long long)want, err);
+    }
+    return CTL_EXIT_OK;
+}
+
+/* The viewers' frames of the last update, then the viewers stopped and joined and each one's
+ * delay for every update added to the frame samples. */
+static void latency_collect_viewers(lc_client *c, latency_viewer *viewers, int n_viewers, atomic_int *stop,
+                                    latency_samples *ls) {
+    lc_client_poll(c, 1000);
+    atomic_store(stop, 1);
+    int missing = 0;
+    for (int k = 0; k < n_viewers; k++) {
+        if (!viewers[k].started) continue;
+        pthread_join(viewers[k].thread, NULL);
+        viewers[k].started = 0;
+        for (int i = 0; i < ls->n_ack; i++) {
+            double d = viewers[k].ok ? latency_viewer_delay(&viewers[k], ls->want_rev[i], ls->t_send[i]) : -1;
+            if (d >= 0) ls->frame[ls->n_frame++] = d;
+            else missing++;
+        }
+    }
+    if (missing) fprintf(stderr, "lucentctl: %d update/viewer pairs saw no frame\n", missing);
+}
+
+/* The table, or with --json one object per measure. */
+static void latency_print(latency_samples *ls) {
+    cJSON *json = ctl_json ? cJSON_CreateObject() : NULL;
+    if (!json) printf("%-16s %5s %9s %9s %9s %9s %9s\n", "ms", "n", "min", "p50", "p90", "p99", "max");
+    latency_report("ping", ls->ping, ls->n_ping, json);
+    latency_report("update_to_ok", ls->ack, ls->n_ack, json);
+    latency_report("update_to_frame", ls->frame, ls->n_frame, json);
+    if (json) {
+        char *t = cJSON_PrintUnformatted(json);
+        printf("%s\n", t ? t : "{}");
+        free(t);
+        cJSON_Delete(json);
+    }
+}
+
+int ctl_cmd_latency(int argc, char **argv) {
+    if (ctl_wants_help(argc, argv)) {
+        usage_latency(stdout);
+        return CTL_EXIT_OK;
+    }
+    latency_opts o;
+    int rc = latency_parse(argc, argv, &o);
+    if (rc != CTL_EXIT_OK) return rc;
+    int n = (int)o.count, n_viewers = (int)o.clients - 1;
+    latency_samples ls = {0};
+    ls.ping = calloc((size_t)n, sizeof *ls.ping);
+    ls.ack = calloc((size_t)n, sizeof *ls.ack);
+    ls.frame = calloc((size_t)n * (size_t)o.clients, sizeof *ls.frame);
+    ls.t_send = calloc((size_t)n, sizeof *ls.t_send);
+    ls.want_rev = calloc((size_t)n, sizeof *ls.want_rev);
     latency_viewer *viewers = calloc((size_t)(n_viewers > 0 ? n_viewers : 1), sizeof *viewers);
     atomic_int viewers_stop = 0;
-    int n_ping = 0, n_ack = 0, n_frame = 0;
     char err[512], req[512];
     lc_client *c = NULL;
-    if (!ping || !ack || !frame || !t_send || !want_rev || !viewers) {
+    if (!ls.ping || !ls.ack || !ls.frame || !ls.t_send || !ls.want_rev || !viewers) {
         fprintf(stderr, "lucentctl: out of memory\n");
         rc = CTL_EXIT_CONN;
         goto out;
     }
     c = ctl_connect(NULL, &rc);
     if (!c) goto out;
-    for (int i = 0; i < n && i < 20; i++) {
-        double t0 = mono_ms();
-        if (lc_client_request(c, "{\"type\":\"ping\",\"t\":0}", NULL, 0, err, sizeof err) != 0) {
-            fprintf(stderr, "lucentctl: ping: %s\n", err);
-            rc = CTL_EXIT_CONN;
-            goto out;
-        }
-        ping[n_ping++] = mono_ms() - t0;
-    }
+    if ((rc = latency_pings(c, n, &ls)) != CTL_EXIT_OK) goto out;
     int r = lc_client_subscribe(c, LC_CLIENT_LIGHTMAP, 0, 0, err, sizeof err);
     lc_client_frame f;
     if (r == 0) r = lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, 0, 0, CTL_TIMEOUT_MS * 2, &f, err, sizeof err);
@@ -701,82 +824,14 @@ int ctl_cmd_latency(int argc, char **argv) {
     }
     for (int k = 0; k < n_viewers; k++) /* all subscribed (or failed) before the first update */
         while (viewers[k].started && !atomic_load(&viewers[k].ready)) lc_client_poll(c, 5);
-    const cJSON *pos = NULL;
-    cJSON *wel = cJSON_Parse(lc_client_welcome(c));
-    const cJSON *grid = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(wel, "scene"), "grid");
-    double centre[3] = {0, 1, 0};
-    if ((pos = cJSON_GetObjectItemCaseSensitive(grid, "origin")) && cJSON_GetArraySize(pos) == 3) {
-        /* the middle of the grid is inside the scene's bounds: a safe place for the probe */
-        const cJSON *cell = cJSON_GetObjectItemCaseSensitive(grid, "cell"), *dims = cJSON_GetObjectItemCaseSensitive(grid, "dims");
-        for (int k = 0; k < 3; k++)
-            centre[k] = cJSON_GetArrayItem(pos, k)->valuedouble +
-                        0.5 * (cJSON_IsNumber(cell) ? cell->valuedouble : 0) *
-                            (cJSON_GetArraySize(dims) == 3 ? cJSON_GetArrayItem(dims, k)->valuedouble - 1 : 0);
-    }
-    cJSON_Delete(wel);
-    double next = mono_ms();
-    for (int i = 0; i < n && !stream_stop; i++) {
-        while (mono_ms() < next) lc_client_poll(c, (int)fmax(1, next - mono_ms()));
-        next += interval * 1000.0;
-        /* alternate the intensity so every update changes the lightmap */
-        snprintf(req, sizeof req,
-                 "{\"type\":\"light.set\",\"light\":{\"id\":\"%s\",\"type\":\"point\",\"position\":[%.6g,%.6g,%.6g],"
-                 "\"color\":[1,1,1],\"intensity\":%g}}",
-                 light, centre[0], centre[1], centre[2], (i % 2) ? 0.5 : 1.0);
-        double t0 = mono_ms();
-        char *reply = NULL;
-        r = lc_client_request(c, req, &reply, 0, err, sizeof err);
-        double t_ok = mono_ms();
-        if (r != 0) {
-            if (r == 1) ctl_print_server_error(reply);
-            else fprintf(stderr, "lucentctl: %s\n", err);
-            free(reply);
-            rc = r == 1 ? CTL_EXIT_REFUSED : CTL_EXIT_CONN;
-            goto out;
-        }
-        cJSON *o = cJSON_Parse(reply);
-        free(reply);
-        const cJSON *rev = cJSON_GetObjectItemCaseSensitive(o, "revision");
-        uint64_t want = cJSON_IsNumber(rev) ? (uint64_t)rev->valuedouble : 0;
-        cJSON_Delete(o);
-        t_send[n_ack] = t0;
-        want_rev[n_ack] = want;
-        ack[n_ack++] = t_ok - t0;
-        if (lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, want, 0, CTL_TIMEOUT_MS, &f, err, sizeof err) == 0)
-            frame[n_frame++] = mono_ms() - t0;
-        else
-            fprintf(stderr, "lucentctl: no frame for revision %llu: %s\n", (unsigned long long)want, err);
-    }
-    if (n_viewers > 0) { /* the viewers' frames of the last update, then their delays */
-        lc_client_poll(c, 1000);
-        atomic_store(&viewers_stop, 1);
-        int missing = 0;
-        for (int k = 0; k < n_viewers; k++) {
-            if (!viewers[k].started) continue;
-            pthread_join(viewers[k].thread, NULL);
-            viewers[k].started = 0;
-            for (int i = 0; i < n_ack; i++) {
-                double d = viewers[k].ok ? latency_viewer_delay(&viewers[k], want_rev[i], t_send[i]) : -1;
-                if (d >= 0) frame[n_frame++] = d;
-                else missing++;
-            }
-        }
-        if (missing) fprintf(stderr, "lucentctl: %d update/viewer pairs saw no frame\n", missing);
-    }
-    snprintf(req, sizeof req, "{\"type\":\"light.remove\",\"light_id\":\"%s\"}", light);
+    double centre[3];
+    latency_probe_position(c, centre);
+    if ((rc = latency_updates(c, &o, centre, &ls)) != CTL_EXIT_OK) goto out;
+    if (n_viewers > 0) latency_collect_viewers(c, viewers, n_viewers, &viewers_stop, &ls);
+    snprintf(req, sizeof req, "{\"type\":\"light.remove\",\"light_id\":\"%s\"}", o.light);
     lc_client_request(c, req, NULL, 0, err, sizeof err);
-    cJSON *json = ctl_json ? cJSON_CreateObject() : NULL;
-    if (!json) printf("%-16s %5s %9s %9s %9s %9s %9s\n", "ms", "n", "min", "p50", "p90", "p99", "max");
-    latency_report("ping", ping, n_ping, json);
-    latency_report("update_to_ok", ack, n_ack, json);
-    latency_report("update_to_frame", frame, n_frame, json);
-    if (json) {
-        char *t = cJSON_PrintUnformatted(json);
-        printf("%s\n", t ? t : "{}");
-        free(t);
-        cJSON_Delete(json);
-    }
-    if (n_frame < n_ack * (int)clients) rc = CTL_EXIT_CONN;
+    latency_print(&ls);
+    if (ls.n_frame < ls.n_ack * (int)o.clients) rc = CTL_EXIT_CONN;
 out:
     atomic_store(&viewers_stop, 1);
     for (int k = 0; viewers && k < n_viewers; k++) {
@@ -786,10 +841,10 @@ out:
     }
     lc_client_close(c);
     free(viewers);
-    free(want_rev);
-    free(t_send);
-    free(ping);
-    free(ack);
-    free(frame);
+    free(ls.want_rev);
+    free(ls.t_send);
+    free(ls.ping);
+    free(ls.ack);
+    free(ls.frame);
     return rc;
 }
