@@ -136,30 +136,13 @@ static void hier_radius_range(void *ctx, size_t begin, size_t end, int thread) {
     }
 }
 
-static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_hierarchy *out,
-                       uint32_t **perm_out, char *err, size_t errlen) {
+/* Pre-order DFS, left child first: a node's first leaf is the next free leaf slot when it is
+ * visited, because its whole subtree follows it in pre-order. Fills pre (node ids in
+ * pre-order), first (each node's first leaf slot) and perm (leaf slot -> surfel); stack is
+ * scratch. -1 with err if the tree does not have its 2n - 1 nodes and n leaves. */
+static int hier_preorder(const hier_tree *t, uint32_t root, uint32_t *pre, uint32_t *stack, uint32_t *first,
+                         uint32_t *perm, char *err, size_t errlen) {
     uint32_t n = t->n, total = 2 * n - 1;
-    uint32_t *pre = NULL, *stack = NULL, *first = NULL, *count = NULL, *order = NULL, *out_index = NULL;
-    uint32_t *perm = NULL, *levels = NULL, *skip = NULL;
-    lc_lcb_surfel *tmp = NULL;
-    lc_lcb_node *nodes = NULL;
-    pre = malloc(sizeof *pre * total);
-    stack = malloc(sizeof *stack * total);
-    first = malloc(sizeof *first * total);
-    count = malloc(sizeof *count * total);
-    order = malloc(sizeof *order * total);
-    out_index = malloc(sizeof *out_index * total);
-    perm = malloc(sizeof *perm * n);
-    levels = malloc(sizeof *levels * ((size_t)total + 1));
-    tmp = malloc(sizeof *tmp * n);
-    nodes = calloc(total, sizeof *nodes);
-    if (!pre || !stack || !first || !count || !order || !out_index || !perm || !levels || !tmp || !nodes) {
-        lc_set_err(err, errlen, "hierarchy: out of memory for %u nodes", total);
-        goto err;
-    }
-
-    /* Pre-order DFS, left child first: a node's first leaf is the next free leaf slot when
-     * it is visited, because its whole subtree follows it in pre-order. */
     uint32_t sp = 0, k = 0, pos = 0;
     stack[sp++] = root;
     while (sp > 0) {
@@ -175,9 +158,14 @@ static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_h
     }
     if (k != total || pos != n) {
         lc_set_err(err, errlen, "hierarchy: internal error (tree has %u nodes, %u leaves)", k, pos);
-        goto err;
+        return -1;
     }
-    /* Reverse pre-order visits children before parents: counts and attributes bottom-up. */
+    return 0;
+}
+
+/* Reverse pre-order visits children before parents: surfel counts and attributes bottom-up. */
+static void hier_bottom_up(hier_tree *t, const lc_lcb_surfel *surfels, const uint32_t *pre, uint32_t *count) {
+    uint32_t n = t->n, total = 2 * n - 1;
     for (uint32_t i = total; i-- > 0;) {
         uint32_t id = pre[i];
         if (hier_is_leaf(t, id)) {
@@ -189,8 +177,13 @@ static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_h
             hier_merge_attr(t, id, a, b);
         }
     }
+}
 
-    /* BFS, level by level; siblings end up adjacent (child[1] = child[0] + 1). */
+/* BFS, level by level; siblings end up adjacent (child[1] = child[0] + 1). Fills order (BFS
+ * position -> node id), out_index (node id -> BFS position) and levels (each level's first
+ * position, then the node count); returns the number of levels. */
+static uint32_t hier_bfs(const hier_tree *t, uint32_t root, uint32_t *order, uint32_t *out_index, uint32_t *levels) {
+    uint32_t n = t->n, total = 2 * n - 1;
     uint32_t tail = 1, level_start = 0, n_levels = 0;
     order[0] = root;
     while (level_start < tail) {
@@ -207,12 +200,14 @@ static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_h
         level_start = level_end;
     }
     levels[n_levels] = total;
-    uint32_t *shrunk = realloc(levels, sizeof *levels * ((size_t)n_levels + 1));
-    if (shrunk) levels = shrunk;
+    return n_levels;
+}
 
-    memcpy(tmp, surfels, sizeof *tmp * n);
-    for (uint32_t i = 0; i < n; i++) surfels[i] = tmp[perm[i]];
-
+/* The nodes in BFS order: attributes, children by BFS position, surfel ranges. Returns the
+ * sum of their surfel counts (what exact radii would cost). */
+static uint64_t hier_fill_nodes(const hier_tree *t, const uint32_t *order, const uint32_t *out_index,
+                                const uint32_t *first, const uint32_t *count, lc_lcb_node *nodes) {
+    uint32_t n = t->n, total = 2 * n - 1;
     uint64_t work = 0;
     for (uint32_t i = 0; i < total; i++) {
         uint32_t id = order[i];
@@ -232,14 +227,20 @@ static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_h
         nd->surfel_count = count[id];
         work += count[id];
     }
+    return work;
+}
 
-    /* Radii: exact over the node's surfels; if the tree is so unbalanced that this would be
-     * quadratic, big nodes take the (looser) bound from their children instead. */
-    if (work > (uint64_t)HIER_EXACT_DEPTH * n) {
+/* Radii: exact over the node's (reordered) surfels; if the tree is so unbalanced that this
+ * would be quadratic (work: the nodes' surfel counts summed), big nodes take the (looser)
+ * bound from their children instead. -1 with err out of memory. */
+static int hier_radii(const hier_tree *t, const lc_lcb_surfel *surfels, lc_lcb_node *nodes, uint64_t work, char *err,
+                      size_t errlen) {
+    uint32_t total = 2 * t->n - 1, *skip = NULL;
+    if (work > (uint64_t)HIER_EXACT_DEPTH * t->n) {
         skip = calloc(total, sizeof *skip);
         if (!skip) {
             lc_set_err(err, errlen, "hierarchy: out of memory for %u nodes", total);
-            goto err;
+            return -1;
         }
         for (uint32_t i = 0; i < total; i++) skip[i] = nodes[i].surfel_count > HIER_EXACT_BIG;
     }
@@ -260,6 +261,43 @@ static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_h
             nd->radius = hier_round_up(r);
         }
     }
+    free(skip);
+    return 0;
+}
+
+/* The finished hierarchy from the built tree: surfels reordered so each node covers a
+ * contiguous range (perm: new position -> old index), nodes in BFS order with their levels. */
+static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_hierarchy *out,
+                       uint32_t **perm_out, char *err, size_t errlen) {
+    uint32_t n = t->n, total = 2 * n - 1;
+    uint32_t *pre = NULL, *stack = NULL, *first = NULL, *count = NULL, *order = NULL, *out_index = NULL;
+    uint32_t *perm = NULL, *levels = NULL;
+    lc_lcb_surfel *tmp = NULL;
+    lc_lcb_node *nodes = NULL;
+    int rc = -1;
+    pre = malloc(sizeof *pre * total);
+    stack = malloc(sizeof *stack * total);
+    first = malloc(sizeof *first * total);
+    count = malloc(sizeof *count * total);
+    order = malloc(sizeof *order * total);
+    out_index = malloc(sizeof *out_index * total);
+    perm = malloc(sizeof *perm * n);
+    levels = malloc(sizeof *levels * ((size_t)total + 1));
+    tmp = malloc(sizeof *tmp * n);
+    nodes = calloc(total, sizeof *nodes);
+    if (!pre || !stack || !first || !count || !order || !out_index || !perm || !levels || !tmp || !nodes) {
+        lc_set_err(err, errlen, "hierarchy: out of memory for %u nodes", total);
+        goto err;
+    }
+    if (hier_preorder(t, root, pre, stack, first, perm, err, errlen) != 0) goto err;
+    hier_bottom_up(t, surfels, pre, count);
+    uint32_t n_levels = hier_bfs(t, root, order, out_index, levels);
+    uint32_t *shrunk = realloc(levels, sizeof *levels * ((size_t)n_levels + 1));
+    if (shrunk) levels = shrunk;
+    memcpy(tmp, surfels, sizeof *tmp * n);
+    for (uint32_t i = 0; i < n; i++) surfels[i] = tmp[perm[i]];
+    uint64_t work = hier_fill_nodes(t, order, out_index, first, count, nodes);
+    if (hier_radii(t, surfels, nodes, work, err, errlen) != 0) goto err;
 
     out->nodes = nodes;
     out->n_nodes = total;
@@ -269,15 +307,8 @@ static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_h
         *perm_out = perm;
     else
         free(perm);
-    free(pre);
-    free(stack);
-    free(first);
-    free(count);
-    free(order);
-    free(out_index);
-    free(tmp);
-    free(skip);
-    return 0;
+    nodes = NULL, levels = NULL, perm = NULL;
+    rc = 0;
 err:
     free(pre);
     free(stack);
@@ -289,8 +320,7 @@ err:
     free(levels);
     free(tmp);
     free(nodes);
-    free(skip);
-    return -1;
+    return rc;
 }
 
 /* --- kd-tree ------------------------------------------------------------------------------ */
