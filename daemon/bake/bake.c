@@ -1,5 +1,5 @@
 /* bake: the lucent-bake pipeline and its option table. Runs on the main thread; the stages
- * parallelise internally (lc_parallel_for, Embree's TBB pool). */
+ * parallelise internally (lc_parallel_for, each given --threads; Embree's TBB pool). */
 #include "bake/bake.h"
 
 #include <cjson/cJSON.h>
@@ -409,11 +409,11 @@ static void bake_buried_range(void *arg, size_t begin, size_t end, int thread) {
 
 /* Drops buried surfels in place (surfels and their triangles stay paired, order kept).
  * Keeps everything when all would go. Returns the number dropped, or -1 (out of memory). */
-static int64_t bake_drop_buried(const lc_rt *rt, lc_lcb_surfel *surfels, uint32_t *tri, uint32_t *n) {
+static int64_t bake_drop_buried(const lc_rt *rt, lc_lcb_surfel *surfels, uint32_t *tri, uint32_t *n, int threads) {
     uint8_t *bur = malloc(*n ? *n : 1);
     if (!bur) return -1;
     bake_buried_ctx bc = {rt, surfels, bur};
-    lc_parallel_for(*n, 256, bake_buried_range, &bc);
+    lc_parallel_for(threads, *n, 256, bake_buried_range, &bc);
     uint32_t k = 0;
     for (uint32_t i = 0; i < *n; i++) k += !bur[i];
     if (k > 0 && k < *n) {
@@ -583,7 +583,8 @@ static int bake_lightmap_uv(bake_job *b, char *err, size_t errlen) {
     lc_uv_params uvp = {.texels_per_metre = s->texel_density,
                         .atlas_size = s->texel_density > 0 ? 0 : (uint32_t)s->atlas_size,
                         .padding = (uint32_t)s->padding,
-                        .chart_angle_deg = s->chart_angle};
+                        .chart_angle_deg = s->chart_angle,
+                        .threads = s->threads};
     if (b->scene.has_lightmap_uv) {
         if (lc_uvgen_measure(&b->scene.mesh, &uvp, &b->uvs, err, errlen) != 0) return 1;
     } else if (lc_uvgen(&b->scene.mesh, &uvp, &b->uvs, err, errlen) != 0) {
@@ -602,14 +603,14 @@ static int bake_bvh(bake_job *b, char *err, size_t errlen) {
 
 /* Texel caches, then seam dilation. */
 static int bake_texel_caches(bake_job *b, char *err, size_t errlen) {
-    if (lc_texels_rasterize(&b->scene, b->uvs.width, b->uvs.height, &b->lm, &b->caches, &b->n_caches, err, errlen) !=
-        0)
+    if (lc_texels_rasterize(&b->scene, b->uvs.width, b->uvs.height, b->s->threads, &b->lm, &b->caches, &b->n_caches,
+                            err, errlen) != 0)
         return 1;
     if (b->n_caches == 0) {
         lc_set_err(err, errlen, "no lightmap texel is covered; raise --atlas-size or --texel-density");
         return 1;
     }
-    lc_texels_dilate(&b->lm, (uint32_t)b->s->dilate);
+    lc_texels_dilate(&b->lm, (uint32_t)b->s->dilate, b->s->threads);
     b->n_texel_caches = b->n_caches;
     return 0;
 }
@@ -629,7 +630,8 @@ static int bake_relocate(bake_job *b, char *err, size_t errlen) {
                              .texel_fraction = 0.6,
                              .grid_fraction = 0.8,
                              .offset = b->s->reloc_offset,
-                             .seed = (uint64_t)b->s->seed};
+                             .seed = (uint64_t)b->s->seed,
+                             .threads = b->s->threads};
     lc_relocate_caches(b->rt, b->caches, b->n_caches, &rp, &b->rs);
     return 0;
 }
@@ -638,9 +640,11 @@ static int bake_surfels(bake_job *b, char *err, size_t errlen) {
     const lc_bake_settings *s = b->s;
     lc_surfel_params sp = {.target_count = (uint32_t)s->surfels,
                            .relax_iterations = (uint32_t)s->relax,
-                           .seed = (uint64_t)s->seed};
+                           .seed = (uint64_t)s->seed,
+                           .threads = s->threads};
     if (lc_surfels_generate(&b->scene, &sp, &b->surfels, &b->surfel_tri, &b->n_surfels, err, errlen) != 0) return 1;
-    int64_t n_buried = s->drop_buried ? bake_drop_buried(b->rt, b->surfels, b->surfel_tri, &b->n_surfels) : 0;
+    int64_t n_buried =
+        s->drop_buried ? bake_drop_buried(b->rt, b->surfels, b->surfel_tri, &b->n_surfels, s->threads) : 0;
     if (n_buried < 0) return bake_oom(err, errlen);
     if (!s->quiet && n_buried > 0)
         lc_info("bake", "dropped %lld buried surfels (inside geometry), %u left", (long long)n_buried, b->n_surfels);
@@ -650,8 +654,8 @@ static int bake_surfels(bake_job *b, char *err, size_t errlen) {
 /* The surfel tree (it reorders the surfels; their triangles follow), then each surfel's
  * nearest cache. */
 static int bake_hierarchy(bake_job *b, char *err, size_t errlen) {
-    if (lc_hierarchy_build(b->surfels, b->n_surfels, (lc_hierarchy_method)b->s->hierarchy, &b->hier, &b->perm, err,
-                           errlen) != 0)
+    if (lc_hierarchy_build(b->surfels, b->n_surfels, (lc_hierarchy_method)b->s->hierarchy, b->s->threads, &b->hier,
+                           &b->perm, err, errlen) != 0)
         return 1;
     b->tri_sorted = malloc((size_t)b->n_surfels * sizeof *b->tri_sorted);
     if (!b->tri_sorted) return bake_oom(err, errlen);
@@ -700,7 +704,8 @@ static int bake_links(bake_job *b, char *err, size_t errlen) {
                          .final_samples = (uint32_t)s->final_samples,
                          .sh_bands = s->link_sh ? (uint32_t)s->bands : 0,
                          .seed = (uint64_t)s->seed,
-                         .probe_rays = (uint32_t)s->probe_rays};
+                         .probe_rays = (uint32_t)s->probe_rays,
+                         .threads = s->threads};
     if (s->exposure) {
         b->seen = calloc(b->n_surfels ? b->n_surfels : 1, sizeof *b->seen);
         if (!b->seen) return bake_oom(err, errlen);
@@ -930,7 +935,6 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
     lc_bake_report *r = report ? report : &local_report;
     memset(r, 0, sizeof *r);
 
-    lc_parallel_set_threads(s->threads);
     lc_progress_set_enabled(!s->quiet);
     double t_start = (lc_clock_ms() * 1e-3), t0 = t_start;
     int rc = 0;

@@ -59,6 +59,7 @@ typedef struct {
     uint32_t *cls;          /* per node id: emission class of every surfel below, or HIER_MIXED */
     double ce;              /* emission term weight (0: the plain PIC metric) */
     double inv_extent2;     /* 1 / (largest bounding-box side)^2 */
+    int threads;            /* parallel-for workers (0 = all cores), the caller's setting */
 } hier_tree;
 
 static int hier_is_leaf(const hier_tree *t, uint32_t id) { return id < t->n; }
@@ -245,7 +246,7 @@ static int hier_radii(const hier_tree *t, const lc_lcb_surfel *surfels, lc_lcb_n
         for (uint32_t i = 0; i < total; i++) skip[i] = nodes[i].surfel_count > HIER_EXACT_BIG;
     }
     hier_radius_ctx rc = {surfels, nodes, skip};
-    lc_parallel_for(total, 256, hier_radius_range, &rc);
+    lc_parallel_for(t->threads, total, 256, hier_radius_range, &rc);
     if (skip) {
         for (uint32_t i = total; i-- > 0;) {
             if (!skip[i]) continue;
@@ -599,7 +600,7 @@ static int hier_key_cmp(const void *a, const void *b) {
 static int hier_aac_tree(hier_tree *t, const lc_lcb_surfel *s, const float bmin[3], const float bmax[3],
                          uint32_t *root, char *err, size_t errlen) {
     uint32_t n = t->n, total = 2 * n - 1;
-    int threads = lc_parallel_threads(), rc = -1;
+    int threads = lc_parallel_threads(t->threads), rc = -1;
     hier_aac ac = {.t = t};
     uint64_t *keys = malloc(sizeof *keys * n);
     ac.clus = malloc(sizeof *ac.clus * n);
@@ -637,7 +638,7 @@ static int hier_aac_tree(hier_tree *t, const lc_lcb_surfel *s, const float bmin[
         lc_set_err(err, errlen, "hierarchy: too many AAC tasks (degenerate Morton split)");
         goto err;
     }
-    lc_parallel_for(ac.n_tasks, 1, hier_aac_task_run, &ac);
+    lc_parallel_for(threads, ac.n_tasks, 1, hier_aac_task_run, &ac);
     for (int i = 1; i < threads; i++) ac.scratch[0].failed |= ac.scratch[i].failed;
     uint32_t k = hier_aac_upper(&ac, 0, n, 29);
     k = hier_aac_combine(&ac, &ac.scratch[0], 0, k, 1);
@@ -671,9 +672,9 @@ err:
 
 /* --- public -------------------------------------------------------------------------------- */
 
-int lc_hierarchy_build(lc_lcb_surfel *surfels, uint32_t n, lc_hierarchy_method method, lc_hierarchy *out,
+int lc_hierarchy_build(lc_lcb_surfel *surfels, uint32_t n, lc_hierarchy_method method, int threads, lc_hierarchy *out,
                        uint32_t **perm_out, char *err, size_t errlen) {
-    hier_tree t = {.n = n};
+    hier_tree t = {.n = n, .threads = threads};
     uint32_t *idx = NULL;
     if (perm_out) *perm_out = NULL;
     if (!out) {

@@ -21,9 +21,9 @@ typedef struct lc_hierarchy {
 
 /* Builds the tree and REORDERS surfels[] in place into leaf (DFS) order so every node's
  * surfels are the contiguous range [first_surfel, first_surfel + surfel_count).
- * *perm_out (optional, malloc'd) maps new index -> old index. Deterministic.
- * Returns 0 or -1 with err set. */
-int lc_hierarchy_build(lc_lcb_surfel *surfels, uint32_t n, lc_hierarchy_method method, lc_hierarchy *out,
+ * *perm_out (optional, malloc'd) maps new index -> old index. threads: parallel-for workers
+ * (0 = all cores). Deterministic, whatever the thread count. Returns 0 or -1 with err set. */
+int lc_hierarchy_build(lc_lcb_surfel *surfels, uint32_t n, lc_hierarchy_method method, int threads, lc_hierarchy *out,
                        uint32_t **perm_out, char *err, size_t errlen);
 void lc_hierarchy_release(lc_hierarchy *h);
 

@@ -623,7 +623,7 @@ int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_sur
                    const lc_lcb_cache *caches, uint32_t n_caches, const lc_link_params *params, lc_lcb_link *links,
                    uint16_t *link_sh, lc_link_stats *stats) {
     links_ctx ctx = {0};
-    int threads = lc_parallel_threads(), rc = -1;
+    int threads = lc_parallel_threads(params ? params->threads : 0), rc = -1;
     if (stats) memset(stats, 0, sizeof *stats);
     if (!rt || !h || !params || (!links && n_caches) || (!surfels && n_surfels) || (!caches && n_caches)) {
         lc_error("links", "lc_links_build: NULL argument");
@@ -671,7 +671,7 @@ int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_sur
         goto err;
     }
     ctx.progress = lc_progress_begin("links", n_caches);
-    lc_parallel_for(n_caches, 16, links_range, &ctx);
+    lc_parallel_for(threads, n_caches, 16, links_range, &ctx);
     lc_progress_end(ctx.progress);
     if (stats && n_caches) {
         double used = 0, omega = 0;
@@ -732,13 +732,13 @@ static void links_gather_range(void *arg, size_t begin, size_t end, int thread) 
 }
 
 int lc_links_gather_bound(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_surfels, const lc_lcb_cache *caches,
-                          uint32_t n_caches, uint32_t probe_rays, uint64_t seed, const float *radiosity,
-                          float *irradiance) {
+                          uint32_t n_caches, uint32_t probe_rays, uint64_t seed, int want_threads,
+                          const float *radiosity, float *irradiance) {
     if (!rt || !surfels || !n_surfels || (n_caches && (!caches || !irradiance)) || !radiosity || !probe_rays) {
         lc_error("links", "lc_links_gather_bound: NULL argument, no surfels or no probe rays");
         return -1;
     }
-    int threads = lc_parallel_threads(), rc = -1;
+    int threads = lc_parallel_threads(want_threads), rc = -1;
     lc_link_params prm = {.links_per_cache = 1, .node_samples = 1, .final_samples = 1, .seed = seed,
                           .probe_rays = probe_rays};
     links_ctx ctx = {0};
@@ -752,7 +752,7 @@ int lc_links_gather_bound(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_
     }
     if (links_hash_build(&ctx.hash, surfels, n_surfels) != 0) goto oom;
     links_gather_job job = {&ctx, radiosity, irradiance};
-    lc_parallel_for(n_caches, 16, links_gather_range, &job);
+    lc_parallel_for(threads, n_caches, 16, links_gather_range, &job);
     rc = 0;
     goto done;
 oom:

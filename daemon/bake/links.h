@@ -28,6 +28,7 @@ typedef struct lc_link_params {
     /* Optional output (NULL = not wanted): n_surfels counters, zeroed by the caller; each
      * cache adds 1 to every surfel its probe rays hit (see bake/exposure.h). */
     uint32_t *surfel_seen;
+    int threads;              /* parallel-for workers, 0 = all cores (the result does not depend on it) */
 } lc_link_params;
 
 /* A node is near (probe-ray estimate) when the cache is within 2 bounding radii of its
@@ -55,9 +56,10 @@ int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_sur
  * with the bake's ray stratification and hit attribution — the quantity the links compress, without
  * the compression. An engine solution can get no closer to the truth than this through its
  * surfels; lucent-ref fidelity reports it beside the engine. radiosity: n_surfels x 3;
- * irradiance: n_caches x 3 (grid and inside caches get 0). Returns 0, or -1 (logged). */
+ * irradiance: n_caches x 3 (grid and inside caches get 0). threads: parallel-for workers
+ * (0 = all cores). Returns 0, or -1 (logged). */
 int lc_links_gather_bound(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_surfels, const lc_lcb_cache *caches,
-                          uint32_t n_caches, uint32_t probe_rays, uint64_t seed, const float *radiosity,
+                          uint32_t n_caches, uint32_t probe_rays, uint64_t seed, int threads, const float *radiosity,
                           float *irradiance);
 
 /* Visible solid angle of surfel s seen from point p (disc approximation, no visibility):

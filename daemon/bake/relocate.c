@@ -121,7 +121,7 @@ void lc_relocate_caches(const lc_rt *rt, lc_lcb_cache *caches, uint32_t n, const
     float amax = 0;
     for (uint32_t v = 0; v < 3 * mesh->n_vertices; v++) amax = fmaxf(amax, fabsf(mesh->position[v]));
     reloc_ctx ctx = {rt, caches, params, outcome, lc_ray_lift_relocate(amax)};
-    lc_parallel_for(n, 64, reloc_range, &ctx);
+    lc_parallel_for(params->threads, n, 64, reloc_range, &ctx);
     if (stats)
         for (uint32_t i = 0; i < n; i++) {
             stats->moved += outcome[i] == RELOC_MOVED;

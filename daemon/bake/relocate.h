@@ -16,6 +16,7 @@ typedef struct lc_relocate_params {
     double grid_fraction;     /* same for grid caches (0.8, misses ignored) */
     double offset;            /* metres past the back face */
     uint64_t seed;
+    int threads;              /* parallel-for workers, 0 = all cores (the result does not depend on it) */
 } lc_relocate_params;
 
 typedef struct lc_relocate_stats {

@@ -255,7 +255,7 @@ int lc_surfels_generate(const lc_scene *scene, const lc_surfel_params *params, l
     c.halton_offset = lc_rng_next(&rng) & 0xFFFFFu; /* <= 1M: radical inverses stay exact */
     c.rot[0] = lc_rng_float(&rng);
     c.rot[1] = lc_rng_float(&rng);
-    lc_parallel_for(n, 1024, surfels_init_range, &c);
+    lc_parallel_for(params->threads, n, 1024, surfels_init_range, &c);
 
     if (params->relax_iterations > 0 && n > 1) {
         bary_next = malloc(sizeof *bary_next * 2 * (size_t)n);
@@ -276,11 +276,11 @@ int lc_surfels_generate(const lc_scene *scene, const lc_surfel_params *params, l
         for (uint32_t it = 0; it < params->relax_iterations; it++) {
             surfels_grid_build(&c, n);
             c.bary_next = bary_next;
-            lc_parallel_for(n, 1024, surfels_relax_range, &c);
+            lc_parallel_for(params->threads, n, 1024, surfels_relax_range, &c);
             float *swap = c.bary;
             c.bary = bary_next;
             bary_next = swap;
-            lc_parallel_for(n, 1024, surfels_replace_range, &c);
+            lc_parallel_for(params->threads, n, 1024, surfels_replace_range, &c);
         }
         bary = c.bary; /* whichever buffer is current; the other is bary_next */
     }

@@ -333,7 +333,7 @@ err:
     return rc;
 }
 
-int lc_texels_rasterize(const lc_scene *scene, uint32_t width, uint32_t height, lc_lightmap *lm,
+int lc_texels_rasterize(const lc_scene *scene, uint32_t width, uint32_t height, int threads, lc_lightmap *lm,
                         lc_lcb_cache **caches, uint32_t *n_caches, char *err, size_t errlen) {
     uint32_t *owner = NULL, *row_count = NULL, *texel_cache = NULL;
     uint8_t *mask = NULL;
@@ -381,7 +381,7 @@ int lc_texels_rasterize(const lc_scene *scene, uint32_t width, uint32_t height, 
                 (unsigned long long)contested, first_contested);
 
     texels_job job = {scene, width, height, owner, row_count, texel_cache, NULL, 0};
-    lc_parallel_for(height, 16, texels_count_rows, &job);
+    lc_parallel_for(threads, height, 16, texels_count_rows, &job);
     for (uint32_t y = 0; y < height; y++) row_count[y + 1] += row_count[y];
     uint32_t n = row_count[height];
     uint32_t base = *caches ? *n_caches : 0;
@@ -394,7 +394,7 @@ int lc_texels_rasterize(const lc_scene *scene, uint32_t width, uint32_t height, 
     *caches = all;
     job.out = all + base;
     job.base = base;
-    lc_parallel_for(height, 8, texels_fill_rows, &job);
+    lc_parallel_for(threads, height, 8, texels_fill_rows, &job);
     /* owners are final: owner becomes the BFS's source-texel array */
     uint64_t filled = 0;
     if (texels_spread(width, height, mask, texel_cache, owner, &filled) != 0) goto oom;
@@ -465,7 +465,7 @@ static void texels_dilate_rows(void *ctx, size_t begin, size_t end, int thread) 
     }
 }
 
-void lc_texels_dilate(lc_lightmap *lm, uint32_t passes) {
+void lc_texels_dilate(lc_lightmap *lm, uint32_t passes, int threads) {
     if (!lm || !lm->texel_cache || passes == 0 || lm->width == 0 || lm->height == 0) return;
     const size_t N = (size_t)lm->width * lm->height;
     uint32_t *cache2 = malloc(N * sizeof *cache2), *src = malloc(N * sizeof *src), *src2 = malloc(N * sizeof *src2);
@@ -480,7 +480,7 @@ void lc_texels_dilate(lc_lightmap *lm, uint32_t passes) {
     uint32_t *cur = lm->texel_cache, *cur_src = src, *nxt = cache2, *nxt_src = src2;
     for (uint32_t p = 0; p < passes; p++) {
         texels_dilate_job job = {lm->width, lm->height, cur, cur_src, nxt, nxt_src, row_filled};
-        lc_parallel_for(lm->height, 16, texels_dilate_rows, &job);
+        lc_parallel_for(threads, lm->height, 16, texels_dilate_rows, &job);
         uint64_t filled = 0;
         for (uint32_t y = 0; y < lm->height; y++) filled += row_filled[y];
         lm->n_dilated += (uint32_t)filled;

@@ -25,13 +25,14 @@ typedef struct lc_lightmap {
  * texel, reached through footprint texels; these count in n_dilated. Bilinear reads anywhere
  * inside a triangle then never touch an empty texel, unless the triangle's chart owns no
  * texel centre at all. Returns 0 or -1 with err set. */
-int lc_texels_rasterize(const lc_scene *scene, uint32_t width, uint32_t height, lc_lightmap *lm,
+int lc_texels_rasterize(const lc_scene *scene, uint32_t width, uint32_t height, int threads, lc_lightmap *lm,
                         lc_lcb_cache **caches, uint32_t *n_caches, char *err, size_t errlen);
 
 /* Dilation: `passes` rounds over the 8 neighbours; an empty texel takes the cache of its
  * first covered neighbour in a fixed order (deterministic). Adds `passes` further rings
- * around what rasterize filled. */
-void lc_texels_dilate(lc_lightmap *lm, uint32_t passes);
+ * around what rasterize filled. threads (here and in rasterize): parallel-for workers, 0 =
+ * all cores; the result does not depend on it. */
+void lc_texels_dilate(lc_lightmap *lm, uint32_t passes, int threads);
 
 void lc_lightmap_release(lc_lightmap *lm);
 

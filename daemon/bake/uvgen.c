@@ -314,6 +314,7 @@ typedef struct {
     uint32_t *order;      /* triangles, each chart a contiguous range */
     double *cu, *cv;      /* corner coordinates per order position */
     double cos_flip;
+    int threads;          /* parallel-for workers: lc_uv_params.threads */
 } uvgen_ctx;
 
 static void uvgen_basis(const double n[3], double t[3], double b[3]) {
@@ -680,7 +681,7 @@ static int uvgen_resolve(uvgen_ctx *cx, uvgen_chart **charts, uint32_t *n_charts
         if (!v) goto err;
         verdict = v;
         uvgen_round job = {cx, *charts + round_begin, verdict};
-        lc_parallel_for(round_end - round_begin, 4, uvgen_check_charts, &job);
+        lc_parallel_for(cx->threads, round_end - round_begin, 4, uvgen_check_charts, &job);
         for (uint32_t i = round_begin; i < round_end; i++) {
             int ov = verdict[i - round_begin];
             if (ov < 0) goto err;
@@ -1674,7 +1675,7 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
     }
 
     /* 1. charts */
-    uvgen_ctx cx = {mesh, weld, tri_n, degen, order, cu, cv, 0.02};
+    uvgen_ctx cx = {mesh, weld, tri_n, degen, order, cu, cv, 0.02, params->threads};
     uint32_t cap_charts = 64, n_charts = 0;
     charts = malloc(cap_charts * sizeof *charts);
     if (!charts) goto oom;

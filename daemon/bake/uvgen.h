@@ -16,6 +16,7 @@ typedef struct lc_uv_params {
     uint32_t padding;        /* empty texels between charts and at the border, >= 2 */
     double chart_angle_deg;  /* max normal deviation from the chart's projection normal, (0, 90);
                                 sub-texel bevels merged into a neighbour may exceed it (up to 88) */
+    int threads;             /* parallel-for workers, 0 = all cores (the result does not depend on it) */
 } lc_uv_params;
 
 typedef struct lc_uv_stats {

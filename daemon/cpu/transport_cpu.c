@@ -24,6 +24,7 @@ typedef struct tcpu {
     uint32_t n_feedback;
     float *texel_w;          /* n_texel_caches*links_per_cache*3: tcpu_texel_weights */
     float cone[256][8];
+    int threads;             /* the parallel-for's workers: the engine's setting */
 } tcpu;
 
 static void tcpu_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out);
@@ -40,10 +41,10 @@ static void tcpu_release(void *impl) {
 }
 
 static void *tcpu_create(const lc_lcb_view *v, int threads, char *err, size_t errlen) {
-    (void)threads; /* lc_parallel_set_threads is process-wide; the engine sets it */
     tcpu *t = calloc(1, sizeof *t);
     if (!t) goto oom;
     t->v = v;
+    t->threads = threads;
     t->cells = v->grid_dims[0] * v->grid_dims[1] * v->grid_dims[2];
     t->coeff_cap = LC_SH_MAX_COEFFS;
     if (lc_transport_outputs_alloc(&t->out, v) != 0) goto oom;
@@ -498,12 +499,12 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
         /* Intermediate passes only need the caches some surfel reads. */
         tcpu_gather_job job = {t, last ? NULL : t->feedback_list, bands, (int)st->chroma_bands, chroma,
                                lc_transport_texel_bands(st), lc_transport_texel_band1(st)};
-        lc_parallel_for(last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
+        lc_parallel_for(t->threads, last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
         double t4 = lc_clock_ms();
         ms_gather += t4 - t3;
         /* Feedback for the next pass (and, progressive, for the next relight). */
         tcpu_feedback_job fj = {t, bands};
-        lc_parallel_for(v->n_surfels, 1024, tcpu_feedback_range, &fj);
+        lc_parallel_for(t->threads, v->n_surfels, 1024, tcpu_feedback_range, &fj);
         ms_bounce += lc_clock_ms() - t4;
     }
     fr->stage_ms[LC_STAGE_BOUNCE] = ms_bounce;

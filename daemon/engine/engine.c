@@ -30,6 +30,7 @@ struct lc_engine {
     const lc_transport_ops *ops;
     void *impl;
     float scene_eps; /* ray offset scaled to the scene (lc_ray_lift_scene) */
+    int threads;     /* the parallel-for's workers (0 = all cores), the creator's setting */
     /* Embree: static geometry in its own scene, each asset in its own scene, and a top
      * scene of instances rebuilt when the objects change. */
     RTCDevice device;
@@ -153,7 +154,7 @@ lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int thread
     e->bake = bake;
     e->v = lc_lcb_get(bake);
     const lc_lcb_view *v = e->v;
-    lc_parallel_set_threads(threads);
+    e->threads = threads;
     e->scene_eps = lc_embree_scene_epsilon(v);
     e->device = lc_embree_device_new(threads, "engine", err, errlen);
     if (!e->device) goto err;
@@ -503,7 +504,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     uint32_t stages_run = 0;
     if (lights_changed || objects_changed) {
         engine_direct_job job = {e, st->lights, st->n_lights};
-        lc_parallel_for(v->n_surfels, 256, engine_direct_range, &job);
+        lc_parallel_for(e->threads, v->n_surfels, 256, engine_direct_range, &job);
         stages_run |= 1u << LC_STAGE_DIRECT;
     }
     int sky_on = st->environment.kind != LC_ENV_NONE && st->environment.intensity > 0;
@@ -514,7 +515,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
             lc_set_err(err, errlen, "out of memory for the sky transfer");
             return -1;
         }
-        lc_parallel_for(v->n_surfels, 256, engine_sky_range, e);
+        lc_parallel_for(e->threads, v->n_surfels, 256, engine_sky_range, e);
         e->sky_valid = 1;
     }
     /* Sky radiance SH (L2). */

@@ -26,8 +26,8 @@ int lc_ref_gather_bound(const lc_lcb *bake, const float *radiosity, uint32_t pro
         for (int k = 0; k < 3; k++) mesh.index[3 * i + k] = v->triangles[i].v[k];
     rt = lc_rt_create(&mesh, threads, err, errlen);
     if (!rt) goto done;
-    if (lc_links_gather_bound(rt, v->surfels, v->n_surfels, v->caches, v->n_caches, probe_rays, seed, radiosity,
-                              cache_e) != 0) {
+    if (lc_links_gather_bound(rt, v->surfels, v->n_surfels, v->caches, v->n_caches, probe_rays, seed, threads,
+                              radiosity, cache_e) != 0) {
         lc_set_err(err, errlen, "the gather bound failed (see the log)");
         goto done;
     }

@@ -27,6 +27,7 @@ struct lc_ref {
     const lc_lcb *bake;
     const lc_lcb_view *v;
     float eps; /* ray offset scaled to the scene, as the engine's (lc_ray_lift_scene) */
+    int threads; /* the parallel-for's workers (0 = all cores), the creator's setting */
     float surfel_area; /* mean surfel area: the bake's spacing (exposure reweighs surfels, not the sum) */
     /* State (copied). */
     lc_engine_light *lights;
@@ -764,7 +765,7 @@ lc_ref *lc_ref_create(const lc_lcb *bake, const lc_engine_state *st, int threads
     r->bake = bake;
     r->v = lc_lcb_get(bake);
     const lc_lcb_view *v = r->v;
-    lc_parallel_set_threads(threads);
+    r->threads = threads;
     r->eps = lc_embree_scene_epsilon(v);
     double area_sum = 0;
     for (uint32_t i = 0; i < v->n_surfels; i++) area_sum += v->surfels[i].area;
@@ -820,7 +821,7 @@ lc_ref *lc_ref_create(const lc_lcb *bake, const lc_engine_state *st, int threads
     if (ref_surfels_index(r) != 0 || ref_build_emitters(r) != 0) goto oom;
     r->tri_albedo = malloc(((size_t)v->n_triangles + 1) * 3 * sizeof(float));
     if (!r->tri_albedo) goto oom;
-    lc_parallel_for(v->n_triangles, 1024, ref_tri_albedo_range, r);
+    lc_parallel_for(r->threads, v->n_triangles, 1024, ref_tri_albedo_range, r);
     if (ref_build_objects(r, st) != 0) goto oom;
 
     /* Embree: one scene, static mesh (geometry 0) and objects (geometry 1). */
@@ -1041,7 +1042,7 @@ int lc_ref_render(lc_ref *r, const lc_ref_settings *s, lc_ref_result *out, char 
         snprintf(stage, sizeof stage, "reference pass %u", pass + 1);
         ref_pass_ctx ctx = {r, s, jobs, active, pass, s->batch_spp, NULL};
         if (!s->quiet) ctx.progress = lc_progress_begin(stage, n_active);
-        lc_parallel_for(n_active, 1, ref_pass_range, &ctx);
+        lc_parallel_for(r->threads, n_active, 1, ref_pass_range, &ctx);
         lc_progress_end(ctx.progress);
         /* Convergence: the spp cap, or (adaptive) the target standard error. */
         double ymax[2] = {0, 0};

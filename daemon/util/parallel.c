@@ -6,12 +6,8 @@
 
 #define LC_PARALLEL_MAX_THREADS 256
 
-static int parallel_threads = 0;
-
-void lc_parallel_set_threads(int threads) { parallel_threads = threads; }
-
-int lc_parallel_threads(void) {
-    int n = parallel_threads;
+int lc_parallel_threads(int threads) {
+    int n = threads;
     if (n <= 0) {
         long c = sysconf(_SC_NPROCESSORS_ONLN);
         n = c > 0 ? (int)c : 1;
@@ -43,10 +39,10 @@ static void *parallel_run(void *arg) {
     return NULL;
 }
 
-void lc_parallel_for(size_t n, size_t grain, lc_parallel_fn fn, void *ctx) {
+void lc_parallel_for(int want, size_t n, size_t grain, lc_parallel_fn fn, void *ctx) {
     if (n == 0) return;
     if (grain == 0) grain = 1;
-    int threads = lc_parallel_threads();
+    int threads = lc_parallel_threads(want);
     size_t chunks = (n + grain - 1) / grain;
     if ((size_t)threads > chunks) threads = (int)chunks;
     parallel_job job = {.n = n, .grain = grain, .fn = fn, .ctx = ctx};

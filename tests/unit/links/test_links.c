@@ -337,7 +337,7 @@ static void test_closed_box(void) {
     caches[nc++] = grid_cache(lc_v3(0.5f, 0.5f, 0.5f));
     caches[nc++] = grid_cache(lc_v3(0.3f, 0.6f, 0.7f));
     caches[nc++] = grid_cache(lc_v3(0.8f, 0.2f, 0.25f));
-    lc_link_params prm = {256, 8, 16, 0, 42, 0, NULL};
+    lc_link_params prm = {256, 8, 16, 0, 42, 0, NULL, 0};
     lc_lcb_link *links = calloc((size_t)nc * prm.links_per_cache, sizeof *links);
     lc_link_stats st;
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, nc, &prm, links, NULL, &st) == 0, "build");
@@ -369,7 +369,7 @@ static void test_closed_box(void) {
     CHECK(st.rays > 0 && st.mean_links_used > 1, "stats filled");
 
     /* Fewer links: coarse nodes are sampled, not enumerated; the sum stays close. */
-    lc_link_params coarse = {32, 8, 16, 0, 42, 0, NULL};
+    lc_link_params coarse = {32, 8, 16, 0, 42, 0, NULL, 0};
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, nc, &coarse, links, NULL, &st) == 0, "build");
     for (uint32_t c = 0; c < nc; c++) {
         double om = cache_omega(&h, links, coarse.links_per_cache, c);
@@ -407,7 +407,7 @@ static void test_patch(void) {
         caches[2 * i] = grid_cache(lc_v3(0, 0, dists[i]));
         caches[2 * i + 1] = texel_cache(lc_v3(0, 0, dists[i]), lc_v3(0, 0, -1));
     }
-    lc_link_params prm = {32, 8, 16, 3, 9, 0, NULL};
+    lc_link_params prm = {32, 8, 16, 3, 9, 0, NULL, 0};
     uint32_t L = prm.links_per_cache, nsh = prm.sh_bands * prm.sh_bands;
     lc_lcb_link *links = calloc((size_t)6 * L, sizeof *links);
     uint16_t *sh = calloc((size_t)6 * L * nsh, sizeof *sh);
@@ -464,7 +464,7 @@ static void test_occlusion(void) {
         lc_rt *rt = make_rt(&w);
         if (!rt) return;
         lc_lcb_cache caches[2] = {grid_cache(lc_v3(0, 0, d)), texel_cache(lc_v3(0, 0, d), lc_v3(0, 0, -1))};
-        lc_link_params prm = {32, 8, 16, 0, 5, 0, NULL};
+        lc_link_params prm = {32, 8, 16, 0, 5, 0, NULL, 0};
         lc_lcb_link *links = calloc((size_t)2 * prm.links_per_cache, sizeof *links);
         CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, 2, &prm, links, NULL, NULL) == 0, "build");
         double full = rect_solid_angle(a, a, d);
@@ -511,16 +511,16 @@ static void test_determinism(void) {
             caches[i] = grid_cache(p);
         }
     }
-    lc_link_params prm = {24, 4, 8, 2, 77, 64, NULL};
+    lc_link_params prm = {24, 4, 8, 2, 77, 64, NULL, 0};
     size_t nl = (size_t)NC * prm.links_per_cache, ns = nl * 4;
     lc_lcb_link *a = calloc(nl, sizeof *a), *b = calloc(nl, sizeof *b);
     uint16_t *sa = calloc(ns, sizeof *sa), *sb = calloc(ns, sizeof *sb);
     lc_link_stats st1, st2;
     uint32_t *seen1 = calloc(w.n_surfels, sizeof *seen1), *seen2 = calloc(w.n_surfels, sizeof *seen2);
-    lc_parallel_set_threads(1);
+    prm.threads = 1;
     prm.surfel_seen = seen1;
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, NC, &prm, a, sa, &st1) == 0, "build 1");
-    lc_parallel_set_threads(2);
+    prm.threads = 2;
     prm.surfel_seen = seen2;
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, NC, &prm, b, sb, &st2) == 0, "build 2");
     prm.surfel_seen = NULL;
@@ -541,7 +541,6 @@ static void test_determinism(void) {
     prm.seed = 78;
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, caches, NC, &prm, b, sb, NULL) == 0, "build 3");
     CHECK(memcmp(a, b, nl * sizeof *a) != 0, "another seed gives other links");
-    lc_parallel_set_threads(0);
     free(a);
     free(b);
     free(sa);
@@ -562,10 +561,10 @@ static void test_bad_params(void) {
     lc_lcb_cache c = grid_cache(lc_v3(0, 0, 1));
     lc_lcb_link links[8];
     uint16_t sh[8 * 81];
-    lc_link_params zero_links = {0, 8, 16, 0, 1, 0, NULL};
+    lc_link_params zero_links = {0, 8, 16, 0, 1, 0, NULL, 0};
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, &c, 1, &zero_links, links, NULL, NULL) == -1,
           "links_per_cache 0 rejected");
-    lc_link_params bands9 = {8, 8, 16, 9, 1, 0, NULL};
+    lc_link_params bands9 = {8, 8, 16, 9, 1, 0, NULL, 0};
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, &c, 1, &bands9, links, sh, NULL) == -1,
           "9 SH bands rejected");
     lc_rt_release(rt);
@@ -593,7 +592,7 @@ static void test_closed_box_real(void) {
     scene.n_materials = 1;
     lc_scene_update_bounds(&scene);
     char err[256];
-    lc_surfel_params sp = {3000, 2, 5};
+    lc_surfel_params sp = {3000, 2, 5, 0};
     uint32_t n = 0;
     lc_lcb_surfel *surfels = NULL;
     CHECK(lc_surfels_generate(&scene, &sp, &surfels, NULL, &n, err, sizeof err) == 0, "surfels: %s", err);
@@ -605,12 +604,12 @@ static void test_closed_box_real(void) {
         grid_cache(lc_v3(0.5f, 0.5f, 0.5f)),
         grid_cache(lc_v3(0.3f, 0.7f, 0.6f)),
     };
-    lc_link_params prm = {512, 8, 16, 0, 42, 0, NULL};
+    lc_link_params prm = {512, 8, 16, 0, 42, 0, NULL, 0};
     lc_lcb_link *links = calloc((size_t)4 * prm.links_per_cache, sizeof *links);
     for (int method = 0; method < 2; method++) {
         lc_hierarchy h;
         memset(&h, 0, sizeof h);
-        CHECK(lc_hierarchy_build(surfels, n, method ? LC_HIERARCHY_KDTREE : LC_HIERARCHY_AAC, &h, NULL, err,
+        CHECK(lc_hierarchy_build(surfels, n, method ? LC_HIERARCHY_KDTREE : LC_HIERARCHY_AAC, 0, &h, NULL, err,
                                  sizeof err) == 0,
               "hierarchy: %s", err);
         if (!h.nodes) continue;
@@ -650,7 +649,7 @@ static void test_gather_bound(void) {
     caches[5].flags |= LC_CACHE_INSIDE;
     float *b = malloc((size_t)w.n_surfels * 3 * sizeof *b), e[6 * 3];
     for (uint32_t i = 0; i < 3 * w.n_surfels; i++) b[i] = 1.0f;
-    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 6, 1024, 7, b, e) == 0, "gather");
+    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 6, 1024, 7, 0, b, e) == 0, "gather");
     for (int c = 0; c < 4; c++)
         for (int k = 0; k < 3; k++) CHECK(fabsf(e[3 * c + k] - 1.0f) < 0.01f, "uniform box: cache %d E %.4f", c, e[3 * c + k]);
     for (int k = 0; k < 6; k++) CHECK(e[12 + k] == 0.0f, "grid and inside caches get 0 (%d: %g)", k, e[12 + k]);
@@ -658,12 +657,12 @@ static void test_gather_bound(void) {
         int floor = w.surfels[i].normal[1] > 0.5f;
         b[3 * i] = floor ? 2.0f : 0.0f, b[3 * i + 1] = floor ? 1.0f : 0.0f, b[3 * i + 2] = 0.0f;
     }
-    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 1, 4096, 7, b, e) == 0, "gather floor");
+    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 1, 4096, 7, 0, b, e) == 0, "gather floor");
     double ff = rect_form_factor(1, 1, 1);
     CHECK(fabs(e[0] / (2 * ff) - 1) < 0.02 && fabs(e[1] / ff - 1) < 0.02 && e[2] == 0.0f,
           "lit floor seen from the ceiling: E (%.4f %.4f %.4f) vs B x F = (%.4f %.4f 0)", e[0], e[1], e[2], 2 * ff, ff);
-    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 1, 0, 7, b, e) == -1, "no probe rays: error");
-    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 1, 64, 7, NULL, e) == -1, "no radiosity: error");
+    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 1, 0, 7, 0, b, e) == -1, "no probe rays: error");
+    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 1, 64, 7, 0, NULL, e) == -1, "no radiosity: error");
     free(b);
     lc_rt_release(rt);
     world_free(&w);

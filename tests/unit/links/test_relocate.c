@@ -97,7 +97,7 @@ static lc_lcb_cache make_cache(lc_vec3 p, lc_vec3 n, uint32_t flags) {
     return c;
 }
 
-static const lc_relocate_params params = {64, 0.6, 0.8, 0.01, 11};
+static const lc_relocate_params params = {64, 0.6, 0.8, 0.01, 11, 0};
 
 static void test_buried_texel(void) {
     world w = {0};
@@ -198,11 +198,11 @@ static void test_grid_caches(void) {
         }
     }
     memcpy(b, a, N * sizeof *a);
-    lc_parallel_set_threads(1);
-    lc_relocate_caches(rt, a, N, &params, NULL);
-    lc_parallel_set_threads(2);
-    lc_relocate_caches(rt, b, N, &params, &st);
-    lc_parallel_set_threads(0);
+    lc_relocate_params one = params, two = params;
+    one.threads = 1;
+    two.threads = 2;
+    lc_relocate_caches(rt, a, N, &one, NULL);
+    lc_relocate_caches(rt, b, N, &two, &st);
     CHECK(memcmp(a, b, N * sizeof *a) == 0, "relocation identical for 1 and 2 threads");
     fprintf(stderr, "determinism set: moved %u inside %u of %d\n", st.moved, st.inside, N);
     CHECK(st.moved > 0, "some of the determinism set moved");

@@ -215,13 +215,10 @@ static void run_case(lc_lcb_surfel *(*make)(uint32_t, uint64_t), uint32_t n, lc_
     memcpy(s2, orig, sizeof *s2 * n);
     lc_hierarchy h1 = {0}, h2 = {0};
     uint32_t *p1 = NULL, *p2 = NULL;
-    lc_parallel_set_threads(1);
-    int rc1 = lc_hierarchy_build(s1, n, m, &h1, &p1, err, sizeof err);
+    int rc1 = lc_hierarchy_build(s1, n, m, 1, &h1, &p1, err, sizeof err);
     CHECK(rc1 == 0, "%s: build failed: %s", what, err);
-    lc_parallel_set_threads(2);
-    int rc2 = lc_hierarchy_build(s2, n, m, &h2, &p2, err, sizeof err);
+    int rc2 = lc_hierarchy_build(s2, n, m, 2, &h2, &p2, err, sizeof err);
     CHECK(rc2 == 0, "%s: build failed: %s", what, err);
-    lc_parallel_set_threads(0);
     if (rc1 == 0 && rc2 == 0) {
         verify(orig, s1, n, &h1, p1, 1, what);
         CHECK(h1.n_nodes == h2.n_nodes && h1.n_levels == h2.n_levels &&
@@ -258,7 +255,7 @@ static double build_quality(lc_lcb_surfel *(*make)(uint32_t, uint64_t), uint32_t
     lc_lcb_surfel *s = make(n, 3);
     lc_hierarchy h = {0};
     double t0 = now_s();
-    int rc = lc_hierarchy_build(s, n, m, &h, NULL, err, sizeof err);
+    int rc = lc_hierarchy_build(s, n, m, 0, &h, NULL, err, sizeof err);
     *secs = now_s() - t0;
     CHECK(rc == 0, "build failed: %s", err);
     double q = rc == 0 ? lc_hierarchy_quality(s, &h) : 1e30;
@@ -293,7 +290,7 @@ static uint32_t flush_lamp_case(uint32_t n, int *lamp_only_root, uint32_t *pure_
     }
     lc_hierarchy h = {0};
     char err[256] = "";
-    CHECK(lc_hierarchy_build(s, n, LC_HIERARCHY_AAC, &h, NULL, err, sizeof err) == 0, "flush lamp: %s", err);
+    CHECK(lc_hierarchy_build(s, n, LC_HIERARCHY_AAC, 0, &h, NULL, err, sizeof err) == 0, "flush lamp: %s", err);
     *lamp_only_root = 0;
     *pure_nodes = 0;
     for (uint32_t i = 0; i < h.n_nodes; i++) {
@@ -312,16 +309,16 @@ int main(void) {
     char err[256] = "";
     lc_hierarchy h = {0};
     lc_lcb_surfel one = {.position = {1, 2, 3}, .normal = {0, 1, 0}, .area = 0.5f};
-    CHECK(lc_hierarchy_build(&one, 0, LC_HIERARCHY_AAC, &h, NULL, err, sizeof err) == -1, "n = 0 must fail");
+    CHECK(lc_hierarchy_build(&one, 0, LC_HIERARCHY_AAC, 0, &h, NULL, err, sizeof err) == -1, "n = 0 must fail");
     CHECK(strstr(err, "n") != NULL, "error names the parameter: %s", err);
-    CHECK(lc_hierarchy_build(&one, 1, LC_HIERARCHY_KDTREE, &h, NULL, err, sizeof err) == 0, "n = 1: %s", err);
+    CHECK(lc_hierarchy_build(&one, 1, LC_HIERARCHY_KDTREE, 0, &h, NULL, err, sizeof err) == 0, "n = 1: %s", err);
     CHECK(h.n_nodes == 1 && h.n_levels == 1 && h.nodes[0].child[0] == LC_NONE && h.nodes[0].surfel_count == 1 &&
               fabsf(h.nodes[0].radius - sqrtf(0.5f / (float)M_PI)) < 1e-6f,
           "n = 1: single leaf root");
     lc_hierarchy_release(&h);
     lc_lcb_surfel nan = one;
     nan.position[1] = NAN;
-    CHECK(lc_hierarchy_build(&nan, 1, LC_HIERARCHY_AAC, &h, NULL, err, sizeof err) == -1, "NaN position must fail");
+    CHECK(lc_hierarchy_build(&nan, 1, LC_HIERARCHY_AAC, 0, &h, NULL, err, sizeof err) == -1, "NaN position must fail");
 
     const uint32_t sizes[] = {1, 2, 3, 1000, 50000};
     for (int m = 0; m < 2; m++)
@@ -339,7 +336,7 @@ int main(void) {
         for (int m = 0; m < 2; m++) {
             memcpy(c, s, sizeof *c * 500);
             uint32_t *perm = NULL;
-            int rc = lc_hierarchy_build(c, 500, (lc_hierarchy_method)m, &h, &perm, err, sizeof err);
+            int rc = lc_hierarchy_build(c, 500, (lc_hierarchy_method)m, 0, &h, &perm, err, sizeof err);
             CHECK(rc == 0, "coincident: %s", err);
             if (rc == 0) verify(s, c, 500, &h, perm, 1, "coincident");
             lc_hierarchy_release(&h);

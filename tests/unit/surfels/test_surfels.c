@@ -248,13 +248,13 @@ int main(void) {
 
     lc_lcb_surfel *s = NULL;
     uint32_t *tri = NULL, n = 0;
-    lc_surfel_params bad = {0, 0, 1};
+    lc_surfel_params bad = {0, 0, 1, 0};
     CHECK(lc_surfels_generate(&sc, &bad, &s, &tri, &n, err, sizeof err) == -1, "target_count 0 must fail");
     CHECK(strstr(err, "target_count") != NULL, "error names the parameter: %s", err);
 
     const uint32_t target = 3000;
-    lc_surfel_params p0 = {target, 0, 42}, p8 = {target, 8, 42};
-    lc_surfel_params p8b = {target, 8, 43};
+    lc_surfel_params p0 = {target, 0, 42, 0}, p8 = {target, 8, 42, 0};
+    lc_surfel_params p8b = {target, 8, 43, 0};
 
     /* unrelaxed */
     int rc = lc_surfels_generate(&sc, &p0, &s, &tri, &n, err, sizeof err);
@@ -276,13 +276,13 @@ int main(void) {
     /* relaxed, with 1 and 2 threads: identical bytes */
     lc_lcb_surfel *r1 = NULL, *r2 = NULL, *r3 = NULL;
     uint32_t *t1 = NULL, *t2 = NULL, n1 = 0, n2 = 0, n3 = 0;
-    lc_parallel_set_threads(1);
-    rc = lc_surfels_generate(&sc, &p8, &r1, &t1, &n1, err, sizeof err);
+    lc_surfel_params p8_1 = p8, p8_2 = p8;
+    p8_1.threads = 1;
+    p8_2.threads = 2;
+    rc = lc_surfels_generate(&sc, &p8_1, &r1, &t1, &n1, err, sizeof err);
     CHECK(rc == 0, "generate relaxed: %s", err);
-    lc_parallel_set_threads(2);
-    int rc2 = lc_surfels_generate(&sc, &p8, &r2, &t2, &n2, err, sizeof err);
+    int rc2 = lc_surfels_generate(&sc, &p8_2, &r2, &t2, &n2, err, sizeof err);
     CHECK(rc2 == 0, "generate relaxed: %s", err);
-    lc_parallel_set_threads(0);
     if (rc == 0 && rc2 == 0) {
         check_surfels(&sc, r1, t1, n1, target, "relaxed");
         CHECK(n1 == n2 && memcmp(r1, r2, sizeof *r1 * n1) == 0 && memcmp(t1, t2, sizeof *t1 * n1) == 0,
@@ -312,7 +312,7 @@ int main(void) {
     /* counts that do not divide the area evenly, and N = 1 */
     const uint32_t odd[] = {1, 7, 1001};
     for (int k = 0; k < 3; k++) {
-        lc_surfel_params p = {odd[k], 2, 5};
+        lc_surfel_params p = {odd[k], 2, 5, 0};
         rc = lc_surfels_generate(&sc, &p, &s, &tri, &n, err, sizeof err);
         CHECK(rc == 0, "generate %u: %s", odd[k], err);
         if (rc == 0) check_surfels(&sc, s, tri, n, odd[k], "odd count");
@@ -330,7 +330,7 @@ int main(void) {
                         sizeof err) != 0) {
         fprintf(stderr, "SKIP Cornell box: lc_scene_import failed (%s)\n", err);
     } else {
-        lc_surfel_params p = {20000, 4, 1};
+        lc_surfel_params p = {20000, 4, 1, 0};
         double t0 = now_s();
         rc = lc_surfels_generate(&cb, &p, &s, &tri, &n, err, sizeof err);
         fprintf(stderr, "Cornell box: %u triangles, %u surfels in %.3f s\n", cb.mesh.n_triangles, n, now_s() - t0);
@@ -358,7 +358,7 @@ int main(void) {
     make_big(&big, 406);
     const uint32_t counts[] = {32768, 131072};
     for (int k = 0; k < 2; k++) {
-        lc_surfel_params p = {counts[k], 4, 9};
+        lc_surfel_params p = {counts[k], 4, 9, 0};
         double t0 = now_s();
         rc = lc_surfels_generate(&big, &p, &s, NULL, &n, err, sizeof err);
         fprintf(stderr, "timing: %u triangles, %u surfels, 4 relax iterations: %.3f s\n", big.mesh.n_triangles, n,

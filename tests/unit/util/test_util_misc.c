@@ -29,8 +29,10 @@ static const lc_opt test_opts[] = {
 };
 
 static _Atomic long parallel_sum;
+static _Atomic int parallel_max_thread; /* the largest worker index a loop handed out */
 static void sum_range(void *ctx, size_t b, size_t e, int t) {
-    (void)t;
+    int seen = atomic_load(&parallel_max_thread);
+    while (t > seen && !atomic_compare_exchange_weak(&parallel_max_thread, &seen, t)) {}
     int *hits = ctx;
     for (size_t i = b; i < e; i++) {
         hits[i]++;
@@ -80,13 +82,22 @@ int main(void) {
 
     enum { N = 100003 };
     static int hits[N];
-    lc_parallel_set_threads(3);
-    lc_parallel_for(N, 1000, sum_range, hits);
-    lc_parallel_set_threads(0);
+    lc_parallel_for(3, N, 1000, sum_range, hits);
     int once = 1;
     for (int i = 0; i < N; i++) once &= hits[i] == 1;
     CHECK(once, "parallel_for visits every index exactly once");
     CHECK(parallel_sum == (long)N * (N - 1) / 2, "parallel sum");
+    CHECK(parallel_max_thread < 3, "3 threads: worker index %d", parallel_max_thread);
+    /* Each loop takes its own count: nothing carries over from the previous one. */
+    atomic_store(&parallel_max_thread, 0);
+    lc_parallel_for(1, N, 1000, sum_range, hits);
+    CHECK(parallel_max_thread == 0, "1 thread: worker index %d", parallel_max_thread);
+    for (int i = 0; i < N; i++) once &= hits[i] == 2;
+    CHECK(once, "parallel_for(1) visits every index exactly once");
+    CHECK(lc_parallel_threads(3) == 3 && lc_parallel_threads(0) >= 1 &&
+              lc_parallel_threads(-1) == lc_parallel_threads(0) && lc_parallel_threads(100000) == 256,
+          "lc_parallel_threads: 3 -> %d, 0 -> %d, 1e5 -> %d", lc_parallel_threads(3), lc_parallel_threads(0),
+          lc_parallel_threads(100000));
 
     char dir[] = "/tmp/lc_fs_XXXXXX";
     CHECK(mkdtemp(dir) != NULL, "mkdtemp");

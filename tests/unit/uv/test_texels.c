@@ -13,7 +13,9 @@
 #include "bake/texels.h"
 #include "bake/uvgen.h"
 #include "check.h"
-#include "util/parallel.h"
+
+/* Every run but the determinism check's second one (1 thread) uses 2. */
+#define TEXELS_TEST_THREADS 2
 
 static double now(void) {
     struct timespec ts;
@@ -92,7 +94,7 @@ static long count_caches(const lc_scene *s, uint32_t W, uint32_t H) {
     lc_lcb_cache *c = NULL;
     uint32_t n = 0;
     char err[256];
-    if (lc_texels_rasterize(s, W, H, &lm, &c, &n, err, sizeof err) != 0) return -1;
+    if (lc_texels_rasterize(s, W, H, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) != 0) return -1;
     free(c);
     lc_lightmap_release(&lm);
     return n;
@@ -122,7 +124,7 @@ static void test_quad_exact(void) {
     lc_lcb_cache *c = NULL;
     uint32_t n = 0;
     char err[256];
-    CHECK(lc_texels_rasterize(&b.s, 10, 10, &lm, &c, &n, err, sizeof err) == 0, "rasterize: %s", err);
+    CHECK(lc_texels_rasterize(&b.s, 10, 10, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0, "rasterize: %s", err);
     CHECK(n == 64 && lm.n_covered == 64, "quad [0.1,0.9]^2 on 10x10: %u caches, expected 8*8", n);
     uint32_t bad_order = 0, bad_map = 0, bad_pos = 0, bad_attr = 0;
     for (uint32_t i = 0; i < n; i++) {
@@ -159,7 +161,7 @@ static void test_quad_exact(void) {
     /* appending keeps earlier caches and offsets indices */
     lc_lightmap lm2;
     uint32_t n2 = n;
-    CHECK(lc_texels_rasterize(&b.s, 10, 10, &lm2, &c, &n2, err, sizeof err) == 0, "append: %s", err);
+    CHECK(lc_texels_rasterize(&b.s, 10, 10, TEXELS_TEST_THREADS, &lm2, &c, &n2, err, sizeof err) == 0, "append: %s", err);
     CHECK(n2 == 128 && lm2.texel_cache[11] == 64 && c[64].index == 11, "append: n %u, texel 11 -> %u", n2,
           lm2.texel_cache[11]);
     free(c);
@@ -215,7 +217,7 @@ static void test_fill_rule(void) {
         lc_lcb_cache *c = NULL;
         uint32_t n = 0;
         char err[256];
-        CHECK(lc_texels_rasterize(&b.s, 8, 8, &lm, &c, &n, err, sizeof err) == 0, "fan: %s", err);
+        CHECK(lc_texels_rasterize(&b.s, 8, 8, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0, "fan: %s", err);
         CHECK(lm.texel_cache[3 * 8 + 4] != LC_NONE, "fan centre texel (4, 3) must be covered once");
         free(c);
         lc_lightmap_release(&lm);
@@ -256,18 +258,18 @@ static void test_overlap_and_errors(void) {
     lc_lcb_cache *c = NULL;
     uint32_t n = 0;
     char err[256];
-    CHECK(lc_texels_rasterize(&b.s, 16, 16, &lm, &c, &n, err, sizeof err) == 0, "overlap: %s", err);
+    CHECK(lc_texels_rasterize(&b.s, 16, 16, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0, "overlap: %s", err);
     uint32_t from_second = 0;
     for (uint32_t i = 0; i < n; i++) from_second += c[i].position[0] > 2 || fabsf(c[i].albedo[1] - 0.6f) < 1e-6f;
     CHECK(n > 0 && from_second == 0, "overlap: %u of %u caches from the later triangle", from_second, n);
     free(c);
     c = NULL;
     lc_lightmap_release(&lm);
-    CHECK(lc_texels_rasterize(&b.s, 0, 16, &lm, &c, &n, err, sizeof err) == -1 && strstr(err, "size"), "size 0: %s",
+    CHECK(lc_texels_rasterize(&b.s, 0, 16, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == -1 && strstr(err, "size"), "size 0: %s",
           err);
     free(b.s.mesh.uv1);
     b.s.mesh.uv1 = NULL;
-    CHECK(lc_texels_rasterize(&b.s, 16, 16, &lm, &c, &n, err, sizeof err) == -1 && strstr(err, "uv1"), "no uv1: %s",
+    CHECK(lc_texels_rasterize(&b.s, 16, 16, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == -1 && strstr(err, "uv1"), "no uv1: %s",
           err);
     lc_scene_release(&b.s);
 }
@@ -445,6 +447,7 @@ static uint32_t check_fill_source(const char *name, const lc_scene *s, const lc_
 
 /* uvgen + rasterize + dilate with all the invariants; returns covered texels. */
 static uint32_t run_atlas(const char *name, builder *b, lc_uv_params p, int per_triangle) {
+    p.threads = TEXELS_TEST_THREADS;
     lc_uv_stats st;
     char err[256];
     CHECK(lc_uvgen(&b->s.mesh, &p, &st, err, sizeof err) == 0, "%s: uvgen: %s", name, err);
@@ -452,7 +455,7 @@ static uint32_t run_atlas(const char *name, builder *b, lc_uv_params p, int per_
     lc_lcb_cache *c = NULL;
     uint32_t n = 0;
     double t0 = now();
-    CHECK(lc_texels_rasterize(&b->s, st.width, st.height, &lm, &c, &n, err, sizeof err) == 0, "%s: %s", name, err);
+    CHECK(lc_texels_rasterize(&b->s, st.width, st.height, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0, "%s: %s", name, err);
     double t1 = now();
     const uint32_t W = st.width, H = st.height, n_fill = lm.n_dilated;
     /* rasterize alone already covers every bilinear read, from the right chart */
@@ -461,7 +464,7 @@ static uint32_t run_atlas(const char *name, builder *b, lc_uv_params p, int per_
     uint32_t *before = malloc(4 * (size_t)W * H);
     memcpy(before, lm.texel_cache, 4 * (size_t)W * H);
     double t2 = now();
-    lc_texels_dilate(&lm, 2);
+    lc_texels_dilate(&lm, 2, TEXELS_TEST_THREADS);
     double t3 = now();
     fprintf(stderr, "%s: %u tris, %ux%u, %u covered, %u filled (source up to %u texels away), %u dilated; "
             "rasterize %.3f s, dilate %.3f s\n", name, b->s.mesh.n_triangles, W, H, lm.n_covered, n_fill, far,
@@ -498,10 +501,8 @@ static uint32_t run_atlas(const char *name, builder *b, lc_uv_params p, int per_
     lc_lightmap lm2;
     lc_lcb_cache *c2 = NULL;
     uint32_t n2 = 0;
-    lc_parallel_set_threads(1);
-    CHECK(lc_texels_rasterize(&b->s, st.width, st.height, &lm2, &c2, &n2, err, sizeof err) == 0, "%s", err);
-    lc_texels_dilate(&lm2, 2);
-    lc_parallel_set_threads(2);
+    CHECK(lc_texels_rasterize(&b->s, st.width, st.height, 1, &lm2, &c2, &n2, err, sizeof err) == 0, "%s", err);
+    lc_texels_dilate(&lm2, 2, 1);
     CHECK(n2 == n && memcmp(c, c2, sizeof *c * n) == 0 &&
               memcmp(lm.texel_cache, lm2.texel_cache, 4 * (size_t)st.width * st.height) == 0,
           "%s: deterministic", name);
@@ -585,7 +586,6 @@ static void test_speed(void) {
 }
 
 int main(void) {
-    lc_parallel_set_threads(2); /* the first run of each atlas; determinism compares with 1 */
     test_quad_exact();
     test_fill_rule();
     test_tiny_chart();
