@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Runs every test: an ASan+UBSan build (unit, fuzz replay and fast integration tests), then
-# the release build's full suite (including bakes of ../shared/scenes when present).
-# Ends with ctest's summary of the full suite.
+# Runs every test: an ASan+UBSan Debug build (unit, fuzz replay and fast integration tests)
+# in build-asan/, then the Release build's full suite (including bakes of ../shared/scenes
+# when present) in build-release/ (build/ stays the demo's RelWithDebInfo build).
+# Ends with ctest's summary of the full suite. CI (.ci/run) runs scripts/fuzz.sh first.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 bash "$root/scripts/setup-deps.sh"
@@ -13,8 +14,8 @@ cmake --build "$asan" -j"$jobs"
 echo "== ASan+UBSan: unit, fuzz replay, fast integration tests =="
 (cd "$asan" && ctest --output-on-failure -j"$jobs" -LE slow)
 
-build="$root/build"
-cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+build="$root/build-release"
+cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$build" -j"$jobs"
-echo "== full suite =="
+echo "== full suite (Release) =="
 cd "$build" && ctest --output-on-failure -j"$jobs"
