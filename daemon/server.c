@@ -176,6 +176,41 @@ static void server_report_relight_failure(lc_server *s) {
         if (o->authed) session_error(s, o, &none, LC_ERR_INTERNAL, "", msg);
 }
 
+/* One WRITEABLE's frame: the first subscribed stream with a newer publication (or a forced
+ * keyframe) that its max_rate lets through, encoded from the session's copy and written.
+ * -1 closes the connection. */
+static int session_write_frame(lc_server *s, lc_session *ss, struct lws *wsi) {
+    for (int k = 1; k < STREAMS; k++) {
+        if (!ss->stream[k].on || !(ss->stream[k].force || ss->stream[k].sent_pub_seq < ss->frame_seq)) continue;
+        double now = lc_clock_ms();
+        if (!ss->stream[k].force && ss->stream[k].max_rate > 0 &&
+            now - ss->stream[k].last_ms < 1000.0 / ss->stream[k].max_rate)
+            continue; /* the tick re-arms writable */
+        lc_frames_job job = {.frame = ss->frame,
+                             .pub_seq = ss->frame_seq,
+                             .stream = k,
+                             .enc = ss->stream[k].enc,
+                             .residual = ss->stream[k].residual,
+                             .sequence = ss->stream[k].sequence + 1,
+                             .force_key = ss->stream[k].force,
+                             .tile = s->tile,
+                             .keyframe_interval = s->cfg->keyframe_interval,
+                             .delta_threshold = s->cfg->delta_threshold,
+                             .pre = LWS_PRE};
+        size_t n = lc_frames_encode(s->frames, &ss->copy, &job);
+        if (n == 0) return -1;
+        ss->stream[k].force = 0;
+        ss->stream[k].sequence++;
+        ss->stream[k].sent_pub_seq = ss->frame_seq;
+        ss->stream[k].last_ms = now;
+        if (lws_write(wsi, ss->copy.out + LWS_PRE, n, LWS_WRITE_BINARY) < (int)n) return -1;
+        s->frames_sent++;
+        s->bytes_sent += n;
+        return 0;
+    }
+    return 0;
+}
+
 static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len) {
     struct lws_vhost *vh = lws_get_vhost(wsi);
     lc_server *s = vh ? lws_get_vhost_user(vh) : NULL;
@@ -284,35 +319,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
                              strlen(ss->close_reason));
             return -1;
         } else if (ss->authed && session_wants_frame(ss)) {
-            for (int k = 1; k < STREAMS; k++) {
-                if (!ss->stream[k].on || !(ss->stream[k].force || ss->stream[k].sent_pub_seq < ss->frame_seq))
-                    continue;
-                double now = lc_clock_ms();
-                if (!ss->stream[k].force && ss->stream[k].max_rate > 0 &&
-                    now - ss->stream[k].last_ms < 1000.0 / ss->stream[k].max_rate)
-                    continue; /* the tick re-arms writable */
-                lc_frames_job job = {.frame = ss->frame,
-                                     .pub_seq = ss->frame_seq,
-                                     .stream = k,
-                                     .enc = ss->stream[k].enc,
-                                     .residual = ss->stream[k].residual,
-                                     .sequence = ss->stream[k].sequence + 1,
-                                     .force_key = ss->stream[k].force,
-                                     .tile = s->tile,
-                                     .keyframe_interval = s->cfg->keyframe_interval,
-                                     .delta_threshold = s->cfg->delta_threshold,
-                                     .pre = LWS_PRE};
-                size_t n = lc_frames_encode(s->frames, &ss->copy, &job);
-                if (n == 0) return -1;
-                ss->stream[k].force = 0;
-                ss->stream[k].sequence++;
-                ss->stream[k].sent_pub_seq = ss->frame_seq;
-                ss->stream[k].last_ms = now;
-                if (lws_write(wsi, ss->copy.out + LWS_PRE, n, LWS_WRITE_BINARY) < (int)n) return -1;
-                s->frames_sent++;
-                s->bytes_sent += n;
-                break;
-            }
+            if (session_write_frame(s, ss, wsi) != 0) return -1;
         }
         /* A stream held back by its max_rate is re-armed by the tick, not here (that would spin). */
         if (ss->outq_n > 0 || ss->closing || (ss->authed && session_frame_due(ss, lc_clock_ms())))
