@@ -40,20 +40,14 @@ grep -qF -- "(default $Q/share/lucent/cornell.lcb)" "$TMP/help" ||
   fail "installed lucent-bake verify: $(head -c 400 "$TMP/out")"
 
 # The installed lucentd on its default (installed) bake, driven by the installed lucentctl.
-"$Q/bin/lucentd" --port 0 --state-dir "$TMP/state" --backend cpu --log-level warn >"$TMP/d.out" 2>"$TMP/d.err" &
-DPID=$!
-trap 'kill "$DPID" 2>/dev/null; wait "$DPID" 2>/dev/null; rm -rf "$TMP"' EXIT
-port=""
-for _ in $(seq 1 400); do
-  port="$(sed -n 's/^lucentd listening port=\([0-9]*\).*/\1/p' "$TMP/d.out")"
-  [ -n "$port" ] && break
-  kill -0 "$DPID" 2>/dev/null || break
-  sleep 0.05
-done
-if [ -z "$port" ]; then
+# (lib.sh's start_lucentd with the installed tree for LUCENT_BINARY_DIR: state in $TMP/d)
+if ! LUCENT_BINARY_DIR="$Q" LUCENTD_START_TIMEOUT=20 start_lucentd "$TMP/d"; then
+  kill "$LUCENTD_PID" 2>/dev/null
   fail "installed lucentd did not start: $(head -c 400 "$TMP/d.err")"
   finish
 fi
+DPID=$LUCENTD_PID port=$LUCENTD_PORT
+trap 'kill "$DPID" 2>/dev/null; wait "$DPID" 2>/dev/null; rm -rf "$TMP"' EXIT
 export LUCENT_URL="ws://127.0.0.1:$port/"
 CTL="$Q/bin/lucentctl"
 expect_exit 0 "" "$CTL" light set key --type point --position 0.28,0.4,0.28 --intensity 2
