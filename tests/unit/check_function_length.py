@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""No function longer than 150 lines in the daemon, the protocol or the client (issue 14).
+"""No function longer than 150 lines in the shared code, the daemon, the protocol, the client or the tools (issue 14).
 
 Usage: check_function_length.py [--max N] [--list] [PATH ...]
 
-PATHs are files or directories (default: daemon/, protocol/ and client/ under the source
+PATHs are files or directories (default: common/, daemon/, protocol/, client/ and tools/ under the source
 root, LUCENT_SOURCE_DIR or this script's ../..). Every .c/.cpp found is scanned; directories
 named build* or starting with a dot are skipped. A function's length is counted from the
 line of its body's opening brace to the line of its closing brace, both included.
@@ -21,7 +21,7 @@ import signal
 import sys
 
 MAX_LINES = 150
-SOURCE_DIRS = ("daemon", "protocol", "client")
+SOURCE_DIRS = ("common", "daemon", "protocol", "client", "tools")
 EXTENSIONS = (".c", ".cpp")
 
 # Keywords that can precede a parenthesis in a declaration without naming the function.

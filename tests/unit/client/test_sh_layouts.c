@@ -3,8 +3,8 @@
  *
  * For known radiance fields (a constant, directional lobes from 14 directions with a
  * different lobe per colour channel, random L2 fields), the SH a client receives is built as
- * the server builds it (radiance projected on lucent's basis, daemon/util/sh.h lc_sh_eval,
- * then convolved with the clamped cosine A_l, daemon/cpu/transport_cpu.c "Grid"), sent in an
+ * the server builds it (radiance projected on lucent's basis, common/sh.h lc_sh_eval,
+ * then convolved with the clamped cosine A_l, daemon/engine/cpu/transport_cpu.c "Grid"), sent in an
  * shgrid f32 keyframe and decoded by lc_client_view_apply. It is converted with the helper
  * for platform P and evaluated with P's formula, written out below with its source, at the
  * normal mapped into P's frame. That must equal lucent's own irradiance, lc_sh9_irradiance, at

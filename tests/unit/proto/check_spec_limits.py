@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """The spec states lucentd's defaults: protocol/PROTOCOL.md (§1.3 and the welcome example)
 and protocol/asyncapi.yaml (the port) must say what `lucentd --help` says, which comes from
-the option table fed by daemon/util/limits.h. Fails on any drift.
+the option table fed by common/limits.h. Fails on any drift.
 usage: check_spec_limits.py LUCENTD SOURCE_DIR"""
 import json
 import re

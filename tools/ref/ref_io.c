@@ -139,7 +139,7 @@ int lc_ref_write(const char *dir, const lc_ref_result *res, const char *extra_js
     cJSON_AddStringToObject(root, "quantity",
                             "indirect irradiance as the lucent engine defines it: light arriving from surfaces "
                             "(emission + everything they reflect, any number of bounces), one-sided surfaces, "
-                            "no direct light from lights or the directly seen sky (see daemon/ref/ref.h)");
+                            "no direct light from lights or the directly seen sky (see tools/ref/ref.h)");
     cJSON *lm = cJSON_AddObjectToObject(root, "lightmap");
     cJSON_AddNumberToObject(lm, "width", res->width);
     cJSON_AddNumberToObject(lm, "height", res->height);
