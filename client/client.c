@@ -25,16 +25,16 @@
 #define CLIENT_TICK_US (20 * LWS_US_PER_MS)
 #define CLIENT_MAX_MESSAGE (256u << 20) /* largest frame we reassemble (a 4k f32 lightmap is 192 MiB) */
 #define CLIENT_MAX_TEXT (16u << 20)
-#define CLIENT_ID_PREFIX "lc~"          /* ids of the library's own requests */
-#define CLIENT_STREAMS 4                /* indexed by LC_CLIENT_LIGHTMAP.. (0 unused) */
+#define CLIENT_ID_PREFIX "lc~" /* ids of the library's own requests */
+#define CLIENT_STREAMS 4       /* indexed by LC_CLIENT_LIGHTMAP.. (0 unused) */
 
 /* ------------------------------------------------------------------------------------------
  * Views: a client-side copy of one stream
  * ---------------------------------------------------------------------------------------- */
 
 struct lc_client_view {
-    int have_key;           /* a keyframe was applied since create/reset */
-    uint16_t flags;         /* of the last applied frame */
+    int have_key;   /* a keyframe was applied since create/reset */
+    uint16_t flags; /* of the last applied frame */
     int stream, encoding;
     uint64_t revision, sequence, server_time_us, client_time_us;
     uint32_t width, height, depth, tile_size;
@@ -42,7 +42,7 @@ struct lc_client_view {
     size_t value_count, value_cap;
     char **object_ids; /* objects stream: width strings */
     uint32_t n_object_ids;
-    uint8_t *words;  /* lightmap: the texels as received, encoded (residual deltas add to them) */
+    uint8_t *words; /* lightmap: the texels as received, encoded (residual deltas add to them) */
     size_t words_len, words_cap;
     int words_encoding;
     uint32_t *tiles; /* tiles of the last applied delta */
@@ -111,9 +111,7 @@ static float get_f32(const uint8_t *p) {
 /* Decodes one lightmap texel into rgb. */
 static void decode_texel(int encoding, const uint8_t *p, float *rgb) {
     switch (encoding) {
-    case LC_ENC_RGB9E5:
-        lc_rgb9e5_decode(get_u32(p), rgb);
-        break;
+    case LC_ENC_RGB9E5: lc_rgb9e5_decode(get_u32(p), rgb); break;
     case LC_ENC_RGBA16F:
         for (int k = 0; k < 3; k++) rgb[k] = lc_half_to_float((uint16_t)(p[2 * k] | p[2 * k + 1] << 8));
         break;
@@ -185,8 +183,7 @@ static int apply_lightmap(lc_client_view *v, const lc_frame_header *h, const uin
         return 0;
     }
     if (h->width != v->width || h->height != v->height || v->stream != LC_CLIENT_LIGHTMAP) {
-        set_err(err, errlen, "delta for a %ux%u lightmap, the copy is %ux%u", h->width, h->height, v->width,
-                v->height);
+        set_err(err, errlen, "delta for a %ux%u lightmap, the copy is %ux%u", h->width, h->height, v->width, v->height);
         return -2;
     }
     if (h->tile_count > v->tile_cap) {
@@ -204,7 +201,8 @@ static int apply_lightmap(lc_client_view *v, const lc_frame_header *h, const uin
     uint8_t *inflated = NULL;
     if (residual) {
         if (!words_ok) {
-            set_err(err, errlen, "residual delta without an encoded %s copy", lc_proto_encoding_name((lc_encoding)h->encoding));
+            set_err(err, errlen, "residual delta without an encoded %s copy",
+                    lc_proto_encoding_name((lc_encoding)h->encoding));
             return -2;
         }
         size_t expect = lc_frame_tile_texels(h, tiles) * tb;
@@ -318,7 +316,7 @@ int lc_client_view_apply(lc_client_view *v, const uint8_t *frame, size_t len, lc
         }
     }
     int r = h.stream == LC_STREAM_LIGHTMAP ? apply_lightmap(v, &h, tiles, payload, err, errlen)
-                                          : apply_sh(v, &h, payload, err, errlen);
+                                           : apply_sh(v, &h, payload, err, errlen);
     if (r != 0) {
         if (r == -1 && key) v->have_key = 0; /* a half-written keyframe */
         return r;
@@ -352,10 +350,10 @@ typedef struct client_msg {
 } client_msg;
 
 typedef enum {
-    CONN_IDLE = 0,  /* no socket (before the first attempt, or waiting to retry) */
-    CONN_OPENING,   /* TCP/TLS/WebSocket handshake or hello sent, no welcome yet */
-    CONN_OPEN,      /* welcome received */
-    CONN_DEAD,      /* closed for good */
+    CONN_IDLE = 0, /* no socket (before the first attempt, or waiting to retry) */
+    CONN_OPENING,  /* TCP/TLS/WebSocket handshake or hello sent, no welcome yet */
+    CONN_OPEN,     /* welcome received */
+    CONN_DEAD,     /* closed for good */
 } conn_state;
 
 typedef struct client_sub {
@@ -381,7 +379,7 @@ struct lc_client {
     int port;
 
     /* reconnect */
-    int attempts;       /* consecutive failed attempts */
+    int attempts; /* consecutive failed attempts */
     int backoff_ms;
     long long retry_at; /* monotonic ms of the next attempt (CONN_IDLE) */
 
@@ -551,13 +549,12 @@ static void client_on_text(lc_client *c, char *text) {
         int is_reply = is_error || (type && (!strcmp(type, "ok") || !strcmp(type, "state") || !strcmp(type, "pong")));
         /* an error without an id answers a request the server could not read (bad_json) */
         int match = c->pending && !c->reply_done && is_reply &&
-                    (c->pending_id ? (ids_equal(id, c->pending_id) || (is_error && !id)) : 1);
+            (c->pending_id ? (ids_equal(id, c->pending_id) || (is_error && !id)) : 1);
         if (match) {
             c->reply = text;
             text = NULL;
             c->reply_done = 1;
-        } else if (!c->closing && c->cb.on_message)
-            c->cb.on_message(c, text, c->cb.user);
+        } else if (!c->closing && c->cb.on_message) c->cb.on_message(c, text, c->cb.user);
     }
     cJSON_Delete(o);
     free(text);
@@ -593,8 +590,7 @@ static void client_on_binary(lc_client *c, uint8_t *data, size_t len) {
     if (f.keyframe) {
         c->stats.keyframes++;
         c->resync_pending = 0;
-    } else
-        c->stats.deltas++;
+    } else c->stats.deltas++;
     if (!c->closing && c->cb.on_frame) c->cb.on_frame(c, &f, c->cb.user);
 }
 
@@ -604,8 +600,7 @@ static void client_connection_lost(lc_client *c, const char *why) {
     c->wsi = NULL;
     txq_clear(c);
     c->rxlen = 0;
-    if (c->reconnect && !c->refused && !c->closing &&
-        (c->max_retries <= 0 || c->attempts < c->max_retries)) {
+    if (c->reconnect && !c->refused && !c->closing && (c->max_retries <= 0 || c->attempts < c->max_retries)) {
         c->state = CONN_IDLE;
         if (!was_open) c->attempts++;
         int jitter = c->backoff_ms / 5;
@@ -713,15 +708,13 @@ static int client_lws_callback(struct lws *wsi, enum lws_callback_reasons reason
             const unsigned char *p = in;
             snprintf(c->reason, sizeof c->reason, "server closed the connection (%d%s%.*s)", (p[0] << 8) | p[1],
                      len > 2 ? ": " : "", (int)(len - 2), (const char *)p + 2);
-        } else
-            snprintf(c->reason, sizeof c->reason, "server closed the connection");
+        } else snprintf(c->reason, sizeof c->reason, "server closed the connection");
         break;
     case LWS_CALLBACK_CLIENT_CLOSED:
         if (c->state == CONN_OPENING || c->state == CONN_OPEN)
             client_connection_lost(c, c->reason[0] ? c->reason : "connection closed");
         break;
-    default:
-        break;
+    default: break;
     }
     return lws_callback_http_dummy(wsi, reason, user, in, len);
 }
@@ -807,7 +800,7 @@ static int client_start_attempt(lc_client *c) {
         ci.alpn = "http/1.1";
         if (c->insecure)
             ci.ssl_connection |= LCCSCF_ALLOW_SELFSIGNED | LCCSCF_SKIP_SERVER_CERT_HOSTNAME_CHECK |
-                                 LCCSCF_ALLOW_EXPIRED | LCCSCF_ALLOW_INSECURE;
+                LCCSCF_ALLOW_EXPIRED | LCCSCF_ALLOW_INSECURE;
     }
     if (!lws_client_connect_via_info(&ci) && c->state == CONN_OPENING) {
         c->wsi = NULL;
@@ -887,10 +880,8 @@ lc_client *lc_client_open(const lc_client_options *o, char *err, size_t errlen) 
         set_err(err, errlen, "server error %s: %s", json_str(e, "code") ? json_str(e, "code") : "?",
                 json_str(e, "message") ? json_str(e, "message") : "");
         cJSON_Delete(e);
-    } else if (c->state == CONN_OPENING)
-        set_err(err, errlen, "%s: timed out waiting for the server's welcome", c->url);
-    else
-        set_err(err, errlen, "%s", c->reason[0] ? c->reason : "connection failed");
+    } else if (c->state == CONN_OPENING) set_err(err, errlen, "%s: timed out waiting for the server's welcome", c->url);
+    else set_err(err, errlen, "%s", c->reason[0] ? c->reason : "connection failed");
 err:
     lc_client_close(c);
     return NULL;
@@ -1169,8 +1160,8 @@ static const double sh9_k[9] = {0.28209479177387814, 0.48860251190291992, 0.4886
                                 0.48860251190291992, 1.09254843059207907, 1.09254843059207907,
                                 0.31539156525252001, 1.09254843059207907, 0.54627421529603954};
 static const double sh9_a[9] = {3.14159265358979323846, 2.09439510239319549, 2.09439510239319549,
-                                2.09439510239319549, 0.78539816339744831, 0.78539816339744831,
-                                0.78539816339744831, 0.78539816339744831, 0.78539816339744831};
+                                2.09439510239319549,    0.78539816339744831, 0.78539816339744831,
+                                0.78539816339744831,    0.78539816339744831, 0.78539816339744831};
 
 void lc_sh9_to_unity(const float irradiance[27], float unity[27]) {
     /* Unity's SphericalHarmonicsL2 is premultiplied (HDRP SphericalHarmonicMath.UndoCosineRescaling:

@@ -14,10 +14,10 @@ enum { CTL_EXIT_OK = 0, CTL_EXIT_REFUSED = 1, CTL_EXIT_USAGE = 2, CTL_EXIT_CONN 
 #define CTL_TIMEOUT_MS 5000
 
 /* Global options, set by main before dispatch. */
-extern const char *ctl_url;   /* --url / LUCENT_URL */
-extern const char *ctl_token; /* --token / LUCENT_TOKEN */
-extern int ctl_json;          /* --json */
-extern int ctl_insecure;      /* --insecure: wss with self-signed / mismatched certificates */
+extern const char *ctl_url;     /* --url / LUCENT_URL */
+extern const char *ctl_token;   /* --token / LUCENT_TOKEN */
+extern int ctl_json;            /* --json */
+extern int ctl_insecure;        /* --insecure: wss with self-signed / mismatched certificates */
 extern const char *ctl_ca_file; /* --ca-file / LUCENT_CA_FILE: PEM bundle for wss (NULL = system) */
 
 /* Prints "lucentctl: <message>" and the hint to stderr; returns CTL_EXIT_USAGE. */
@@ -85,8 +85,8 @@ typedef enum {
 } ctl_flag_kind;
 
 typedef struct ctl_flag {
-    const char *name;    /* "--position"; NULL ends the table */
-    const char *key;     /* JSON field it sets */
+    const char *name; /* "--position"; NULL ends the table */
+    const char *key;  /* JSON field it sets */
     ctl_flag_kind kind;
     unsigned long counts; /* LIST: allowed counts as bits (1ul << 3 = exactly 3) */
     int expand;           /* LIST: a single value is repeated to the largest allowed count */

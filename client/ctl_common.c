@@ -131,8 +131,7 @@ static const struct {
     {"unknown_asset",
      "the scene has no such asset; the welcome lists scene.assets (lucent-bake --asset NAME=FILE adds one)"},
     {"unknown_material", "the scene has no such material; 'lucentctl state' lists the materials"},
-    {"limit_exceeded",
-     "too many lights, objects or batch ops (welcome limits); remove some first or split the batch"},
+    {"limit_exceeded", "too many lights, objects or batch ops (welcome limits); remove some first or split the batch"},
     {"rate_limited",
      "over the server's request rate (welcome limits.rate per second); slow down (script --speed) or raise "
      "lucentd --rate"},
@@ -343,8 +342,7 @@ static cJSON *ctl_flag_value(const char *cmd, const ctl_flag *f, const char *val
         if (*val && strlen(val) <= CTL_STRING_MAX) return cJSON_CreateString(val);
         ctl_usage_error("%s: %s '%.64s': expected 1..%d bytes", cmd, f->name, val, CTL_STRING_MAX);
         return NULL;
-    case CTL_FLAG_SWITCH:
-        return cJSON_CreateTrue();
+    case CTL_FLAG_SWITCH: return cJSON_CreateTrue();
     }
     ctl_usage_error("%s: %s '%s': expected %s", cmd, f->name, val, ctl_flag_kind_hint(f));
     return NULL;
@@ -382,8 +380,7 @@ int ctl_parse_flags(const char *cmd, const ctl_flag *table, int argc, char **arg
                 return ctl_usage_error("%s: %s needs a value (%s)", cmd, f->name, f->metavar ? f->metavar : "");
             val = argv[++i];
         }
-        if (cJSON_GetObjectItemCaseSensitive(into, f->key))
-            return ctl_usage_error("%s: %s given twice", cmd, f->name);
+        if (cJSON_GetObjectItemCaseSensitive(into, f->key)) return ctl_usage_error("%s: %s given twice", cmd, f->name);
         cJSON *item = ctl_flag_value(cmd, f, val);
         if (!item) return CTL_EXIT_USAGE;
         cJSON_AddItemToObject(into, f->key, item);

@@ -71,10 +71,10 @@ int ctl_image_write_exr_half(const char *path, uint32_t width, uint32_t height, 
     put_attr(&b, "channels", "chlist", 3 * (2 + 16) + 1);
     for (int c = 0; c < 3; c++) {
         put(&b, channels[c], 2);
-        put_u32(&b, 1);                 /* pixel type HALF */
-        put(&b, "\0\0\0\0", 4);          /* pLinear + reserved */
-        put_u32(&b, 1);                 /* x sampling */
-        put_u32(&b, 1);                 /* y sampling */
+        put_u32(&b, 1);         /* pixel type HALF */
+        put(&b, "\0\0\0\0", 4); /* pLinear + reserved */
+        put_u32(&b, 1);         /* x sampling */
+        put_u32(&b, 1);         /* y sampling */
     }
     put(&b, "", 1);
     put_attr(&b, "compression", "compression", 1);

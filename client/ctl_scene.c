@@ -50,13 +50,14 @@ done:
 /* --- ping -------------------------------------------------------------------------------- */
 
 static void ctl_usage_ping(FILE *f) {
-    fprintf(f, "usage: lucentctl ping [--count N] [--interval SECONDS]\n"
-               "\n"
-               "Sends ping and prints the round trip in milliseconds (with --json: each pong, plus\n"
-               "\"rtt_ms\"). With --count N > 1, a min/avg/max summary follows.\n"
-               "\n"
-               "  --count N            pings to send (default 1, at most 100000)\n"
-               "  --interval SECONDS   pause between pings (default 0.2)\n");
+    fprintf(f,
+            "usage: lucentctl ping [--count N] [--interval SECONDS]\n"
+            "\n"
+            "Sends ping and prints the round trip in milliseconds (with --json: each pong, plus\n"
+            "\"rtt_ms\"). With --count N > 1, a min/avg/max summary follows.\n"
+            "\n"
+            "  --count N            pings to send (default 1, at most 100000)\n"
+            "  --interval SECONDS   pause between pings (default 0.2)\n");
 }
 
 int ctl_cmd_ping(int argc, char **argv) {
@@ -200,10 +201,8 @@ int ctl_cmd_send(int argc, char **argv) {
 /* --- light, object ----------------------------------------------------------------------- */
 
 static const ctl_flag ctl_light_flags[] = {
-    {"--type", "type", CTL_FLAG_CHOICE, 0, 0, "point|spot|directional|area", "point|spot|directional|area",
-     "required"},
-    {"--position", "position", CTL_FLAG_LIST, 1ul << 3, 0, NULL, "x,y,z",
-     "metres (point, spot, area: required)"},
+    {"--type", "type", CTL_FLAG_CHOICE, 0, 0, "point|spot|directional|area", "point|spot|directional|area", "required"},
+    {"--position", "position", CTL_FLAG_LIST, 1ul << 3, 0, NULL, "x,y,z", "metres (point, spot, area: required)"},
     {"--direction", "direction", CTL_FLAG_LIST, 1ul << 3, 0, NULL, "x,y,z",
      "the way light travels (spot, directional, area: required)"},
     {"--color", "color", CTL_FLAG_LIST, 1ul << 3, 0, NULL, "r,g,b", "linear RGB, each 0..1e6 (default 1,1,1)"},
@@ -232,22 +231,25 @@ static const ctl_flag ctl_object_flags[] = {
 };
 
 static void ctl_usage_light(FILE *f) {
-    fprintf(f, "usage: lucentctl light set ID --type TYPE [options]\n"
-               "       lucentctl light rm ID\n"
-               "\n"
-               "light set creates or replaces light ID (light.set, PROTOCOL.md §4.3): fields not\n"
-               "given take their defaults. Options:\n");
+    fprintf(f,
+            "usage: lucentctl light set ID --type TYPE [options]\n"
+            "       lucentctl light rm ID\n"
+            "\n"
+            "light set creates or replaces light ID (light.set, PROTOCOL.md §4.3): fields not\n"
+            "given take their defaults. Options:\n");
     ctl_print_flags(ctl_light_flags, f);
-    fprintf(f, "\nexample: lucentctl light set key --type spot --position 0.28,0.5,0.28 \\\n"
-               "           --direction 0,-1,0 --intensity 2 --outer-cone 0.6\n");
+    fprintf(f,
+            "\nexample: lucentctl light set key --type spot --position 0.28,0.5,0.28 \\\n"
+            "           --direction 0,-1,0 --intensity 2 --outer-cone 0.6\n");
 }
 
 static void ctl_usage_object(FILE *f) {
-    fprintf(f, "usage: lucentctl object set ID --asset NAME [options]\n"
-               "       lucentctl object rm ID\n"
-               "\n"
-               "object set creates or replaces object instance ID of a baked asset (object.set,\n"
-               "PROTOCOL.md §4.5): fields not given take their defaults. Options:\n");
+    fprintf(f,
+            "usage: lucentctl object set ID --asset NAME [options]\n"
+            "       lucentctl object rm ID\n"
+            "\n"
+            "object set creates or replaces object instance ID of a baked asset (object.set,\n"
+            "PROTOCOL.md §4.5): fields not given take their defaults. Options:\n");
     ctl_print_flags(ctl_object_flags, f);
     fprintf(f, "\nexample: lucentctl object set box1 --asset cube --position 0.2,0,0.15 --scale 0.5\n");
 }
@@ -344,10 +346,11 @@ static const ctl_flag ctl_material_flags[] = {
 };
 
 static void ctl_usage_material(FILE *f) {
-    fprintf(f, "usage: lucentctl material set NAME --emission r,g,b\n"
-               "\n"
-               "Sets the emission of a scene material (material.set, PROTOCOL.md §4.7); 'lucentctl\n"
-               "state' lists the materials. Options:\n");
+    fprintf(f,
+            "usage: lucentctl material set NAME --emission r,g,b\n"
+            "\n"
+            "Sets the emission of a scene material (material.set, PROTOCOL.md §4.7); 'lucentctl\n"
+            "state' lists the materials. Options:\n");
     ctl_print_flags(ctl_material_flags, f);
     fprintf(f, "\nexample: lucentctl material set light --emission 34,24,8\n");
 }
@@ -406,10 +409,11 @@ static const ctl_flag ctl_env_flags[] = {
 };
 
 static void ctl_usage_env(FILE *f) {
-    fprintf(f, "usage: lucentctl env set --none | --color r,g,b | --sh 27,NUMBERS [--intensity N]\n"
-               "\n"
-               "Sets the environment (sky) light (environment.set, PROTOCOL.md §4.8); exactly one\n"
-               "of --none, --color, --sh. Options:\n");
+    fprintf(f,
+            "usage: lucentctl env set --none | --color r,g,b | --sh 27,NUMBERS [--intensity N]\n"
+            "\n"
+            "Sets the environment (sky) light (environment.set, PROTOCOL.md §4.8); exactly one\n"
+            "of --none, --color, --sh. Options:\n");
     ctl_print_flags(ctl_env_flags, f);
     fprintf(f, "\nexample: lucentctl env set --color 0.4,0.5,0.7 --intensity 0.5\n");
 }
@@ -472,10 +476,11 @@ static const ctl_flag ctl_settings_flags[] = {
 };
 
 static void ctl_usage_settings(FILE *f) {
-    fprintf(f, "usage: lucentctl settings set [options]\n"
-               "\n"
-               "Changes relight settings (settings.set, PROTOCOL.md §4.9); only the options given\n"
-               "are sent, at least one. Options:\n");
+    fprintf(f,
+            "usage: lucentctl settings set [options]\n"
+            "\n"
+            "Changes relight settings (settings.set, PROTOCOL.md §4.9); only the options given\n"
+            "are sent, at least one. Options:\n");
     ctl_print_flags(ctl_settings_flags, f);
     fprintf(f, "\nexample: lucentctl settings set --bounces 2 --progressive true\n");
 }

@@ -17,13 +17,13 @@
 #include <time.h>
 #include <unistd.h>
 
-#define CTL_SCRIPT_LINE_MAX (1u << 20)   /* bytes per line; far above any server's message limit */
-#define CTL_SCRIPT_MSGS_MAX 1000000u     /* messages per file */
+#define CTL_SCRIPT_LINE_MAX (1u << 20)    /* bytes per line; far above any server's message limit */
+#define CTL_SCRIPT_MSGS_MAX 1000000u      /* messages per file */
 #define CTL_SCRIPT_BYTES_MAX (256u << 20) /* kept message text per file */
-#define CTL_SCRIPT_AT_MAX 1e9            /* seconds; keeps at/speed well inside a timespec */
+#define CTL_SCRIPT_AT_MAX 1e9             /* seconds; keeps at/speed well inside a timespec */
 #define CTL_SCRIPT_SPEED_MIN 1e-3
 #define CTL_SCRIPT_SPEED_MAX 1e6
-#define CTL_SCRIPT_ERRORS_SHOWN 100      /* malformed lines reported before "... and N more" */
+#define CTL_SCRIPT_ERRORS_SHOWN 100 /* malformed lines reported before "... and N more" */
 
 typedef struct ctl_script_msg {
     char *text;    /* compact JSON, "at" removed */
@@ -298,15 +298,15 @@ static void ctl_script_summary(const ctl_script *s, const ctl_script_run *r) {
     FILE *out = ctl_json ? stderr : stdout; /* stdout stays pure JSON lines with --json */
     char rev[32] = "none";
     if (r->final_revision >= 0) snprintf(rev, sizeof rev, "%lld", r->final_revision);
-    fprintf(out, "%s: %lld message%s sent, %lld failed, %.3f s, final revision %s, max lag %.1f ms\n", s->name,
-            r->sent, r->sent == 1 ? "" : "s", r->failed, ctl_ts_seconds(&now) - ctl_ts_seconds(&r->start), rev,
+    fprintf(out, "%s: %lld message%s sent, %lld failed, %.3f s, final revision %s, max lag %.1f ms\n", s->name, r->sent,
+            r->sent == 1 ? "" : "s", r->failed, ctl_ts_seconds(&now) - ctl_ts_seconds(&r->start), rev,
             r->max_lag * 1e3);
     fflush(out);
 }
 
 /* Sends every message once, on schedule from a fresh t0. Returns an exit code, or -1 to go on. */
-static int ctl_script_pass(lc_client *c, const ctl_script *s, const ctl_script_opts *o, ctl_script_run *r,
-                           int progress, long long pass) {
+static int ctl_script_pass(lc_client *c, const ctl_script *s, const ctl_script_opts *o, ctl_script_run *r, int progress,
+                           long long pass) {
     struct timespec t0, now;
     char err[512], buf[1024];
     clock_gettime(CLOCK_MONOTONIC, &t0);

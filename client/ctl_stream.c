@@ -176,10 +176,12 @@ static int write_sh(stream_out *so, const char *prefix, const lc_client_frame *f
     cJSON_AddNumberToObject(o, "revision", (double)f->revision);
     cJSON_AddNumberToObject(o, "sequence", (double)f->sequence);
     cJSON_AddStringToObject(o, "quantity", "irradiance_sh");
-    cJSON_AddStringToObject(o, "layout", "9 coefficients x RGB interleaved (c0.r c0.g c0.b c1.r ...), "
-                                         "real orthonormal SH, i = l*l + l + m, E(n) = sum c_i y_i(n)");
+    cJSON_AddStringToObject(o, "layout",
+                            "9 coefficients x RGB interleaved (c0.r c0.g c0.b c1.r ...), "
+                            "real orthonormal SH, i = l*l + l + m, E(n) = sum c_i y_i(n)");
     if (f->stream == LC_CLIENT_SHGRID) {
-        const cJSON *grid = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(so->welcome, "scene"), "grid");
+        const cJSON *grid =
+            cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(so->welcome, "scene"), "grid");
         const uint32_t dims[3] = {f->width, f->height, f->depth};
         cJSON *d = cJSON_CreateArray();
         for (int k = 0; k < 3; k++) cJSON_AddItemToArray(d, cJSON_CreateNumber(dims[k]));
@@ -272,24 +274,27 @@ static void watch_on_frame(lc_client *c, const lc_client_frame *f, void *user) {
     w->last_frame_s = watch_now_s();
     if (w->until_rev && f->revision >= w->until_rev) w->reached = 1;
     double age = frame_age_ms(f);
-    fprintf(w->index,
-            "{\"file\":\"%s\",\"stream\":\"%s\",\"encoding\":\"%s\",\"revision\":%llu,\"sequence\":%llu,"
-            "\"keyframe\":%s,\"residual\":%s,\"tiles\":%u,\"bytes\":%zu,\"server_time_us\":%llu,\"client_time_us\":%llu,"
-            "\"age_ms\":%.3f}\n",
-            prefix, stream_name(f->stream), encoding_name(f->encoding), (unsigned long long)f->revision,
-            (unsigned long long)f->sequence, f->keyframe ? "true" : "false", f->residual ? "true" : "false",
-            f->tile_count, f->raw_len,
-            (unsigned long long)f->server_time_us, (unsigned long long)f->client_time_us, age);
+    fprintf(
+        w->index,
+        "{\"file\":\"%s\",\"stream\":\"%s\",\"encoding\":\"%s\",\"revision\":%llu,\"sequence\":%llu,"
+        "\"keyframe\":%s,\"residual\":%s,\"tiles\":%u,\"bytes\":%zu,\"server_time_us\":%llu,\"client_time_us\":%llu,"
+        "\"age_ms\":%.3f}\n",
+        prefix, stream_name(f->stream), encoding_name(f->encoding), (unsigned long long)f->revision,
+        (unsigned long long)f->sequence, f->keyframe ? "true" : "false", f->residual ? "true" : "false", f->tile_count,
+        f->raw_len, (unsigned long long)f->server_time_us, (unsigned long long)f->client_time_us, age);
     fflush(w->index);
     if (ctl_json)
-        printf("{\"type\":\"frame\",\"file\":\"%s\",\"revision\":%llu,\"sequence\":%llu,\"keyframe\":%s,\"bytes\":%zu}\n",
-               prefix, (unsigned long long)f->revision, (unsigned long long)f->sequence,
-               f->keyframe ? "true" : "false", f->raw_len);
+        printf(
+            "{\"type\":\"frame\",\"file\":\"%s\",\"revision\":%llu,\"sequence\":%llu,\"keyframe\":%s,\"bytes\":%zu}\n",
+            prefix, (unsigned long long)f->revision, (unsigned long long)f->sequence, f->keyframe ? "true" : "false",
+            f->raw_len);
     else
         printf("%s revision %llu %s %zu B (%u tiles) -> %s/%s.*\n", stream_name(f->stream),
-               (unsigned long long)f->revision, f->keyframe ? "keyframe" : f->residual ? "residual delta" : "delta",
-               f->raw_len, f->tile_count,
-               w->so.dir, prefix);
+               (unsigned long long)f->revision,
+               f->keyframe       ? "keyframe"
+                   : f->residual ? "residual delta"
+                                 : "delta",
+               f->raw_len, f->tile_count, w->so.dir, prefix);
     fflush(stdout);
 }
 
@@ -339,14 +344,16 @@ int ctl_cmd_watch(int argc, char **argv) {
             if (parse_positive(v, &settle) != 0 || settle > 3600)
                 return ctl_usage_error("watch: --settle '%s' is not a number of seconds in (0, 3600]", v);
         } else if (!strcmp(k, "--max-rate") || !strcmp(k, "--duration") || !strcmp(k, "--exposure") ||
-                 !strcmp(k, "--count")) {
+                   !strcmp(k, "--count")) {
             double x;
             if (parse_positive(v, &x) != 0) return ctl_usage_error("watch: %s '%s' is not a positive number", k, v);
-            if (!strcmp(k, "--count") && x != floor(x)) return ctl_usage_error("watch: --count '%s' is not a whole number", v);
-            *(!strcmp(k, "--max-rate") ? &max_rate : !strcmp(k, "--duration") ? &duration
-                                                     : !strcmp(k, "--exposure") ? &exposure : &count) = x;
-        } else
-            return ctl_usage_error("watch: unknown option '%s'", k);
+            if (!strcmp(k, "--count") && x != floor(x))
+                return ctl_usage_error("watch: --count '%s' is not a whole number", v);
+            *(!strcmp(k, "--max-rate")       ? &max_rate
+                  : !strcmp(k, "--duration") ? &duration
+                  : !strcmp(k, "--exposure") ? &exposure
+                                             : &count) = x;
+        } else return ctl_usage_error("watch: unknown option '%s'", k);
     }
     if (!stream) return ctl_usage_error("watch: --stream is required");
     if (!dir) return ctl_usage_error("watch: --out DIR is required");
@@ -470,8 +477,7 @@ int ctl_cmd_snapshot(int argc, char **argv) {
                 if (!s) return ctl_usage_error("snapshot: --stream '%s' is not lightmap, shgrid or objects", tok);
                 want[s] = 1;
             }
-        } else
-            return ctl_usage_error("snapshot: unknown option '%s'", k);
+        } else return ctl_usage_error("snapshot: unknown option '%s'", k);
     }
     if (!dir) return ctl_usage_error("snapshot: --out DIR is required");
     if (mkdir_p(dir) != 0) {
@@ -513,9 +519,8 @@ int ctl_cmd_snapshot(int argc, char **argv) {
         cJSON_AddNumberToObject(e, "last_frame_bytes", (double)f.raw_len); /* the frame that completed the copy */
         cJSON_AddBoolToObject(e, "last_frame_keyframe", f.keyframe);
         if (!ctl_json)
-            printf("%s: revision %llu, %ux%ux%u -> %s/%s.%s\n", stream_name(s), (unsigned long long)f.revision,
-                   f.width, f.height, f.depth, dir, stream_name(s),
-                   s == LC_CLIENT_LIGHTMAP ? "{exr,png}" : "{json,bin}");
+            printf("%s: revision %llu, %ux%ux%u -> %s/%s.%s\n", stream_name(s), (unsigned long long)f.revision, f.width,
+                   f.height, f.depth, dir, stream_name(s), s == LC_CLIENT_LIGHTMAP ? "{exr,png}" : "{json,bin}");
     }
     if (rc == CTL_EXIT_OK) {
         char path[1100];
@@ -577,8 +582,7 @@ static void latency_report(const char *name, double *v, int n, cJSON *json) {
         cJSON_AddNumberToObject(o, "n", n);
         const char *k[5] = {"min_ms", "p50_ms", "p90_ms", "p99_ms", "max_ms"};
         for (int i = 0; i < 5; i++) cJSON_AddNumberToObject(o, k[i], n ? st[i] : 0);
-    } else
-        printf("%-16s %5d %9.2f %9.2f %9.2f %9.2f %9.2f\n", name, n, st[0], st[1], st[2], st[3], st[4]);
+    } else printf("%-16s %5d %9.2f %9.2f %9.2f %9.2f %9.2f\n", name, n, st[0], st[1], st[2], st[3], st[4]);
 }
 
 /* --clients N: N-1 more subscribers, each on its own thread with its own connection (a
@@ -619,7 +623,7 @@ static void *latency_viewer_main(void *arg) {
         lc_client_callbacks cb = {latency_viewer_frame, NULL, NULL, v};
         lc_client_set_callbacks(c, &cb);
         v->ok = lc_client_subscribe(c, LC_CLIENT_LIGHTMAP, 0, 0, err, sizeof err) == 0 &&
-                lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, 0, 0, CTL_TIMEOUT_MS * 2, NULL, err, sizeof err) == 0;
+            lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, 0, 0, CTL_TIMEOUT_MS * 2, NULL, err, sizeof err) == 0;
         if (!v->ok) fprintf(stderr, "lucentctl: latency viewer: %s\n", err);
     }
     atomic_store(&v->ready, 1);
@@ -662,8 +666,7 @@ static int latency_parse(int argc, char **argv, latency_opts *o) {
         } else if (!strcmp(k, "--clients")) {
             if (parse_positive(v, &o->clients) != 0 || o->clients != floor(o->clients) || o->clients > 1000)
                 return ctl_usage_error("latency: --clients '%s' is not a whole number in 1..1000", v);
-        } else
-            return ctl_usage_error("latency: unknown option '%s'", k);
+        } else return ctl_usage_error("latency: unknown option '%s'", k);
     }
     return CTL_EXIT_OK;
 }
@@ -698,11 +701,12 @@ static void latency_probe_position(lc_client *c, double centre[3]) {
     cJSON *wel = cJSON_Parse(lc_client_welcome(c));
     const cJSON *grid = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(wel, "scene"), "grid");
     if ((pos = cJSON_GetObjectItemCaseSensitive(grid, "origin")) && cJSON_GetArraySize(pos) == 3) {
-        const cJSON *cell = cJSON_GetObjectItemCaseSensitive(grid, "cell"), *dims = cJSON_GetObjectItemCaseSensitive(grid, "dims");
+        const cJSON *cell = cJSON_GetObjectItemCaseSensitive(grid, "cell"),
+                    *dims = cJSON_GetObjectItemCaseSensitive(grid, "dims");
         for (int k = 0; k < 3; k++)
             centre[k] = cJSON_GetArrayItem(pos, k)->valuedouble +
-                        0.5 * (cJSON_IsNumber(cell) ? cell->valuedouble : 0) *
-                            (cJSON_GetArraySize(dims) == 3 ? cJSON_GetArrayItem(dims, k)->valuedouble - 1 : 0);
+                0.5 * (cJSON_IsNumber(cell) ? cell->valuedouble : 0) *
+                    (cJSON_GetArraySize(dims) == 3 ? cJSON_GetArrayItem(dims, k)->valuedouble - 1 : 0);
     }
     cJSON_Delete(wel);
 }
@@ -742,8 +746,7 @@ static int latency_updates(lc_client *c, const latency_opts *o, const double cen
         ls->ack[ls->n_ack++] = t_ok - t0;
         if (lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, want, 0, CTL_TIMEOUT_MS, &f, err, sizeof err) == 0)
             ls->frame[ls->n_frame++] = mono_ms() - t0;
-        else
-            fprintf(stderr, "lucentctl: no frame for revision %llu: %s\n", (unsigned long long)want, err);
+        else fprintf(stderr, "lucentctl: no frame for revision %llu: %s\n", (unsigned long long)want, err);
     }
     return CTL_EXIT_OK;
 }

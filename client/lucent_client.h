@@ -45,16 +45,16 @@ enum { LC_CLIENT_RESIDUAL = 0x100 };
 enum { LC_CLIENT_DISCONNECTED = 0, LC_CLIENT_CONNECTED = 1, LC_CLIENT_RECONNECTING = 2 };
 
 typedef struct lc_client_options {
-    const char *url;      /* ws://host[:port][/path] or wss://…; required */
-    const char *token;    /* access token ("" = none) */
-    const char *name;     /* client name shown in `changed` (default "liblucent-client") */
-    int timeout_ms;       /* connect / request timeout (default 5000) */
-    int insecure;         /* wss: accept self-signed certificates and any host name */
-    const char *ca_file;  /* wss: PEM CA bundle (NULL = system store) */
-    int reconnect;        /* 1: on connection loss reconnect with back-off and resubscribe */
-    int backoff_min_ms;   /* first retry delay (default 100); doubles up to backoff_max_ms */
-    int backoff_max_ms;   /* default 5000 */
-    int max_retries;      /* consecutive failed attempts before giving up, 0 = forever */
+    const char *url;     /* ws://host[:port][/path] or wss://…; required */
+    const char *token;   /* access token ("" = none) */
+    const char *name;    /* client name shown in `changed` (default "liblucent-client") */
+    int timeout_ms;      /* connect / request timeout (default 5000) */
+    int insecure;        /* wss: accept self-signed certificates and any host name */
+    const char *ca_file; /* wss: PEM CA bundle (NULL = system store) */
+    int reconnect;       /* 1: on connection loss reconnect with back-off and resubscribe */
+    int backoff_min_ms;  /* first retry delay (default 100); doubles up to backoff_max_ms */
+    int backoff_max_ms;  /* default 5000 */
+    int max_retries;     /* consecutive failed attempts before giving up, 0 = forever */
 } lc_client_options;
 
 /* Fills defaults (everything zero/NULL except the defaults above). */

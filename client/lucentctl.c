@@ -6,7 +6,6 @@
 
 #include "ctl.h"
 
-
 typedef struct ctl_command {
     const char *name;
     const char *args;    /* shown after the name in --help */
@@ -37,16 +36,17 @@ static void ctl_usage(FILE *f) {
         snprintf(left, sizeof left, "%s %s", ctl_commands[i].name, ctl_commands[i].args);
         fprintf(f, "  %-24s %s\n", left, ctl_commands[i].summary);
     }
-    fprintf(f, "\n"
-               "global options (before or after COMMAND):\n"
-               "  --url URL                server (default ws://127.0.0.1:7700/, env LUCENT_URL)\n"
-               "  --token TOKEN            access token (env LUCENT_TOKEN)\n"
-               "  --ca-file FILE           wss: trust the CA certificates in FILE (env LUCENT_CA_FILE)\n"
-               "  --insecure               wss: accept self-signed certificates and any host name\n"
-               "  --json                   machine-readable output (server replies as JSON lines)\n"
-               "  --help                   this help; 'lucentctl COMMAND --help' for a command\n"
-               "\n"
-               "exit codes: 0 ok, 1 server refused, 2 usage, 3 connection (cannot connect, lost, timeout)\n");
+    fprintf(f,
+            "\n"
+            "global options (before or after COMMAND):\n"
+            "  --url URL                server (default ws://127.0.0.1:7700/, env LUCENT_URL)\n"
+            "  --token TOKEN            access token (env LUCENT_TOKEN)\n"
+            "  --ca-file FILE           wss: trust the CA certificates in FILE (env LUCENT_CA_FILE)\n"
+            "  --insecure               wss: accept self-signed certificates and any host name\n"
+            "  --json                   machine-readable output (server replies as JSON lines)\n"
+            "  --help                   this help; 'lucentctl COMMAND --help' for a command\n"
+            "\n"
+            "exit codes: 0 ok, 1 server refused, 2 usage, 3 connection (cannot connect, lost, timeout)\n");
 }
 
 /* Takes a global option at argv[*i] (advancing *i past a separate value). Returns 1 when

@@ -10,8 +10,8 @@ uint16_t lc_half_from_float(float f) {
     uint32_t mant = x & 0x7FFFFFu;
     if (exp == 0xFF) return (uint16_t)(sign | 0x7C00u | (mant ? 0x200u : 0)); /* inf / NaN */
     int e = (int)exp - 127 + 15;
-    if (e >= 31) return (uint16_t)(sign | 0x7C00u);                             /* overflow → inf */
-    if (e <= 0) {                                                                /* subnormal / zero */
+    if (e >= 31) return (uint16_t)(sign | 0x7C00u); /* overflow → inf */
+    if (e <= 0) {                                   /* subnormal / zero */
         if (e < -10) return (uint16_t)sign;
         mant |= 0x800000u;
         int shift = 14 - e;

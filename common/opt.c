@@ -96,8 +96,7 @@ static int opt_assign(const lc_opt *o, void *settings, const char *value, char *
         *(int *)field = v;
         return 0;
     }
-    case LC_OPT_CALLBACK:
-        return o->fn(settings, value, err, errlen);
+    case LC_OPT_CALLBACK: return o->fn(settings, value, err, errlen);
     }
     lc_set_err(err, errlen, "--%s: unknown option type", o->name);
     return -1;
@@ -118,8 +117,7 @@ int lc_opt_defaults(const lc_opt *table, void *settings, char *err, size_t errle
     return 0;
 }
 
-int lc_opt_set(const lc_opt *table, void *settings, const char *name, const char *value, char *err,
-               size_t errlen) {
+int lc_opt_set(const lc_opt *table, void *settings, const char *name, const char *value, char *err, size_t errlen) {
     const lc_opt *o = lc_opt_find(table, name);
     if (!o) {
         lc_set_err(err, errlen, "unknown option --%s (see --help)", name);
@@ -128,8 +126,8 @@ int lc_opt_set(const lc_opt *table, void *settings, const char *name, const char
     return opt_assign(o, settings, value, err, errlen);
 }
 
-int lc_opt_parse(const lc_opt *table, void *settings, int argc, char **argv, int start,
-                 char **positional, int max_positional, char *err, size_t errlen) {
+int lc_opt_parse(const lc_opt *table, void *settings, int argc, char **argv, int start, char **positional,
+                 int max_positional, char *err, size_t errlen) {
     int npos = 0, options_done = 0;
     for (int i = start; i < argc; i++) {
         const char *arg = argv[i];
@@ -191,11 +189,11 @@ void lc_opt_help(const lc_opt *table, FILE *out) {
     for (const lc_opt *o = table; o->name; o++) {
         char left[64];
         const char *meta = o->metavar ? o->metavar
-                           : o->type == LC_OPT_INT     ? "N"
-                           : o->type == LC_OPT_FLOAT   ? "X"
-                           : o->type == LC_OPT_ENUM    ? o->choices
-                           : o->type == LC_OPT_BOOL    ? ""
-                                                       : "TEXT";
+            : o->type == LC_OPT_INT   ? "N"
+            : o->type == LC_OPT_FLOAT ? "X"
+            : o->type == LC_OPT_ENUM  ? o->choices
+            : o->type == LC_OPT_BOOL  ? ""
+                                      : "TEXT";
         snprintf(left, sizeof left, "--%s%s%s", o->name, *meta ? " " : "", meta);
         fprintf(out, "  %-30s %s", left, o->help ? o->help : "");
         if (o->def && o->type != LC_OPT_CALLBACK) fprintf(out, " (default %s)", o->def);

@@ -33,13 +33,12 @@ typedef struct lc_opt {
 int lc_opt_defaults(const lc_opt *table, void *settings, char *err, size_t errlen);
 /* Sets one option from text, validating type and bounds. err names the option.
  * Returns 0, or -1 (unknown name, bad value). */
-int lc_opt_set(const lc_opt *table, void *settings, const char *name, const char *value, char *err,
-               size_t errlen);
+int lc_opt_set(const lc_opt *table, void *settings, const char *name, const char *value, char *err, size_t errlen);
 /* Parses argv[start..argc). Options may appear anywhere ("--" ends them); the others are
  * returned in positional[] (pointers into argv), at most max_positional.
  * Returns the number of positional arguments, or -1 with err set. */
-int lc_opt_parse(const lc_opt *table, void *settings, int argc, char **argv, int start,
-                 char **positional, int max_positional, char *err, size_t errlen);
+int lc_opt_parse(const lc_opt *table, void *settings, int argc, char **argv, int start, char **positional,
+                 int max_positional, char *err, size_t errlen);
 /* Prints "  --name METAVAR  help (default X; range [a, b])" lines. */
 void lc_opt_help(const lc_opt *table, FILE *out);
 const lc_opt *lc_opt_find(const lc_opt *table, const char *name);

@@ -51,16 +51,13 @@ static void progress_print(lc_progress *p, uint64_t done, int final) {
         int fill = (int)(frac * 30);
         for (int i = 0; i < 30; i++) bar[i] = i < fill ? '#' : '-';
         bar[30] = 0;
-        fprintf(stderr, "\r%-22s [%s] %5.1f%% %7.1fs%s", p->stage, bar, frac * 100, t - p->start,
-                final ? "\n" : "");
+        fprintf(stderr, "\r%-22s [%s] %5.1f%% %7.1fs%s", p->stage, bar, frac * 100, t - p->start, final ? "\n" : "");
     } else {
         int decile = (int)(frac * 10);
         if (!final && decile <= p->last_decile) return;
         p->last_decile = decile;
-        if (final)
-            fprintf(stderr, "%s: done in %.2fs\n", p->stage, t - p->start);
-        else
-            fprintf(stderr, "%s: %d%%\n", p->stage, decile * 10);
+        if (final) fprintf(stderr, "%s: done in %.2fs\n", p->stage, t - p->start);
+        else fprintf(stderr, "%s: %d%%\n", p->stage, decile * 10);
     }
     p->last_print = t;
 }

@@ -12,7 +12,9 @@ static inline uint64_t lc_mix64(uint64_t x) {
     return x ^ (x >> 31);
 }
 
-typedef struct { uint64_t state; } lc_rng;
+typedef struct {
+    uint64_t state;
+} lc_rng;
 
 static inline lc_rng lc_rng_seed(uint64_t seed, uint64_t stream) {
     return (lc_rng){lc_mix64(seed ^ lc_mix64(stream + 0x1234567ull))};

@@ -3,11 +3,17 @@
 #define LC_VEC_H
 #include <math.h>
 
-typedef struct { float x, y, z; } lc_vec3;
+typedef struct {
+    float x, y, z;
+} lc_vec3;
 
 static inline lc_vec3 lc_v3(float x, float y, float z) { return (lc_vec3){x, y, z}; }
 static inline lc_vec3 lc_v3_load(const float *p) { return (lc_vec3){p[0], p[1], p[2]}; }
-static inline void lc_v3_store(float *p, lc_vec3 a) { p[0] = a.x; p[1] = a.y; p[2] = a.z; }
+static inline void lc_v3_store(float *p, lc_vec3 a) {
+    p[0] = a.x;
+    p[1] = a.y;
+    p[2] = a.z;
+}
 static inline lc_vec3 lc_v3_add(lc_vec3 a, lc_vec3 b) { return (lc_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }
 static inline lc_vec3 lc_v3_sub(lc_vec3 a, lc_vec3 b) { return (lc_vec3){a.x - b.x, a.y - b.y, a.z - b.z}; }
 static inline lc_vec3 lc_v3_scale(lc_vec3 a, float s) { return (lc_vec3){a.x * s, a.y * s, a.z * s}; }

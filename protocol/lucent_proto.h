@@ -15,8 +15,8 @@
 
 #define LC_PROTO_NAME "lucent/1"
 #define LC_PROTO_SUBPROTOCOL "lucent.v1"
-#define LC_PROTO_ID_MAX 64      /* bytes in a light/object id or request id string */
-#define LC_PROTO_NAME_MAX 128   /* client names */
+#define LC_PROTO_ID_MAX 64    /* bytes in a light/object id or request id string */
+#define LC_PROTO_NAME_MAX 128 /* client names */
 #define LC_PROTO_TOKEN_MAX 256
 #define LC_FRAME_MAGIC 0x3146434Cu /* "LCF1" little-endian */
 #define LC_FRAME_HEADER_SIZE 64
@@ -66,9 +66,9 @@ typedef struct lc_proto_light {
     float intensity, range;
     float position[3], direction[3]; /* direction normalised by the parser */
     float inner_cone, outer_cone;
-    int shape;                       /* 0 quad, 1 disc */
+    int shape; /* 0 quad, 1 disc */
     float size[2];
-    float tangent[3];                /* zero when not given */
+    float tangent[3]; /* zero when not given */
 } lc_proto_light;
 
 typedef struct lc_proto_object {
@@ -247,8 +247,7 @@ typedef struct lc_frame_header {
 
 /* Writes header (64 B) + tile table + payload into out (capacity cap). Computes the CRC.
  * Returns the frame length, or 0 if it does not fit. */
-size_t lc_frame_write(const lc_frame_header *h, const uint32_t *tiles, const void *payload, uint8_t *out,
-                      size_t cap);
+size_t lc_frame_write(const lc_frame_header *h, const uint32_t *tiles, const void *payload, uint8_t *out, size_t cap);
 /* Parses and checks a frame: magic, version, header size, flags (keyframe, delta, or delta +
  * residual for the lightmap), lengths consistent with len, tile indices ascending and inside
  * the image, CRC. A residual delta's payload is compressed: its inflated size is checked by

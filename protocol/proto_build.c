@@ -163,10 +163,8 @@ static cJSON *proto_light_json(proto_b *b, const lc_proto_light *L) {
     proto_add_floats(b, o, "color", L->color, 3);
     proto_add_float(b, o, "intensity", L->intensity);
     proto_add_float(b, o, "range", L->range);
-    if (t != LC_PLIGHT_DIRECTIONAL || proto_nonzero(L->position, 3))
-        proto_add_floats(b, o, "position", L->position, 3);
-    if (t != LC_PLIGHT_POINT || proto_nonzero(L->direction, 3))
-        proto_add_floats(b, o, "direction", L->direction, 3);
+    if (t != LC_PLIGHT_DIRECTIONAL || proto_nonzero(L->position, 3)) proto_add_floats(b, o, "position", L->position, 3);
+    if (t != LC_PLIGHT_POINT || proto_nonzero(L->direction, 3)) proto_add_floats(b, o, "direction", L->direction, 3);
     if (t == LC_PLIGHT_SPOT) {
         proto_add_float(b, o, "innerConeAngle", L->inner_cone);
         proto_add_float(b, o, "outerConeAngle", L->outer_cone);

@@ -26,17 +26,13 @@ static void proto_put64(uint8_t *p, uint64_t v) {
     for (int i = 0; i < 8; i++) p[i] = (uint8_t)(v >> (8 * i));
 }
 
-static uint16_t proto_get16(const uint8_t *p) {
-    return (uint16_t)(p[0] | p[1] << 8);
-}
+static uint16_t proto_get16(const uint8_t *p) { return (uint16_t)(p[0] | p[1] << 8); }
 
 static uint32_t proto_get32(const uint8_t *p) {
     return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
 }
 
-static uint64_t proto_get64(const uint8_t *p) {
-    return (uint64_t)proto_get32(p) | (uint64_t)proto_get32(p + 4) << 32;
-}
+static uint64_t proto_get64(const uint8_t *p) { return (uint64_t)proto_get32(p) | (uint64_t)proto_get32(p + 4) << 32; }
 
 size_t lc_frame_texel_bytes(lc_encoding e) {
     switch (e) {
@@ -77,8 +73,7 @@ void lc_tile_rect(uint32_t w, uint32_t h, uint32_t s, uint32_t t, uint32_t *x0, 
     *y1 = (uint32_t)by;
 }
 
-size_t lc_frame_write(const lc_frame_header *h, const uint32_t *tiles, const void *payload, uint8_t *out,
-                      size_t cap) {
+size_t lc_frame_write(const lc_frame_header *h, const uint32_t *tiles, const void *payload, uint8_t *out, size_t cap) {
     if (!h || !out) return 0;
     uint64_t total = LC_FRAME_HEADER_SIZE + (uint64_t)h->tile_count * 4 + h->payload_length;
     if (total > cap || (h->tile_count && !tiles) || (h->payload_length && !payload)) return 0;
@@ -173,7 +168,7 @@ int lc_frame_parse(const uint8_t *data, size_t len, lc_frame_header *h, const ui
         }
         if (!h->tile_size) return proto_bad(err, "%s", "a delta needs a tile size");
         uint64_t ntiles = (uint64_t)((h->width + (uint64_t)h->tile_size - 1) / h->tile_size) *
-                          ((h->height + (uint64_t)h->tile_size - 1) / h->tile_size);
+            ((h->height + (uint64_t)h->tile_size - 1) / h->tile_size);
         expect = 0;
         for (uint32_t i = 0; i < h->tile_count; i++) {
             uint32_t t = proto_get32(tiles + 4 * (size_t)i), x0, y0, x1, y1;
@@ -182,7 +177,7 @@ int lc_frame_parse(const uint8_t *data, size_t len, lc_frame_header *h, const ui
                 return proto_bad(err, "%s", "tile indices not strictly ascending");
             lc_tile_rect(h->width, h->height, h->tile_size, t, &x0, &y0, &x1, &y1);
             uint64_t bytes = proto_mul(proto_mul(x1 - x0, y1 - y0), tb);
-            if (residual) continue; /* its payload is compressed: the inflate checks the size */
+            if (residual) continue;                 /* its payload is compressed: the inflate checks the size */
             if (bytes > h->payload_length - expect) /* also keeps the sum from wrapping */
                 return proto_bad(err, "%s", "payload length does not match the tiles");
             expect += bytes;
@@ -208,8 +203,7 @@ int lc_frame_parse(const uint8_t *data, size_t len, lc_frame_header *h, const ui
         }
         break;
     }
-    default:
-        return proto_bad(err, "%s", "unknown stream");
+    default: return proto_bad(err, "%s", "unknown stream");
     }
     if (expect != h->payload_length) return proto_bad(err, "%s", "payload length does not match the stream");
     if (tile_table) *tile_table = tiles;
@@ -265,8 +259,8 @@ typedef struct {
 } proto_residual_layout;
 
 static int proto_residual_layout_of(lc_encoding e, proto_residual_layout *l) {
-    static const proto_residual_layout rgb9e5 = {4, 1, 4, {0, 9, 18, 27}, {9, 9, 9, 5}},
-                                       rgba16f = {2, 4, 1, {0}, {16}}, f32 = {4, 3, 1, {0}, {32}};
+    static const proto_residual_layout rgb9e5 = {4, 1, 4, {0, 9, 18, 27}, {9, 9, 9, 5}}, rgba16f = {2, 4, 1, {0}, {16}},
+                                       f32 = {4, 3, 1, {0}, {32}};
     switch (e) {
     case LC_ENC_RGB9E5: *l = rgb9e5; return 0;
     case LC_ENC_RGBA16F: *l = rgba16f; return 0;
@@ -275,9 +269,7 @@ static int proto_residual_layout_of(lc_encoding e, proto_residual_layout *l) {
     return -1;
 }
 
-static uint32_t proto_get_word(const uint8_t *p, size_t bytes) {
-    return bytes == 2 ? proto_get16(p) : proto_get32(p);
-}
+static uint32_t proto_get_word(const uint8_t *p, size_t bytes) { return bytes == 2 ? proto_get16(p) : proto_get32(p); }
 
 static void proto_put_word(uint8_t *p, size_t bytes, uint32_t v) {
     if (bytes == 2) proto_put16(p, (uint16_t)v);
@@ -315,9 +307,7 @@ void lc_residual_apply(lc_encoding e, uint8_t *held, const uint8_t *residual, si
     }
 }
 
-size_t lc_residual_deflate_bound(size_t n) {
-    return (size_t)compressBound((uLong)n);
-}
+size_t lc_residual_deflate_bound(size_t n) { return (size_t)compressBound((uLong)n); }
 
 size_t lc_residual_deflate(const uint8_t *in, size_t n, uint8_t *out, size_t cap) {
     uLongf len = (uLongf)cap;

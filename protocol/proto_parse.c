@@ -13,10 +13,10 @@
 #include "util/limits.h"
 #include "util/utf8.h"
 
-#define PROTO_STR_MAX 256     /* §1.3: string length */
-#define PROTO_DEPTH_CAP 512   /* below cJSON's own nesting limit (1000) */
-#define PROTO_PTR_MAX 160     /* sizeof lc_proto_error.pointer */
-#define PROTO_QUOTE_MAX 64    /* bytes of client text quoted in an error message */
+#define PROTO_STR_MAX 256   /* §1.3: string length */
+#define PROTO_DEPTH_CAP 512 /* below cJSON's own nesting limit (1000) */
+#define PROTO_PTR_MAX 160   /* sizeof lc_proto_error.pointer */
+#define PROTO_QUOTE_MAX 64  /* bytes of client text quoted in an error message */
 #define PROTO_TWO_53 9007199254740992.0
 #define PROTO_HALF_PI 1.5707963267948966
 #define PROTO_ANGLE_SLACK 1e-6 /* float(π/2) printed by a builder is a little above π/2 */
@@ -26,9 +26,8 @@
 enum { PROTO_SCAN_BAD_UTF8 = 1, PROTO_SCAN_NUL_ESCAPE = 2, PROTO_SCAN_NUL_IN_ID = 4 };
 
 static const char *const proto_type_names[LC_REQ_COUNT] = {
-    "hello",           "subscribe",    "unsubscribe", "light.set", "light.remove",
-    "object.set",      "object.remove", "material.set", "environment.set", "settings.set",
-    "batch",           "state.get",    "snapshot",    "ping"};
+    "hello",        "subscribe",       "unsubscribe",  "light.set", "light.remove", "object.set", "object.remove",
+    "material.set", "environment.set", "settings.set", "batch",     "state.get",    "snapshot",   "ping"};
 static const char *const proto_stream_names[] = {"lightmap", "shgrid", "objects"};
 static const char *const proto_encoding_names[] = {"rgb9e5", "rgba16f", "f32"};
 static const char *const proto_delta_names[] = {"tiles", "residual"};
@@ -36,13 +35,9 @@ static const char *const proto_light_type_names[] = {"point", "spot", "direction
 static const char *const proto_shape_names[] = {"quad", "disc"};
 static const char *const proto_env_names[] = {"none", "constant", "sh"};
 
-const char *lc_proto_type_name(lc_req_type t) {
-    return (unsigned)t < LC_REQ_COUNT ? proto_type_names[t] : "unknown";
-}
+const char *lc_proto_type_name(lc_req_type t) { return (unsigned)t < LC_REQ_COUNT ? proto_type_names[t] : "unknown"; }
 
-int lc_proto_is_change(lc_req_type t) {
-    return t >= LC_REQ_LIGHT_SET && t <= LC_REQ_BATCH;
-}
+int lc_proto_is_change(lc_req_type t) { return t >= LC_REQ_LIGHT_SET && t <= LC_REQ_BATCH; }
 
 const char *lc_proto_stream_name(lc_stream s) {
     return s >= LC_STREAM_LIGHTMAP && s <= LC_STREAM_OBJECTS ? proto_stream_names[s - 1] : "unknown";
@@ -119,13 +114,9 @@ static void proto_ptr_index(char dst[PROTO_PTR_MAX], const char *base, int i) {
 
 /* --- byte-level checks ------------------------------------------------------------------ */
 
-int lc_proto_utf8_valid(const char *s, size_t len) {
-    return (s || !len) && lc_utf8_valid(s, len);
-}
+int lc_proto_utf8_valid(const char *s, size_t len) { return (s || !len) && lc_utf8_valid(s, len); }
 
-size_t lc_proto_utf8_cut(const char *s, size_t len, size_t max) {
-    return s ? lc_utf8_cut(s, len, max) : 0;
-}
+size_t lc_proto_utf8_cut(const char *s, size_t len, size_t max) { return s ? lc_utf8_cut(s, len, max) : 0; }
 
 size_t lc_proto_utf8_sanitize(char *dst, size_t cap, const char *s, size_t len, unsigned flags) {
     if (!dst || !cap) return 0;
@@ -357,8 +348,7 @@ static int proto_scan_json(const char *text, size_t len, int *flags) {
 }
 
 /* Depth, grammar, tree; the root must be an object. */
-static int proto_load(const char *text, size_t len, int max_depth, cJSON **root, int *flags,
-                      lc_proto_error *err) {
+static int proto_load(const char *text, size_t len, int max_depth, cJSON **root, int *flags, lc_proto_error *err) {
     *root = NULL;
     *flags = 0;
     if (max_depth < 1) max_depth = 1;
@@ -379,8 +369,7 @@ static int proto_missing(int required, const char *p, lc_proto_error *err) {
     return required ? proto_fail(err, LC_ERR_INVALID, p, "%s is required", p) : 0;
 }
 
-static int proto_num_item(const cJSON *it, const char *p, double lo, double hi, double *out,
-                          lc_proto_error *err) {
+static int proto_num_item(const cJSON *it, const char *p, double lo, double hi, double *out, lc_proto_error *err) {
     if (!cJSON_IsNumber(it)) return proto_fail(err, LC_ERR_INVALID, p, "%s must be a number", p);
     double v = it->valuedouble;
     if (!isfinite(v)) return proto_fail(err, LC_ERR_OUT_OF_RANGE, p, "%s is not a finite number", p);
@@ -398,8 +387,8 @@ static int proto_num(const cJSON *obj, const char *key, const char *base, int re
     return proto_num_item(it, p, lo, hi, out, err);
 }
 
-static int proto_uint(const cJSON *obj, const char *key, const char *base, int required, uint32_t lo,
-                      uint32_t hi, uint32_t *out, lc_proto_error *err) {
+static int proto_uint(const cJSON *obj, const char *key, const char *base, int required, uint32_t lo, uint32_t hi,
+                      uint32_t *out, lc_proto_error *err) {
     char p[PROTO_PTR_MAX];
     proto_ptr(p, base, key);
     const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
@@ -438,8 +427,8 @@ static int proto_str_item(const cJSON *it, const char *p, size_t minlen, size_t 
     return 1;
 }
 
-static int proto_str(const cJSON *obj, const char *key, const char *base, int required, size_t minlen,
-                     size_t maxlen, char *out, size_t cap, lc_proto_error *err) {
+static int proto_str(const cJSON *obj, const char *key, const char *base, int required, size_t minlen, size_t maxlen,
+                     char *out, size_t cap, lc_proto_error *err) {
     char p[PROTO_PTR_MAX];
     proto_ptr(p, base, key);
     const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
@@ -469,8 +458,8 @@ static int proto_enum(const cJSON *obj, const char *key, const char *base, int r
 }
 
 /* Array of exactly n numbers in [lo, hi]. */
-static int proto_vec(const cJSON *obj, const char *key, const char *base, int required, int n, double lo,
-                     double hi, double *out, lc_proto_error *err) {
+static int proto_vec(const cJSON *obj, const char *key, const char *base, int required, int n, double lo, double hi,
+                     double *out, lc_proto_error *err) {
     char p[PROTO_PTR_MAX], pe[PROTO_PTR_MAX];
     proto_ptr(p, base, key);
     const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
@@ -554,22 +543,21 @@ static int proto_parse_light(const cJSON *o, const char *p, lc_proto_light *L, l
     if (proto_num(o, "innerConeAngle", p, 0, 0, PROTO_HALF_PI + PROTO_ANGLE_SLACK, &inner, err) < 0) return -1;
     inner = fmin(inner, PROTO_HALF_PI);
     outer = fmax(PROTO_HALF_PI / 2, inner); /* default π/4, or the inner angle when that is wider */
-    if (proto_num(o, "outerConeAngle", p, 0, inner, PROTO_HALF_PI + PROTO_ANGLE_SLACK, &outer, err) < 0)
-        return -1;
+    if (proto_num(o, "outerConeAngle", p, 0, inner, PROTO_HALF_PI + PROTO_ANGLE_SLACK, &outer, err) < 0) return -1;
     L->inner_cone = (float)inner;
     L->outer_cone = (float)fmin(outer, PROTO_HALF_PI);
     k = 0;
     if (proto_enum(o, "shape", p, 0, proto_shape_names, 2, &k, err) < 0) return -1;
     L->shape = k;
     int n_size = L->shape == 1 ? 1 : 2;
-    if ((r = proto_vec(o, "size", p, L->type == LC_PLIGHT_AREA, n_size, -INFINITY, INFINITY, v, err)) < 0)
-        return -1;
+    if ((r = proto_vec(o, "size", p, L->type == LC_PLIGHT_AREA, n_size, -INFINITY, INFINITY, v, err)) < 0) return -1;
     if (r) {
         for (int i = 0; i < n_size; i++) {
             proto_ptr(q, p, "size");
             char qe[PROTO_PTR_MAX];
             proto_ptr_index(qe, q, i);
-            if (!(v[i] > 0 && v[i] <= 1e4)) return proto_fail(err, LC_ERR_OUT_OF_RANGE, qe, "%s must be in (0, 1e4]", qe);
+            if (!(v[i] > 0 && v[i] <= 1e4))
+                return proto_fail(err, LC_ERR_OUT_OF_RANGE, qe, "%s must be in (0, 1e4]", qe);
         }
         L->size[0] = (float)v[0];
         L->size[1] = n_size == 2 ? (float)v[1] : 0;
@@ -674,8 +662,7 @@ static int proto_parse_op(const cJSON *m, const char *base, lc_req_type t, lc_pr
         memcpy(op->target, op->object.id, sizeof op->target);
         return 0;
     case LC_REQ_OBJECT_REMOVE:
-        return proto_str(m, "object_id", base, 1, 1, LC_PROTO_ID_MAX, op->target, sizeof op->target, err) < 0 ? -1
-                                                                                                              : 0;
+        return proto_str(m, "object_id", base, 1, 1, LC_PROTO_ID_MAX, op->target, sizeof op->target, err) < 0 ? -1 : 0;
     case LC_REQ_MATERIAL_SET:
         if (proto_str(m, "material", base, 1, 1, LC_PROTO_ID_MAX, op->target, sizeof op->target, err) < 0) return -1;
         if (proto_vec(m, "emission", base, 1, 3, 0, 1e7, v, err) < 0) return -1;
@@ -687,8 +674,7 @@ static int proto_parse_op(const cJSON *m, const char *base, lc_req_type t, lc_pr
     case LC_REQ_SETTINGS_SET:
         if (proto_object(m, "settings", base, 1, &sub, p, err) < 0) return -1;
         return proto_parse_settings(sub, p, &op->settings, err);
-    default:
-        return proto_fail(err, LC_ERR_INVALID, base, "not a change request");
+    default: return proto_fail(err, LC_ERR_INVALID, base, "not a change request");
     }
 }
 
@@ -735,8 +721,7 @@ static int proto_read_id(const cJSON *m, lc_proto_id *id, lc_proto_error *err) {
 
 /* --- requests --------------------------------------------------------------------------- */
 
-static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto_request *out,
-                            lc_proto_error *err) {
+static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto_request *out, lc_proto_error *err) {
     char p[PROTO_PTR_MAX];
     int k, r;
     switch (out->type) {
@@ -745,7 +730,8 @@ static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto
         if (proto_str(m, "token", "", 0, 0, LC_PROTO_TOKEN_MAX, out->token, sizeof out->token, err) < 0) return -1;
         const cJSON *enc = cJSON_GetObjectItemCaseSensitive(m, "encodings");
         if (enc) {
-            if (!cJSON_IsArray(enc)) return proto_fail(err, LC_ERR_INVALID, "/encodings", "/encodings must be an array");
+            if (!cJSON_IsArray(enc))
+                return proto_fail(err, LC_ERR_INVALID, "/encodings", "/encodings must be an array");
             int i = 0;
             for (const cJSON *e = enc->child; e; e = e->next, i++) {
                 proto_ptr_index(p, "/encodings", i);
@@ -801,10 +787,8 @@ static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto
         return 0;
     }
     case LC_REQ_STATE_GET:
-    case LC_REQ_SNAPSHOT:
-        return 0;
-    case LC_REQ_PING:
-        return proto_num(m, "t", "", 1, -INFINITY, INFINITY, &out->ping_t, err) < 0 ? -1 : 0;
+    case LC_REQ_SNAPSHOT: return 0;
+    case LC_REQ_PING: return proto_num(m, "t", "", 1, -INFINITY, INFINITY, &out->ping_t, err) < 0 ? -1 : 0;
     default:
         out->ops = calloc(1, sizeof *out->ops);
         if (!out->ops) return proto_fail(err, LC_ERR_INTERNAL, "", "out of memory");

@@ -18,6 +18,8 @@ if [ "${1:-}" != "--build" ]; then
     clang libclang-rt-14-dev llvm
     # promtool (checks lucentd's /metrics text)
     prometheus
+    # the style check (.clang-format), the shutdown test under valgrind, TLS test certificates
+    clang-format valgrind openssl
   )
 fi
 

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs every test: an ASan+UBSan Debug build (unit, fuzz replay and fast integration tests)
-# in build-asan/, then the Release build's full suite (including bakes of ../shared/scenes
+# in build-asan/, a ThreadSanitizer build's daemon tests in build-tsan/, then the Release
+# build's full suite (including bakes of ../shared/scenes
 # when present) in build-release/ (build/ stays the demo's RelWithDebInfo build).
 # Ends with ctest's summary of the full suite. CI (.ci/run) runs scripts/fuzz.sh first.
 set -euo pipefail
@@ -13,6 +14,17 @@ cmake -S "$root" -B "$asan" -DCMAKE_BUILD_TYPE=Debug -DLUCENT_SANITIZE=ON >/dev/
 cmake --build "$asan" -j"$jobs"
 echo "== ASan+UBSan: unit, fuzz replay, fast integration tests =="
 (cd "$asan" && ctest --output-on-failure -j"$jobs" -LE slow)
+
+# ThreadSanitizer over the daemon's threads (service, compute, engine workers): its unit
+# tests and the integration tests that drive a live lucentd (daemon_basic runs in the other
+# two builds: under TSan's slowdown on 2 loaded cores its SIGTERM check was not reliable).
+tsan="$root/build-tsan"
+cmake -S "$root" -B "$tsan" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLUCENT_TSAN=ON >/dev/null
+cmake --build "$tsan" -j"$jobs" --target lucentd lucentctl lucent-bake cornell_bake client_live \
+  test_compute test_state test_journal test_frames
+echo "== ThreadSanitizer: the daemon's unit and live integration tests =="
+(cd "$tsan" && ctest --output-on-failure -j"$jobs" \
+  -R '^(unit\.daemon\.|integration\.(daemon_hardening|client_live|journal_faults|lucentctl_basic)$)')
 
 build="$root/build-release"
 cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=Release >/dev/null

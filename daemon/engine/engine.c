@@ -68,8 +68,8 @@ lc_engine_settings lc_engine_default_settings(const lc_lcb *bake) {
 
 /* --- Embree scenes ------------------------------------------------------------------------- */
 
-static RTCScene engine_mesh_scene(RTCDevice dev, const void *vertices, size_t vstride, uint32_t nv,
-                                  const void *indices, size_t istride, uint32_t nt) {
+static RTCScene engine_mesh_scene(RTCDevice dev, const void *vertices, size_t vstride, uint32_t nv, const void *indices,
+                                  size_t istride, uint32_t nt) {
     RTCScene sc = rtcNewScene(dev);
     rtcSetSceneFlags(sc, RTC_SCENE_FLAG_ROBUST);
     if (nt > 0) {
@@ -113,9 +113,18 @@ static void engine_build_top(lc_engine *e, const lc_engine_object *objects, uint
 static int engine_occluded(RTCScene sc, const float org[3], const float dir[3], float tfar) {
     struct RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
-    struct RTCRay ray = {.org_x = org[0], .org_y = org[1], .org_z = org[2], .tnear = 0,
-                         .dir_x = dir[0], .dir_y = dir[1], .dir_z = dir[2], .time = 0,
-                         .tfar = tfar, .mask = ~0u, .id = 0, .flags = 0};
+    struct RTCRay ray = {.org_x = org[0],
+                         .org_y = org[1],
+                         .org_z = org[2],
+                         .tnear = 0,
+                         .dir_x = dir[0],
+                         .dir_y = dir[1],
+                         .dir_z = dir[2],
+                         .time = 0,
+                         .tfar = tfar,
+                         .mask = ~0u,
+                         .id = 0,
+                         .flags = 0};
     rtcOccluded1(sc, &ctx, &ray);
     return ray.tfar < 0;
 }
@@ -164,10 +173,9 @@ lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int thread
     if (!e->asset_scenes) goto oom;
     for (uint32_t i = 0; i < v->n_assets; i++) {
         const lc_lcb_asset *a = &v->assets[i];
-        e->asset_scenes[i] =
-            engine_mesh_scene(e->device, v->asset_vertices + a->first_vertex, sizeof(lc_lcb_asset_vertex),
-                              a->vertex_count, v->asset_indices + 3 * (size_t)a->first_triangle,
-                              3 * sizeof(uint32_t), a->triangle_count);
+        e->asset_scenes[i] = engine_mesh_scene(
+            e->device, v->asset_vertices + a->first_vertex, sizeof(lc_lcb_asset_vertex), a->vertex_count,
+            v->asset_indices + 3 * (size_t)a->first_triangle, 3 * sizeof(uint32_t), a->triangle_count);
     }
     engine_build_top(e, NULL, 0);
     if (rtcGetDeviceError(e->device) != RTC_ERROR_NONE) {
@@ -228,12 +236,12 @@ int lc_engine_check_state(const lc_lcb_view *v, const lc_engine_state *st, char 
     }
     for (uint32_t i = 0; i < st->n_lights; i++) {
         const lc_engine_light *l = &st->lights[i];
-#define LIGHT_FAIL(field, ...)                                            \
-    do {                                                                  \
-        char why[160];                                                    \
-        snprintf(why, sizeof why, __VA_ARGS__);                           \
-        lc_set_err(err, errlen, "/lights/%u/%s: %s", i, field, why);     \
-        return -1;                                                        \
+#define LIGHT_FAIL(field, ...)                                       \
+    do {                                                             \
+        char why[160];                                               \
+        snprintf(why, sizeof why, __VA_ARGS__);                      \
+        lc_set_err(err, errlen, "/lights/%u/%s: %s", i, field, why); \
+        return -1;                                                   \
     } while (0)
         if ((unsigned)l->type > LC_ENGINE_LIGHT_AREA) LIGHT_FAIL("type", "unknown light type %d", (int)l->type);
         if (!engine_finite(l->color, 3, 1e6) || l->color[0] < 0 || l->color[1] < 0 || l->color[2] < 0)
@@ -294,8 +302,9 @@ int lc_engine_check_state(const lc_lcb_view *v, const lc_engine_state *st, char 
             }
         }
     const lc_engine_environment *env = &st->environment;
-    if ((unsigned)env->kind > LC_ENV_SH || !engine_finite(env->color, 3, 1e7) || !engine_finite(&env->sh[0][0], 27, 1e7) ||
-        !isfinite(env->intensity) || env->intensity < 0 || env->intensity > 1e7) {
+    if ((unsigned)env->kind > LC_ENV_SH || !engine_finite(env->color, 3, 1e7) ||
+        !engine_finite(&env->sh[0][0], 27, 1e7) || !isfinite(env->intensity) || env->intensity < 0 ||
+        env->intensity > 1e7) {
         lc_set_err(err, errlen, "/environment: kind, color, sh and intensity must be finite (intensity in [0, 1e7])");
         return -1;
     }
@@ -461,12 +470,13 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     }
     for (uint32_t m = 0; m < v->n_materials; m++)
         for (int k = 0; k < 3; k++)
-            emission[3 * m + k] = st->material_emission ? st->material_emission[3 * m + k] : v->materials[m].emission[k];
+            emission[3 * m + k] =
+                st->material_emission ? st->material_emission[3 * m + k] : v->materials[m].emission[k];
     int first = !e->have_state;
     int lights_changed = first || st->n_lights != e->n_lights ||
-                         (st->n_lights && memcmp(st->lights, e->lights, st->n_lights * sizeof *st->lights) != 0);
+        (st->n_lights && memcmp(st->lights, e->lights, st->n_lights * sizeof *st->lights) != 0);
     int objects_changed = first || st->n_objects != e->n_objects ||
-                          (st->n_objects && memcmp(st->objects, e->objects, st->n_objects * sizeof *st->objects) != 0);
+        (st->n_objects && memcmp(st->objects, e->objects, st->n_objects * sizeof *st->objects) != 0);
     int emission_changed = first || memcmp(emission, e->emission, nm * sizeof(float)) != 0;
     int env_changed = first || memcmp(&st->environment, &e->env, sizeof st->environment) != 0;
     int settings_changed = first || memcmp(&st->settings, &e->settings, sizeof st->settings) != 0;
@@ -523,8 +533,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     if (sky_on) {
         if (st->environment.kind == LC_ENV_CONSTANT)
             for (int k = 0; k < 3; k++) sky[0][k] = st->environment.color[k] * (float)sqrt(4.0 * M_PI);
-        else
-            memcpy(sky, st->environment.sh, sizeof sky);
+        else memcpy(sky, st->environment.sh, sizeof sky);
         for (int j = 0; j < 9; j++)
             for (int k = 0; k < 3; k++) sky[j][k] *= st->environment.intensity;
     }
@@ -574,7 +583,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     fr.stage_ms[LC_STAGE_DIRECT] = t2 - t1;
     /* The transport always runs its stages (chroma only when compressing). */
     stages_run |= (1u << LC_STAGE_BOUNCE) | (1u << LC_STAGE_PULL) | (1u << LC_STAGE_GATHER) |
-                  (1u << LC_STAGE_LIGHTMAP) | (1u << LC_STAGE_GRID) | (1u << LC_STAGE_OBJECTS);
+        (1u << LC_STAGE_LIGHTMAP) | (1u << LC_STAGE_GRID) | (1u << LC_STAGE_OBJECTS);
     if (st->settings.chroma_compression && st->settings.chroma_bands < st->settings.bands)
         stages_run |= 1u << LC_STAGE_CHROMA;
     fr.stages_run = stages_run;

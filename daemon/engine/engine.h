@@ -23,10 +23,10 @@
 typedef enum { LC_BACKEND_AUTO = 0, LC_BACKEND_CPU, LC_BACKEND_EGL } lc_backend_kind;
 
 typedef enum {
-    LC_ENGINE_LIGHT_POINT = 0, /* intensity: candela */
-    LC_ENGINE_LIGHT_SPOT,      /* candela, cone angles as glTF (half angles, radians) */
+    LC_ENGINE_LIGHT_POINT = 0,   /* intensity: candela */
+    LC_ENGINE_LIGHT_SPOT,        /* candela, cone angles as glTF (half angles, radians) */
     LC_ENGINE_LIGHT_DIRECTIONAL, /* lux */
-    LC_ENGINE_LIGHT_AREA,      /* nits (emitted radiance), one-sided toward `direction` */
+    LC_ENGINE_LIGHT_AREA,        /* nits (emitted radiance), one-sided toward `direction` */
 } lc_engine_light_type;
 
 typedef enum { LC_AREA_QUAD = 0, LC_AREA_DISC = 1 } lc_engine_area_shape;
@@ -34,22 +34,22 @@ typedef enum { LC_AREA_QUAD = 0, LC_AREA_DISC = 1 } lc_engine_area_shape;
 typedef struct lc_engine_light {
     char id[LC_ENGINE_ID_MAX];
     lc_engine_light_type type;
-    float color[3];      /* linear RGB */
+    float color[3]; /* linear RGB */
     float intensity;
-    float range;         /* 0 = infinite (glTF range window otherwise) */
+    float range; /* 0 = infinite (glTF range window otherwise) */
     float position[3];
-    float direction[3];  /* unit: the way the light travels (spot axis, sun direction, area normal) */
+    float direction[3]; /* unit: the way the light travels (spot axis, sun direction, area normal) */
     float inner_cone, outer_cone;
     lc_engine_area_shape shape;
-    float size[2];       /* quad: width along `tangent`, height along direction x tangent; disc: radius in [0] */
-    float tangent[3];    /* quad orientation, unit, perpendicular to direction */
+    float size[2];    /* quad: width along `tangent`, height along direction x tangent; disc: radius in [0] */
+    float tangent[3]; /* quad orientation, unit, perpendicular to direction */
 } lc_engine_light;
 
 typedef struct lc_engine_object {
     char id[LC_ENGINE_ID_MAX];
-    uint32_t asset;          /* index into the bake's assets */
+    uint32_t asset; /* index into the bake's assets */
     float translation[3];
-    float rotation[4];       /* unit quaternion x, y, z, w */
+    float rotation[4]; /* unit quaternion x, y, z, w */
     float scale[3];
     int visible;
 } lc_engine_object;
@@ -58,18 +58,18 @@ typedef enum { LC_ENV_NONE = 0, LC_ENV_CONSTANT, LC_ENV_SH } lc_engine_env_kind;
 
 typedef struct lc_engine_environment {
     lc_engine_env_kind kind;
-    float color[3];     /* constant sky radiance (nits) */
-    float sh[9][3];     /* L2 radiance SH (RGB per coefficient), lucent SH convention */
-    float intensity;    /* multiplies either */
+    float color[3];  /* constant sky radiance (nits) */
+    float sh[9][3];  /* L2 radiance SH (RGB per coefficient), lucent SH convention */
+    float intensity; /* multiplies either */
 } lc_engine_environment;
 
 typedef struct lc_engine_settings {
-    uint32_t bounces;        /* indirect feedback passes per relight, 0..16 (see lc_engine_relight) */
-    uint32_t bands;          /* SH bands of the cache / SH-lightmap output, 1..8 (the grid is always L2) */
-    int progressive;         /* carry the indirect light of the previous relight (converges across relights) */
-    int chroma_compression;  /* store caches as YCoCg with fewer bands for Co/Cg */
-    uint32_t chroma_bands;   /* bands for Co/Cg when compressing, 1..bands */
-    int sh_lightmap;         /* also output the per-texel radiance SH lightmap */
+    uint32_t bounces;       /* indirect feedback passes per relight, 0..16 (see lc_engine_relight) */
+    uint32_t bands;         /* SH bands of the cache / SH-lightmap output, 1..8 (the grid is always L2) */
+    int progressive;        /* carry the indirect light of the previous relight (converges across relights) */
+    int chroma_compression; /* store caches as YCoCg with fewer bands for Co/Cg */
+    uint32_t chroma_bands;  /* bands for Co/Cg when compressing, 1..bands */
+    int sh_lightmap;        /* also output the per-texel radiance SH lightmap */
 } lc_engine_settings;
 
 typedef struct lc_engine_state {
@@ -80,13 +80,20 @@ typedef struct lc_engine_state {
     const float *material_emission; /* n_materials x 3 nits, or NULL = the baked emission */
     lc_engine_environment environment;
     lc_engine_settings settings;
-    uint64_t revision;               /* echoed in the frame */
+    uint64_t revision; /* echoed in the frame */
 } lc_engine_state;
 
 /* Stage timings of the last relight (milliseconds; 0 when a stage was skipped). */
 typedef enum {
-    LC_STAGE_DIRECT = 0, LC_STAGE_BOUNCE, LC_STAGE_PULL, LC_STAGE_GATHER, LC_STAGE_LIGHTMAP,
-    LC_STAGE_GRID, LC_STAGE_OBJECTS, LC_STAGE_CHROMA, LC_STAGE_COUNT
+    LC_STAGE_DIRECT = 0,
+    LC_STAGE_BOUNCE,
+    LC_STAGE_PULL,
+    LC_STAGE_GATHER,
+    LC_STAGE_LIGHTMAP,
+    LC_STAGE_GRID,
+    LC_STAGE_OBJECTS,
+    LC_STAGE_CHROMA,
+    LC_STAGE_COUNT
 } lc_engine_stage;
 
 typedef struct lc_engine_frame {
@@ -98,13 +105,13 @@ typedef struct lc_engine_frame {
                                  first bands^2 are set) */
     const float *lightmap_sh; /* W*H*sh_stride*3 radiance SH (RGB interleaved per coefficient), or NULL */
     uint32_t n_caches;
-    const float *cache_sh;    /* n_caches*sh_stride*3 incident radiance SH at each cache (texel
+    const float *cache_sh; /* n_caches*sh_stride*3 incident radiance SH at each cache (texel
                                  caches: bands 0-1 only, zeros above, unless sh_lightmap) */
     uint32_t grid_dims[3];
     float grid_origin[3], grid_cell;
-    const float *grid_sh;     /* cells*9*3: L2 irradiance SH (cosine-convolved: E(n) = sum c_i y_i(n)) */
+    const float *grid_sh; /* cells*9*3: L2 irradiance SH (cosine-convolved: E(n) = sum c_i y_i(n)) */
     uint32_t n_objects;
-    const float *object_sh;   /* n_objects*9*3: L2 irradiance SH at each object's position */
+    const float *object_sh;        /* n_objects*9*3: L2 irradiance SH at each object's position */
     const float *surfel_radiosity; /* n_surfels*3: final B (W/m^2) per surfel, for tests/debug */
     const float *node_flux;        /* n_nodes*3: pulled flux (W) of the last pass, for tests/debug */
     double stage_ms[LC_STAGE_COUNT];

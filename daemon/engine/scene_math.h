@@ -108,8 +108,7 @@ static inline lc_sm_area_frame lc_sm_area_frame_of(const lc_engine_light *l) {
 
 /* The emitter's point for (u, w) in [0, 1)^2, uniform in area: the quad centred on
  * `position` (u along tx, w along ty); the disc by radius size[0] sqrt(u) and angle 2 pi w. */
-static inline void lc_sm_area_point(const lc_engine_light *l, const lc_sm_area_frame *f, float u, float w,
-                                    float p[3]) {
+static inline void lc_sm_area_point(const lc_engine_light *l, const lc_sm_area_frame *f, float u, float w, float p[3]) {
     float a, b;
     if (l->shape == LC_AREA_QUAD) {
         a = (u - 0.5f) * l->size[0];

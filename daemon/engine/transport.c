@@ -76,10 +76,8 @@ int lc_transport_fill_lightmap_sh(lc_transport_outputs *o, const lc_lcb_view *v,
     for (size_t i = 0; i < texels; i++) {
         uint32_t c = v->lightmap[i];
         float *dst = o->lightmap_sh + i * rec;
-        if (c == LC_NONE)
-            memset(dst, 0, rec * sizeof(float));
-        else
-            memcpy(dst, o->cache_sh + (size_t)c * rec, rec * sizeof(float));
+        if (c == LC_NONE) memset(dst, 0, rec * sizeof(float));
+        else memcpy(dst, o->cache_sh + (size_t)c * rec, rec * sizeof(float));
     }
     return 0;
 }

@@ -23,10 +23,10 @@
 #include "engine/engine.h"
 
 typedef struct lc_transport_input {
-    const float *b0;             /* n_surfels*3 */
+    const float *b0; /* n_surfels*3 */
     lc_engine_settings settings;
-    int reset_feedback;          /* forget the previous relight's indirect light */
-    const float *object_pos;     /* n_objects*3 world positions to sample the grid at */
+    int reset_feedback;      /* forget the previous relight's indirect light */
+    const float *object_pos; /* n_objects*3 world positions to sample the grid at */
     uint32_t n_objects;
 } lc_transport_input;
 

@@ -53,7 +53,7 @@ typedef struct lc_lcb_header {
     uint32_t table_crc;    /* CRC-32 of the section table */
     uint32_t flags;        /* 0 */
     uint8_t reserved[20];
-    uint32_t header_crc;   /* CRC-32 of bytes [0, 60) */
+    uint32_t header_crc; /* CRC-32 of bytes [0, 60) */
 } lc_lcb_header;
 
 typedef struct lc_lcb_section {
@@ -62,7 +62,7 @@ typedef struct lc_lcb_section {
     uint64_t offset;      /* from file start, multiple of LC_LCB_ALIGN */
     uint64_t size;        /* bytes = count * record_size */
     uint64_t count;
-    uint32_t crc;         /* CRC-32 of the section bytes */
+    uint32_t crc; /* CRC-32 of the section bytes */
     uint32_t flags;
     uint8_t reserved[8];
 } lc_lcb_section;
@@ -93,15 +93,15 @@ typedef struct lc_lcb_surfel {
     float emission[3]; /* nits, as baked (material emission x texture) */
     float area;        /* m^2; with --exposure the effective area (exposure.h), same total */
     uint32_t material;
-    uint32_t cache;    /* nearest cache (for multi-bounce feedback), LC_NONE if none */
+    uint32_t cache; /* nearest cache (for multi-bounce feedback), LC_NONE if none */
     uint32_t reserved;
 } lc_lcb_surfel;
 
 typedef struct lc_lcb_node {
-    float center[3]; /* area-weighted centroid */
-    float area;      /* sum of surfel areas below */
-    float normal[3]; /* area-weighted mean normal, NOT renormalised: length = coherence */
-    float radius;    /* bounding sphere radius around center */
+    float center[3];       /* area-weighted centroid */
+    float area;            /* sum of surfel areas below */
+    float normal[3];       /* area-weighted mean normal, NOT renormalised: length = coherence */
+    float radius;          /* bounding sphere radius around center */
     uint32_t child[2];     /* LC_NONE for leaves */
     uint32_t first_surfel; /* subtree surfels are [first_surfel, first_surfel + surfel_count) */
     uint32_t surfel_count;
@@ -206,8 +206,7 @@ typedef struct lc_lcb_writer lc_lcb_writer;
 lc_lcb_writer *lc_lcb_writer_create(void);
 /* Adds a section. `data` is borrowed until lc_lcb_writer_write() returns. size must equal
  * count * record_size. Returns 0, or -1 (too many sections, duplicate id). */
-int lc_lcb_writer_add(lc_lcb_writer *w, const char id[4], uint32_t record_size, const void *data,
-                      uint64_t count);
+int lc_lcb_writer_add(lc_lcb_writer *w, const char id[4], uint32_t record_size, const void *data, uint64_t count);
 /* Writes the file atomically (temp + fsync + rename). Returns 0 or -1 with err set. */
 int lc_lcb_writer_write(lc_lcb_writer *w, const char *path, char *err, size_t errlen);
 void lc_lcb_writer_release(lc_lcb_writer *w);
@@ -220,7 +219,7 @@ typedef struct lc_lcb_view {
     uint16_t version_major, version_minor;
     const char *meta_json; /* NUL-terminated copy of META */
     size_t meta_len;
-    uint32_t sh_bands;     /* default output bands from the bake settings */
+    uint32_t sh_bands; /* default output bands from the bake settings */
     const lc_lcb_material *materials;
     uint32_t n_materials;
     const lc_lcb_vertex *vertices;

@@ -29,12 +29,9 @@ static void lcb_gather(const lc_lcb *f, const lc_lcb_view *v, const cJSON *meta,
     uint64_t texels = (uint64_t)v->lightmap_width * v->lightmap_height;
     for (uint64_t t = 0; t < texels; t++) {
         uint32_t ci = v->lightmap[t];
-        if (ci == LC_NONE)
-            st->empty++;
-        else if (v->caches[ci].index == t)
-            st->owned++;
-        else
-            st->dilated++;
+        if (ci == LC_NONE) st->empty++;
+        else if (v->caches[ci].index == t) st->owned++;
+        else st->dilated++;
     }
     /* The file is 64-aligned at the end; the table alone when there are no sections. */
     uint64_t end = sizeof(lc_lcb_header) + (uint64_t)lc_lcb_section_count(f) * sizeof(lc_lcb_section);
@@ -56,10 +53,8 @@ static void lcb_human_bytes(uint64_t n, char *buf, size_t len) {
         x /= 1024;
         u++;
     }
-    if (u == 0)
-        snprintf(buf, len, "%llu B", (unsigned long long)n);
-    else
-        snprintf(buf, len, "%.1f %s", x, unit[u]);
+    if (u == 0) snprintf(buf, len, "%llu B", (unsigned long long)n);
+    else snprintf(buf, len, "%.1f %s", x, unit[u]);
 }
 
 static void lcb_id(const char id[4], char buf[5]) {
@@ -86,10 +81,8 @@ static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *
             LC_LCB_VERSION_MAJOR);
     fputs("  source      ", out);
     const cJSON *src = cJSON_GetObjectItemCaseSensitive(meta, "source");
-    if (src)
-        lcb_print_value(src, out);
-    else
-        fputs("-", out);
+    if (src) lcb_print_value(src, out);
+    else fputs("-", out);
     lcb_human_bytes(st->file_size, b, sizeof b);
     fprintf(out, "\n  file size   %s\n", b);
 
@@ -130,8 +123,7 @@ static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *
         char id[5];
         lcb_id(s->id, id);
         lcb_human_bytes(s->size, b, sizeof b);
-        fprintf(out, "  %-4s  %12llu  %10u  %12s  %08x\n", id, (unsigned long long)s->count, s->record_size, b,
-                s->crc);
+        fprintf(out, "  %-4s  %12llu  %10u  %12s  %08x\n", id, (unsigned long long)s->count, s->record_size, b, s->crc);
     }
 }
 

@@ -36,21 +36,35 @@
 #define LCB_GRID_CELLS_MAX (1u << 26)
 
 struct lc_lcb {
-    void *map;             /* file variant: the mapping */
+    void *map; /* file variant: the mapping */
     size_t map_len;
-    void *copy;            /* memory variant with a misaligned buffer: our aligned copy */
+    void *copy; /* memory variant with a misaligned buffer: our aligned copy */
     const uint8_t *base;
     size_t size;
     lc_lcb_section table[LC_LCB_MAX_SECTIONS];
     uint32_t n_sections;
-    char *meta_text;       /* NUL-terminated copy of META */
+    char *meta_text; /* NUL-terminated copy of META */
     lc_lcb_view view;
 };
 
 /* Sections this reader knows; anything else is skipped (forward compatibility). */
 enum {
-    S_META, S_MATL, S_VERT, S_TRIS, S_SURF, S_NODE, S_LEVL, S_CACH, S_LMAP, S_GRID, S_LINK,
-    S_LKSH, S_ASET, S_AVRT, S_AIDX, S_COUNT
+    S_META,
+    S_MATL,
+    S_VERT,
+    S_TRIS,
+    S_SURF,
+    S_NODE,
+    S_LEVL,
+    S_CACH,
+    S_LMAP,
+    S_GRID,
+    S_LINK,
+    S_LKSH,
+    S_ASET,
+    S_AVRT,
+    S_AIDX,
+    S_COUNT
 };
 static const struct {
     char id[5];
@@ -140,12 +154,13 @@ static int lcb_finite(const float *v, int n) {
 
 static int lcb_check_header(lcb_ctx *c, lc_lcb *f) {
     if (c->size < sizeof(lc_lcb_header))
-        return lcb_fail(c, "header: truncated: file is %zu bytes, smaller than the 64-byte header — not a complete "
-                           "lucent bake; re-run lucent-bake", c->size);
+        return lcb_fail(c,
+                        "header: truncated: file is %zu bytes, smaller than the 64-byte header — not a complete "
+                        "lucent bake; re-run lucent-bake",
+                        c->size);
     lc_lcb_header h;
     memcpy(&h, c->base, sizeof h);
-    if (memcmp(h.magic, LC_LCB_MAGIC, 8) != 0)
-        return lcb_fail(c, "header: bad magic — not a lucent bake (.lcb) file");
+    if (memcmp(h.magic, LC_LCB_MAGIC, 8) != 0) return lcb_fail(c, "header: bad magic — not a lucent bake (.lcb) file");
     if (h.version_major != LC_LCB_VERSION_MAJOR) {
         if (h.version_major > LC_LCB_VERSION_MAJOR)
             return lcb_fail(c, "header: format version %u.%u is newer than this build supports (%d.x); upgrade lucent",
@@ -162,8 +177,10 @@ static int lcb_check_header(lcb_ctx *c, lc_lcb *f) {
                         LC_LCB_MAX_SECTIONS);
     size_t table_len = (size_t)h.section_count * sizeof(lc_lcb_section);
     if (table_len > c->size - sizeof h)
-        return lcb_fail(c, "section table: truncated: file is %zu bytes, the table of %u sections ends at %zu — "
-                           "re-run lucent-bake", c->size, h.section_count, sizeof h + table_len);
+        return lcb_fail(c,
+                        "section table: truncated: file is %zu bytes, the table of %u sections ends at %zu — "
+                        "re-run lucent-bake",
+                        c->size, h.section_count, sizeof h + table_len);
     if (lc_crc32(0, c->base + sizeof h, table_len) != h.table_crc)
         return lcb_fail(c, "section table: CRC mismatch" LCB_CORRUPT);
     memcpy(f->table, c->base + sizeof h, table_len);
@@ -176,12 +193,15 @@ static int lcb_check_header(lcb_ctx *c, lc_lcb *f) {
         for (uint32_t i = 0; i < f->n_sections; i++) {
             const lc_lcb_section *s = &f->table[i];
             if (s->offset > c->size || s->size > c->size - s->offset)
-                return lcb_fail(c, "truncated: file is %zu bytes, header says %llu (section %s and later are "
-                                   "missing) — re-run lucent-bake", c->size, (unsigned long long)h.file_size,
-                                lcb_idstr(s->id, b));
+                return lcb_fail(c,
+                                "truncated: file is %zu bytes, header says %llu (section %s and later are "
+                                "missing) — re-run lucent-bake",
+                                c->size, (unsigned long long)h.file_size, lcb_idstr(s->id, b));
         }
-        return lcb_fail(c, "truncated: file is %zu bytes, header says %llu (end padding missing) — re-run "
-                           "lucent-bake", c->size, (unsigned long long)h.file_size);
+        return lcb_fail(c,
+                        "truncated: file is %zu bytes, header says %llu (end padding missing) — re-run "
+                        "lucent-bake",
+                        c->size, (unsigned long long)h.file_size);
     }
     if (h.file_size < c->size)
         return lcb_fail(c, "header: file is %zu bytes, header says %llu (trailing data)" LCB_CORRUPT, c->size,
@@ -196,19 +216,17 @@ static int lcb_check_sections(lcb_ctx *c, const lc_lcb *f) {
         char b[5], b2[5];
         const char *id = lcb_idstr(s->id, b);
         if (s->offset % LC_LCB_ALIGN != 0)
-            return lcb_fail(c, "%s: offset %llu is not a multiple of %d" LCB_CORRUPT, id,
-                            (unsigned long long)s->offset, LC_LCB_ALIGN);
+            return lcb_fail(c, "%s: offset %llu is not a multiple of %d" LCB_CORRUPT, id, (unsigned long long)s->offset,
+                            LC_LCB_ALIGN);
         if (s->offset > c->size || s->size > c->size - s->offset)
             return lcb_fail(c, "%s: bytes [%llu, %llu + %llu) lie outside the file (%zu bytes)" LCB_CORRUPT, id,
-                            (unsigned long long)s->offset, (unsigned long long)s->offset,
-                            (unsigned long long)s->size, c->size);
-        if (s->record_size == 0)
-            return lcb_fail(c, "%s: record size is 0" LCB_CORRUPT, id);
+                            (unsigned long long)s->offset, (unsigned long long)s->offset, (unsigned long long)s->size,
+                            c->size);
+        if (s->record_size == 0) return lcb_fail(c, "%s: record size is 0" LCB_CORRUPT, id);
         if (s->count > UINT64_MAX / s->record_size || s->count * s->record_size != s->size)
             return lcb_fail(c, "%s: size %llu bytes is not %llu records x %u bytes" LCB_CORRUPT, id,
                             (unsigned long long)s->size, (unsigned long long)s->count, s->record_size);
-        if (s->offset < table_end)
-            return lcb_fail(c, "%s: overlaps the header/section table" LCB_CORRUPT, id);
+        if (s->offset < table_end) return lcb_fail(c, "%s: overlaps the header/section table" LCB_CORRUPT, id);
         for (uint32_t j = 0; j < i; j++) {
             const lc_lcb_section *o = &f->table[j];
             /* Both ranges are inside the file, so the sums cannot overflow. */
@@ -216,8 +234,7 @@ static int lcb_check_sections(lcb_ctx *c, const lc_lcb *f) {
                 return lcb_fail(c, "%s: overlaps section %s" LCB_CORRUPT, id, lcb_idstr(o->id, b2));
         }
         for (uint32_t j = 0; j < i; j++)
-            if (memcmp(f->table[j].id, s->id, 4) == 0)
-                return lcb_fail(c, "%s: duplicate section" LCB_CORRUPT, id);
+            if (memcmp(f->table[j].id, s->id, 4) == 0) return lcb_fail(c, "%s: duplicate section" LCB_CORRUPT, id);
         if (lc_crc32(0, c->base + s->offset, (size_t)s->size) != s->crc)
             return lcb_fail(c, "%s: CRC mismatch" LCB_CORRUPT, id);
     }
@@ -239,9 +256,10 @@ static int lcb_find_sections(lcb_ctx *c, const lc_lcb *f) {
             continue;
         }
         if (s->record_size != lcb_known[k].record)
-            return lcb_fail(c, "%s: record size %u, expected %u (%s) — written by an incompatible lucent-bake; "
-                               "re-run lucent-bake", lcb_known[k].id, s->record_size, lcb_known[k].record,
-                            lcb_known[k].what);
+            return lcb_fail(c,
+                            "%s: record size %u, expected %u (%s) — written by an incompatible lucent-bake; "
+                            "re-run lucent-bake",
+                            lcb_known[k].id, s->record_size, lcb_known[k].record, lcb_known[k].what);
         /* The view counts in 32 bits; LINK/LKSH have no count field there. */
         if (k != S_LINK && k != S_LKSH && s->count > UINT32_MAX)
             return lcb_fail(c, "%s: %llu records, more than this reader supports (2^32-1)", lcb_known[k].id,
@@ -267,10 +285,8 @@ static int lcb_json_depth_ok(const char *s, size_t n) {
     for (size_t i = 0; i < n; i++) {
         char ch = s[i];
         if (in_str) {
-            if (ch == '\\')
-                i++;
-            else if (ch == '"')
-                in_str = 0;
+            if (ch == '\\') i++;
+            else if (ch == '"') in_str = 0;
         } else if (ch == '"') {
             in_str = 1;
         } else if (ch == '[' || ch == '{') {
@@ -310,8 +326,8 @@ static int lcb_json_uint(const cJSON *j, uint64_t lo, uint64_t hi, uint64_t *out
 
 static int lcb_meta_uint(lcb_ctx *c, const cJSON *root, const char *path, uint64_t lo, uint64_t hi, uint64_t *out) {
     if (!lcb_json_uint(lcb_json_at(root, path), lo, hi, out))
-        return lcb_fail(c, "META: %s must be an integer in %llu..%llu" LCB_INCONSISTENT, path,
-                        (unsigned long long)lo, (unsigned long long)hi);
+        return lcb_fail(c, "META: %s must be an integer in %llu..%llu" LCB_INCONSISTENT, path, (unsigned long long)lo,
+                        (unsigned long long)hi);
     return 0;
 }
 
@@ -370,8 +386,10 @@ static int lcb_meta_fields(lcb_ctx *c, const cJSON *root) {
         const cJSON *id = cJSON_GetObjectItemCaseSensitive(l, "id");
         if (cJSON_IsString(id) && id->valuestring && !lc_utf8_valid(id->valuestring, strlen(id->valuestring))) {
             char b[257];
-            return lcb_fail(c, "META: /lights/%d/id \"%s\" is not valid UTF-8 — re-run lucent-bake (it replaces "
-                               "invalid bytes with U+FFFD)", i, lcb_namestr(id->valuestring, 64, b));
+            return lcb_fail(c,
+                            "META: /lights/%d/id \"%s\" is not valid UTF-8 — re-run lucent-bake (it replaces "
+                            "invalid bytes with U+FFFD)",
+                            i, lcb_namestr(id->valuestring, 64, b));
         }
     }
     return 0;
@@ -413,8 +431,7 @@ static int lcb_meta_counts(lcb_ctx *c) {
         return lcb_fail(c, "LINK: %llu links, but META /caches/count x /links/per_cache is %llu" LCB_INCONSISTENT,
                         (unsigned long long)lcb_count(c, S_LINK), (unsigned long long)links);
     if (m->link_sh == 0) {
-        if (c->sec[S_LKSH])
-            return lcb_fail(c, "LKSH: present, but META /links/sh_bands is 0" LCB_INCONSISTENT);
+        if (c->sec[S_LKSH]) return lcb_fail(c, "LKSH: present, but META /links/sh_bands is 0" LCB_INCONSISTENT);
     } else {
         uint64_t halves = links * m->link_sh * m->link_sh;
         if (!c->sec[S_LKSH])
@@ -431,8 +448,7 @@ static int lcb_check_meta(lcb_ctx *c, lc_lcb *f) {
     const lc_lcb_section *s = c->sec[S_META];
     size_t len = (size_t)s->size;
     const char *text = (const char *)lcb_data(c, S_META);
-    if (memchr(text, 0, len))
-        return lcb_fail(c, "META: contains a NUL byte (must be JSON text)" LCB_CORRUPT);
+    if (memchr(text, 0, len)) return lcb_fail(c, "META: contains a NUL byte (must be JSON text)" LCB_CORRUPT);
     f->meta_text = malloc(len + 1);
     if (!f->meta_text) return lcb_fail(c, "META: out of memory");
     memcpy(f->meta_text, text, len);
@@ -457,9 +473,10 @@ static int lcb_check_geometry(lcb_ctx *c) {
             return lcb_fail(c, "MATL: material %llu name is not NUL-terminated" LCB_CORRUPT, (unsigned long long)i);
         if (!lcb_name_ok(mat[i].name, sizeof mat[i].name)) {
             char b[257];
-            return lcb_fail(c, "MATL: material %llu name \"%s\" is not valid UTF-8 — re-run lucent-bake (it replaces "
-                               "invalid bytes with U+FFFD)", (unsigned long long)i,
-                            lcb_namestr(mat[i].name, sizeof mat[i].name, b));
+            return lcb_fail(c,
+                            "MATL: material %llu name \"%s\" is not valid UTF-8 — re-run lucent-bake (it replaces "
+                            "invalid bytes with U+FFFD)",
+                            (unsigned long long)i, lcb_namestr(mat[i].name, sizeof mat[i].name, b));
         }
         if (!lcb_finite(mat[i].base_color, 3) || !lcb_finite(mat[i].emission, 3))
             return lcb_fail(c, "MATL: material %llu has a non-finite colour" LCB_INCONSISTENT, (unsigned long long)i);
@@ -560,8 +577,10 @@ static int lcb_check_nodes(lcb_ctx *c) {
                 goto err;
             }
             if (lev + 1 >= n_levels || ch < L[lev + 1] || ch >= L[lev + 2]) {
-                lcb_fail(c, "NODE: node %llu (level %llu) has child %u outside the next level — not in BFS "
-                            "order" LCB_INCONSISTENT, ui, (unsigned long long)lev, ch);
+                lcb_fail(c,
+                         "NODE: node %llu (level %llu) has child %u outside the next level — not in BFS "
+                         "order" LCB_INCONSISTENT,
+                         ui, (unsigned long long)lev, ch);
                 goto err;
             }
             if (has_parent[ch]) {
@@ -598,8 +617,9 @@ static int lcb_check_caches(lcb_ctx *c) {
         uint32_t kind = ca[i].flags & (LC_CACHE_TEXEL | LC_CACHE_GRID);
         if (i < c->m.texel) {
             if (kind != LC_CACHE_TEXEL || ca[i].index >= texels)
-                return lcb_fail(c, "CACH: cache %llu must be a texel cache with index < %llu (META /caches/texel)"
-                                   LCB_INCONSISTENT, ui, (unsigned long long)texels);
+                return lcb_fail(
+                    c, "CACH: cache %llu must be a texel cache with index < %llu (META /caches/texel)" LCB_INCONSISTENT,
+                    ui, (unsigned long long)texels);
         } else if (kind != LC_CACHE_GRID || ca[i].index >= cells) {
             return lcb_fail(c, "CACH: cache %llu must be a grid cache with index < %llu" LCB_INCONSISTENT, ui,
                             (unsigned long long)cells);
@@ -623,8 +643,9 @@ static int lcb_check_links(lcb_ctx *c) {
     uint64_t n_nodes = lcb_count(c, S_NODE);
     for (uint64_t i = 0; i < lcb_count(c, S_LINK); i++)
         if (l[i].node >= n_nodes || !isfinite(l[i].factor) || !(l[i].factor >= 0))
-            return lcb_fail(c, "LINK: link %llu has node %u (of %llu) or a factor that is not finite and >= 0"
-                               LCB_INCONSISTENT, (unsigned long long)i, l[i].node, (unsigned long long)n_nodes);
+            return lcb_fail(
+                c, "LINK: link %llu has node %u (of %llu) or a factor that is not finite and >= 0" LCB_INCONSISTENT,
+                (unsigned long long)i, l[i].node, (unsigned long long)n_nodes);
     /* Used links first, padding after: runtimes stop at link_count. */
     const lc_lcb_cache *ca = lcb_data(c, S_CACH);
     for (uint64_t i = 0; i < lcb_count(c, S_CACH); i++) {
@@ -633,8 +654,9 @@ static int lcb_check_links(lcb_ctx *c) {
                             (unsigned long long)i, ca[i].link_count, (unsigned long long)c->m.per_cache);
         for (uint64_t j = ca[i].link_count; j < c->m.per_cache; j++)
             if (l[i * c->m.per_cache + j].factor != 0)
-                return lcb_fail(c, "LINK: cache %llu slot %llu lies past its link_count %u but is not padding"
-                                   LCB_INCONSISTENT, (unsigned long long)i, (unsigned long long)j, ca[i].link_count);
+                return lcb_fail(
+                    c, "LINK: cache %llu slot %llu lies past its link_count %u but is not padding" LCB_INCONSISTENT,
+                    (unsigned long long)i, (unsigned long long)j, ca[i].link_count);
     }
     if (c->sec[S_LKSH]) {
         const uint16_t *h = lcb_data(c, S_LKSH);
@@ -660,8 +682,10 @@ static int lcb_check_assets(lcb_ctx *c) {
             return lcb_fail(c, "ASET: asset %llu name is not NUL-terminated" LCB_CORRUPT, ui);
         if (!lcb_name_ok(a[i].name, sizeof a[i].name)) {
             char b[257];
-            return lcb_fail(c, "ASET: asset %llu name \"%s\" is not valid UTF-8 — re-run lucent-bake with another "
-                               "--asset name", ui, lcb_namestr(a[i].name, sizeof a[i].name, b));
+            return lcb_fail(c,
+                            "ASET: asset %llu name \"%s\" is not valid UTF-8 — re-run lucent-bake with another "
+                            "--asset name",
+                            ui, lcb_namestr(a[i].name, sizeof a[i].name, b));
         }
         if ((uint64_t)a[i].first_vertex + a[i].vertex_count > n_v)
             return lcb_fail(c, "ASET: asset %llu vertices [%u, +%u) exceed AVRT (%llu)" LCB_INCONSISTENT, ui,

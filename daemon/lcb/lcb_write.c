@@ -26,8 +26,7 @@ static uint64_t lcb_align(uint64_t x) { return (x + (LC_LCB_ALIGN - 1)) & ~(uint
 
 lc_lcb_writer *lc_lcb_writer_create(void) { return calloc(1, sizeof(lc_lcb_writer)); }
 
-int lc_lcb_writer_add(lc_lcb_writer *w, const char id[4], uint32_t record_size, const void *data,
-                      uint64_t count) {
+int lc_lcb_writer_add(lc_lcb_writer *w, const char id[4], uint32_t record_size, const void *data, uint64_t count) {
     if (!w || !id || record_size == 0 || w->n >= LC_LCB_MAX_SECTIONS) return -1;
     if (count > 0 && !data) return -1;
     /* size = count * record_size must fit in 64 bits (and in size_t, to write it). */
@@ -98,8 +97,7 @@ int lc_lcb_writer_write(lc_lcb_writer *w, const char *path, char *err, size_t er
     hdr.table_crc = lc_crc32(0, table, (size_t)w->n * sizeof(lc_lcb_section));
     hdr.header_crc = lc_crc32(0, &hdr, offsetof(lc_lcb_header, header_crc));
     if (lc_fs_writer_pwrite(fw, &hdr, sizeof hdr, 0) != 0) goto io_err;
-    if (w->n > 0 && lc_fs_writer_pwrite(fw, table, (size_t)w->n * sizeof(lc_lcb_section), sizeof hdr) != 0)
-        goto io_err;
+    if (w->n > 0 && lc_fs_writer_pwrite(fw, table, (size_t)w->n * sizeof(lc_lcb_section), sizeof hdr) != 0) goto io_err;
     /* commit reports a latched write error (with errno) as well, and frees fw. */
     return lc_fs_writer_commit(fw, err, errlen);
 io_err:

@@ -29,23 +29,23 @@ struct lc_compute {
     pthread_t thread;
     pthread_mutex_t lock;
     pthread_cond_t cond;
-    compute_job *pending;   /* guarded by lock: newest unstarted submission */
-    lc_published *latest;   /* guarded by lock */
-    uint64_t sequence;      /* guarded by lock: publications so far */
-    uint64_t count;         /* guarded by lock */
-    uint64_t hist[LC_COMPUTE_BUCKETS]; /* guarded by lock: relights per bucket (not cumulative) */
-    double hist_sum_ms;     /* guarded by lock */
-    int stop;               /* guarded by lock */
-    uint64_t submitted;     /* guarded by lock: last job id handed out */
+    compute_job *pending;                    /* guarded by lock: newest unstarted submission */
+    lc_published *latest;                    /* guarded by lock */
+    uint64_t sequence;                       /* guarded by lock: publications so far */
+    uint64_t count;                          /* guarded by lock */
+    uint64_t hist[LC_COMPUTE_BUCKETS];       /* guarded by lock: relights per bucket (not cumulative) */
+    double hist_sum_ms;                      /* guarded by lock */
+    int stop;                                /* guarded by lock */
+    uint64_t submitted;                      /* guarded by lock: last job id handed out */
     uint64_t discarded[LC_COMPUTE_DISCARDS]; /* guarded by lock: ring of job ids never to publish */
-    unsigned discard_next;  /* guarded by lock */
-    int ready;              /* guarded by lock: 1 engine up, -1 failed */
+    unsigned discard_next;                   /* guarded by lock */
+    int ready;                               /* guarded by lock: 1 engine up, -1 failed */
     char start_err[512];
     char backend_name[16];
-    int joined;             /* service thread only: lc_compute_stop has joined the thread */
-    uint64_t failures;      /* guarded by lock: relights that failed */
+    int joined;               /* service thread only: lc_compute_stop has joined the thread */
+    uint64_t failures;        /* guarded by lock: relights that failed */
     uint64_t failed_revision; /* guarded by lock: revision of the last failed relight (0 = the last one succeeded) */
-    char failure[256];      /* guarded by lock: why it failed */
+    char failure[256];        /* guarded by lock: why it failed */
 };
 
 static void compute_job_free(compute_job *j) {

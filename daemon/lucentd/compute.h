@@ -16,8 +16,8 @@ typedef void (*lc_compute_wake_fn)(void *arg);
 
 /* One relight's outputs. Immutable once published; free with lc_published_release. */
 typedef struct lc_published {
-    int refs; /* guarded by compute.lock */
-    uint64_t job;      /* the submission it came from (lc_compute_submit) */
+    int refs;     /* guarded by compute.lock */
+    uint64_t job; /* the submission it came from (lc_compute_submit) */
     uint64_t revision;
     uint64_t timestamp_us; /* when the relight finished (µs since the epoch) */
     double relight_ms;

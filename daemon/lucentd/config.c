@@ -56,16 +56,15 @@ static const lc_opt config_options[] = {
      "JSON config file (keys are these option names; flags override it)", "FILE", NULL},
     {"bake", LC_OPT_STRING, OFF(bake), 1, LC_CONFIG_PATH_MAX, config_default_bake, NULL,
      "bake file to serve (by default the Cornell box in ../share/lucent/ from lucentd's directory)", "FILE", NULL},
-    {"listen", LC_OPT_STRING, OFF(listen), 1, 128, "127.0.0.1", NULL, "interface address to listen on", "ADDR",
-     NULL},
-    {"port", LC_OPT_INT, OFF(port), 0, 65535, LC_LIMIT_STR(LC_DEFAULT_PORT), NULL, "TCP port (0 = any free port, logged)", NULL, NULL},
+    {"listen", LC_OPT_STRING, OFF(listen), 1, 128, "127.0.0.1", NULL, "interface address to listen on", "ADDR", NULL},
+    {"port", LC_OPT_INT, OFF(port), 0, 65535, LC_LIMIT_STR(LC_DEFAULT_PORT), NULL,
+     "TCP port (0 = any free port, logged)", NULL, NULL},
     {"state-dir", LC_OPT_STRING, OFF(state_dir), 1, LC_CONFIG_PATH_MAX, "lucent-state", NULL,
      "directory of the journal and snapshot", "DIR", NULL},
     {"fsync", LC_OPT_ENUM, OFF(fsync_mode), 0, 0, "always", "always|everysec",
      "journal durability: fsync before every ok, or once a second", NULL, NULL},
     {"controller-tokens", LC_OPT_STRING, OFF(controller_tokens), 0, LC_CONFIG_TOKENS_MAX, NULL, NULL,
-     "comma-separated tokens with the controller role (none = no authentication: every client controls)",
-     "LIST", NULL},
+     "comma-separated tokens with the controller role (none = no authentication: every client controls)", "LIST", NULL},
     {"viewer-tokens", LC_OPT_STRING, OFF(viewer_tokens), 0, LC_CONFIG_TOKENS_MAX, NULL, NULL,
      "comma-separated tokens with the viewer role", "LIST", NULL},
     {"origins", LC_OPT_STRING, OFF(origins), 0, LC_CONFIG_TOKENS_MAX, NULL, NULL,
@@ -78,26 +77,31 @@ static const lc_opt config_options[] = {
     {"tls-cert", LC_OPT_STRING, OFF(tls_cert), 0, LC_CONFIG_PATH_MAX, NULL, NULL,
      "TLS certificate (PEM); with --tls-key the port serves wss:// and https://", "FILE", NULL},
     {"tls-key", LC_OPT_STRING, OFF(tls_key), 0, LC_CONFIG_PATH_MAX, NULL, NULL, "TLS private key (PEM)", "FILE", NULL},
-    {"max-message", LC_OPT_INT, OFF(max_message), 1024, LC_LIMIT_MESSAGE_MAX, LC_LIMIT_STR(LC_LIMIT_MESSAGE), NULL, "largest text message (bytes)",
+    {"max-message", LC_OPT_INT, OFF(max_message), 1024, LC_LIMIT_MESSAGE_MAX, LC_LIMIT_STR(LC_LIMIT_MESSAGE), NULL,
+     "largest text message (bytes)", NULL, NULL},
+    {"max-depth", LC_OPT_INT, OFF(max_depth), 4, 64, LC_LIMIT_STR(LC_LIMIT_DEPTH), NULL, "deepest JSON nesting", NULL,
+     NULL},
+    {"max-batch", LC_OPT_INT, OFF(max_batch), 1, LC_LIMIT_BATCH_MAX, LC_LIMIT_STR(LC_LIMIT_BATCH), NULL,
+     "ops per batch", NULL, NULL},
+    {"max-lights", LC_OPT_INT, OFF(max_lights), 1, LC_LIMIT_LIGHTS, LC_LIMIT_STR(LC_LIMIT_LIGHTS), NULL, "lights held",
      NULL, NULL},
-    {"max-depth", LC_OPT_INT, OFF(max_depth), 4, 64, LC_LIMIT_STR(LC_LIMIT_DEPTH), NULL, "deepest JSON nesting", NULL, NULL},
-    {"max-batch", LC_OPT_INT, OFF(max_batch), 1, LC_LIMIT_BATCH_MAX, LC_LIMIT_STR(LC_LIMIT_BATCH), NULL, "ops per batch", NULL, NULL},
-    {"max-lights", LC_OPT_INT, OFF(max_lights), 1, LC_LIMIT_LIGHTS, LC_LIMIT_STR(LC_LIMIT_LIGHTS), NULL, "lights held", NULL, NULL},
-    {"max-objects", LC_OPT_INT, OFF(max_objects), 1, LC_LIMIT_OBJECTS, LC_LIMIT_STR(LC_LIMIT_OBJECTS), NULL, "object instances held", NULL, NULL},
+    {"max-objects", LC_OPT_INT, OFF(max_objects), 1, LC_LIMIT_OBJECTS, LC_LIMIT_STR(LC_LIMIT_OBJECTS), NULL,
+     "object instances held", NULL, NULL},
     {"max-clients", LC_OPT_INT, OFF(max_clients), 1, 100000, "1000", NULL,
      "connected clients (lowered, with a warning, to what the open-files limit allows)", NULL, NULL},
     {"max-queue-bytes", LC_OPT_INT, OFF(max_queue_bytes), 65536, 1073741824, "8388608", NULL,
      "replies queued for one client that does not read; past it the client is dropped (1008)", "BYTES", NULL},
-    {"rate", LC_OPT_INT, OFF(rate), 1, 100000, LC_LIMIT_STR(LC_LIMIT_RATE), NULL, "requests per second per connection (burst 2x)", NULL,
+    {"rate", LC_OPT_INT, OFF(rate), 1, 100000, LC_LIMIT_STR(LC_LIMIT_RATE), NULL,
+     "requests per second per connection (burst 2x)", NULL, NULL},
+    {"hello-timeout", LC_OPT_INT, OFF(hello_timeout), 1, 600, "5", NULL, "seconds a client has to send hello", NULL,
      NULL},
-    {"hello-timeout", LC_OPT_INT, OFF(hello_timeout), 1, 600, "5", NULL, "seconds a client has to send hello",
-     NULL, NULL},
     {"slow-timeout", LC_OPT_INT, OFF(slow_timeout), 1, 3600, "10", NULL,
      "seconds a client may take none of its output (replies or frames) before it is dropped (1008)", NULL, NULL},
     {"backend", LC_OPT_ENUM, OFF(backend), 0, 0, "auto", "auto|cpu|egl", "relight backend", NULL, NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "relight threads (0 = all cores)", NULL, NULL},
     {"refine-delay", LC_OPT_INT, OFF(refine_delay), 0, 10000, "20", NULL,
-     "milliseconds after an update's frame before the idle refinement passes (lets the frame reach clients first)", "MS", NULL},
+     "milliseconds after an update's frame before the idle refinement passes (lets the frame reach clients first)",
+     "MS", NULL},
     {"refine-passes", LC_OPT_INT, OFF(refine_passes), 0, 64, "4", NULL,
      "extra progressive relights while no update waits (each adds a bounce)", NULL, NULL},
     {"bounces", LC_OPT_INT, OFF(bounces), 0, 16, "0", NULL,
@@ -144,8 +148,7 @@ static int config_apply_json(lc_config *c, const char *path, char *err, size_t e
         if (cJSON_IsString(it)) snprintf(value, sizeof value, "%s", it->valuestring);
         else if (cJSON_IsBool(it)) snprintf(value, sizeof value, "%s", cJSON_IsTrue(it) ? "true" : "false");
         else if (cJSON_IsNumber(it)) snprintf(value, sizeof value, "%.17g", it->valuedouble);
-        else if (cJSON_IsArray(it)) { /* token lists may be arrays of strings */
-            size_t n = 0;
+        else if (cJSON_IsArray(it)) { /* token lists may be arrays of strings */ size_t n = 0;
             value[0] = 0;
             for (const cJSON *e = it->child; e; e = e->next) {
                 if (!cJSON_IsString(e)) {
@@ -228,8 +231,8 @@ int lc_config_has_token(const char *list, const char *token) {
 void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *restart_needed, size_t len) {
     size_t n = 0;
     restart_needed[0] = 0;
-#define RESTART_IF(field, name)                                                                          \
-    if (memcmp(&dst->field, &src->field, sizeof dst->field) != 0 && n < len)                             \
+#define RESTART_IF(field, name)                                              \
+    if (memcmp(&dst->field, &src->field, sizeof dst->field) != 0 && n < len) \
         n += (size_t)snprintf(restart_needed + n, len - n, "%s" name, n ? ", " : "");
     RESTART_IF(bake, "bake")
     RESTART_IF(listen, "listen")
@@ -277,8 +280,8 @@ static int config_is_placeholder(const char *tok, size_t len) {
         folded[n++] = ch;
     }
     folded[n] = 0;
-    static const char *const words[] = {"changeme", "replaceme", "placeholder", "yourtoken", "yoursecret", "todo",
-                                        "fixme", "example", NULL};
+    static const char *const words[] = {"changeme", "replaceme", "placeholder", "yourtoken", "yoursecret",
+                                        "todo",     "fixme",     "example",     NULL};
     for (int i = 0; words[i]; i++)
         if (strstr(folded, words[i])) return 1;
     return n > 0 && xs == n; /* "xxxx" */

@@ -16,10 +16,10 @@ typedef struct lc_config {
     char listen[128];
     int port;
     char state_dir[LC_CONFIG_PATH_MAX];
-    int fsync_mode; /* 0 always, 1 everysec */
+    int fsync_mode;                               /* 0 always, 1 everysec */
     char controller_tokens[LC_CONFIG_TOKENS_MAX]; /* comma-separated; empty = no auth, everyone controls */
     char viewer_tokens[LC_CONFIG_TOKENS_MAX];
-    char origins[LC_CONFIG_TOKENS_MAX];           /* comma-separated allow-list; empty = any */
+    char origins[LC_CONFIG_TOKENS_MAX]; /* comma-separated allow-list; empty = any */
     char www[LC_CONFIG_PATH_MAX];
     char tls_cert[LC_CONFIG_PATH_MAX]; /* PEM; with tls_key: serve wss:// and https:// */
     char tls_key[LC_CONFIG_PATH_MAX];
@@ -30,18 +30,18 @@ typedef struct lc_config {
     int max_objects;
     int max_clients;
     int max_queue_bytes; /* bytes of replies queued per client before it is dropped */
-    int rate;          /* requests per second per connection */
-    int hello_timeout; /* seconds */
-    int slow_timeout;  /* seconds a client may leave a frame unread before it is dropped */
-    int backend;       /* 0 auto, 1 cpu, 2 egl */
+    int rate;            /* requests per second per connection */
+    int hello_timeout;   /* seconds */
+    int slow_timeout;    /* seconds a client may leave a frame unread before it is dropped */
+    int backend;         /* 0 auto, 1 cpu, 2 egl */
     int threads;
-    int refine_passes;   /* extra progressive relights while idle */
-    int refine_delay;    /* ms after an update's frame before the refinement passes */
-    int bounces;         /* initial feedback bounces per relight (a snapshot's settings win) */
+    int refine_passes; /* extra progressive relights while idle */
+    int refine_delay;  /* ms after an update's frame before the refinement passes */
+    int bounces;       /* initial feedback bounces per relight (a snapshot's settings win) */
     int tile;          /* lightmap tile size for delta frames */
     int keyframe_interval;
     double delta_threshold; /* relative change that marks a tile dirty */
-    int compact_bytes; /* journal size that triggers a snapshot */
+    int compact_bytes;      /* journal size that triggers a snapshot */
     int log_level;
     int check_config;
     int recover; /* start from the snapshot + the journal's valid prefix, setting the rest aside */

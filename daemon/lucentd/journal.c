@@ -16,8 +16,8 @@
 #include "util/fsutil.h"
 #include "util/log.h"
 
-#define JOURNAL_MAX_FILE (1ull << 30)   /* refuse to replay more than 1 GiB */
-#define JOURNAL_MAX_LINE (4u << 20)     /* one batch line */
+#define JOURNAL_MAX_FILE (1ull << 30) /* refuse to replay more than 1 GiB */
+#define JOURNAL_MAX_LINE (4u << 20)   /* one batch line */
 #define SNAPSHOT_MAX (64u << 20)
 
 struct lc_journal {
@@ -25,11 +25,11 @@ struct lc_journal {
     int fd;
     lc_fsync_mode mode;
     int dirty;
-    int broken;             /* a failed fsync: appends refused until a compaction succeeds */
-    char broken_why[256];   /* what broke it, for the refusals */
+    int broken;           /* a failed fsync: appends refused until a compaction succeeds */
+    char broken_why[256]; /* what broke it, for the refusals */
     double last_sync_ms, last_repair_ms;
-    uint64_t bytes;         /* the last good length: everything below it is complete, durable records */
-    uint64_t failures;      /* failed appends and everysec fsyncs (lc_journal_failures) */
+    uint64_t bytes;    /* the last good length: everything below it is complete, durable records */
+    uint64_t failures; /* failed appends and everysec fsyncs (lc_journal_failures) */
 };
 
 /* The revision a journal line names, or 0 when it is not a record with one. */
@@ -120,8 +120,9 @@ static void journal_break(lc_journal *j, const char *what, int e) {
     if (j->broken) return;
     j->broken = 1;
     snprintf(j->broken_why, sizeof j->broken_why, "%s (%s)", what, strerror(e));
-    lc_error("journal", "%s: %s: %s; refusing changes until a snapshot of the state succeeds (retried every "
-                        "second; check the disk and the free space of '%s')",
+    lc_error("journal",
+             "%s: %s: %s; refusing changes until a snapshot of the state succeeds (retried every "
+             "second; check the disk and the free space of '%s')",
              j->log_path, what, strerror(e), j->dir);
 }
 
@@ -226,19 +227,21 @@ static lc_journal *journal_open(const char *dir, lc_fsync_mode mode, lc_state *s
         if (!nl) { /* torn final append: the change was never acknowledged */
             lc_warn("journal", "%s: dropping an incomplete last line (%zu bytes) left by a crash", j->log_path,
                     len - pos);
-            snprintf(drop.reason, sizeof drop.reason, "%s line %zu: incomplete (a crash during an append)",
-                     j->log_path, lineno);
+            snprintf(drop.reason, sizeof drop.reason, "%s line %zu: incomplete (a crash during an append)", j->log_path,
+                     lineno);
             drop.first_line = lineno;
             break;
         }
         size_t line_len = (size_t)(nl - (text + pos));
         if (line_len > 0 &&
-            journal_replay_line(j->log_path, text + pos, line_len, lineno, state, drop.reason, sizeof drop.reason) != 0) {
+            journal_replay_line(j->log_path, text + pos, line_len, lineno, state, drop.reason, sizeof drop.reason) !=
+                0) {
             /* Replaying past a bad line could apply changes that depended on it, so the
              * valid prefix is all that can be restored; the operator decides. */
             if (!recover) {
-                lc_set_err(err, errlen, "%s; the lines before it are intact: start lucentd once with --recover to "
-                                        "restore them and set this line and the rest of the file aside",
+                lc_set_err(err, errlen,
+                           "%s; the lines before it are intact: start lucentd once with --recover to "
+                           "restore them and set this line and the rest of the file aside",
                            drop.reason);
                 goto err;
             }
@@ -273,8 +276,7 @@ static lc_journal *journal_open(const char *dir, lc_fsync_mode mode, lc_state *s
         if (drop.rev_max)
             snprintf(revs, sizeof revs, "revisions %llu..%llu", (unsigned long long)drop.rev_min,
                      (unsigned long long)drop.rev_max);
-        else
-            snprintf(revs, sizeof revs, "no readable revision");
+        else snprintf(revs, sizeof revs, "no readable revision");
         lc_warn("journal",
                 "--recover: %s; dropped it and the rest of the file: %llu lines (%llu bytes; %s, %llu lines without "
                 "one), kept in %s; the state is revision %llu, rewritten as the snapshot (the next start needs no "
@@ -320,8 +322,9 @@ static int journal_write_all(int fd, const char *p, size_t n) {
 int lc_journal_append(lc_journal *j, const lc_proto_op *ops, uint32_t n_ops, uint64_t revision, char *err,
                       size_t errlen) {
     if (j->broken) {
-        lc_set_err(err, errlen, "the journal refuses changes since %s; they resume once a snapshot of the state "
-                                "succeeds (check the disk of '%s')",
+        lc_set_err(err, errlen,
+                   "the journal refuses changes since %s; they resume once a snapshot of the state "
+                   "succeeds (check the disk of '%s')",
                    j->broken_why, j->dir);
         return -1;
     }
@@ -365,8 +368,9 @@ int lc_journal_append(lc_journal *j, const lc_proto_op *ops, uint32_t n_ops, uin
              * the line off and trust only a fresh snapshot from here on. */
             (void)journal_rollback(j);
             journal_break(j, "fdatasync failed", e);
-            lc_set_err(err, errlen, "journal fsync failed: %s; changes are refused until a snapshot succeeds "
-                                    "(check the disk of '%s')",
+            lc_set_err(err, errlen,
+                       "journal fsync failed: %s; changes are refused until a snapshot succeeds "
+                       "(check the disk of '%s')",
                        strerror(e), j->dir);
             goto done;
         }
@@ -439,8 +443,9 @@ int lc_journal_compact(lc_journal *j, const lc_state *state, char *err, size_t e
     }
     if (j->broken) {
         j->broken = 0;
-        lc_warn("journal", "%s: recovered: the snapshot holds every acknowledged change and the journal is empty; "
-                           "accepting changes again",
+        lc_warn("journal",
+                "%s: recovered: the snapshot holds every acknowledged change and the journal is empty; "
+                "accepting changes again",
                 j->log_path);
     }
     rc = 0;

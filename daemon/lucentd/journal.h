@@ -24,12 +24,12 @@ typedef struct lc_journal lc_journal;
 
 /* What lc_journal_recover set aside (all zero when the journal was clean). */
 typedef struct lc_journal_dropped {
-    uint64_t first_line;          /* 1-based line of journal.log where the dropped part starts */
-    uint64_t lines, bytes;        /* the dropped part: from that line to the end of the file */
-    uint64_t rev_min, rev_max;    /* revisions named by the dropped lines (0 when none had one) */
-    uint64_t unreadable;          /* dropped lines without a readable revision */
-    char reason[1280];            /* why the first dropped line was refused (names the file and line) */
-    char saved[1024];             /* the file that keeps the dropped bytes ("" if it could not be written) */
+    uint64_t first_line;       /* 1-based line of journal.log where the dropped part starts */
+    uint64_t lines, bytes;     /* the dropped part: from that line to the end of the file */
+    uint64_t rev_min, rev_max; /* revisions named by the dropped lines (0 when none had one) */
+    uint64_t unreadable;       /* dropped lines without a readable revision */
+    char reason[1280];         /* why the first dropped line was refused (names the file and line) */
+    char saved[1024];          /* the file that keeps the dropped bytes ("" if it could not be written) */
 } lc_journal_dropped;
 
 /* Opens DIR (created if missing) and restores *state (already initialised from the bake):

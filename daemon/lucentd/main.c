@@ -19,7 +19,8 @@ static void main_ready(void *arg, int port) {
 int main(int argc, char **argv) {
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
-            printf("usage: lucentd [options]\n\nWith no options it serves the embedded Cornell box on 127.0.0.1:7700.\n\n");
+            printf(
+                "usage: lucentd [options]\n\nWith no options it serves the embedded Cornell box on 127.0.0.1:7700.\n\n");
             lc_opt_help(lc_config_options(), stdout);
             printf("\nexit codes: 0 clean shutdown, 1 runtime failure, 2 invalid configuration or bake\n");
             return 0;

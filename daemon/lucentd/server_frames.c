@@ -120,8 +120,8 @@ static const uint8_t *frames_lightmap_words(lc_frames *f, const lc_frames_job *j
 
 /* The tiles where some texel of j->frame moved by more than thr from cp->lm_sent, into tiles
  * (capacity: every tile); returns their count and the texels they cover in *texels_out. */
-static uint32_t frames_dirty_tiles(const lc_frames_copy *cp, const lc_frames_job *j, uint32_t S, float thr, float floor_v, uint32_t *tiles,
-                                    size_t *texels_out) {
+static uint32_t frames_dirty_tiles(const lc_frames_copy *cp, const lc_frames_job *j, uint32_t S, float thr,
+                                   float floor_v, uint32_t *tiles, size_t *texels_out) {
     const lc_published *p = j->frame;
     const uint32_t W = p->lm_w, H = p->lm_h, T = lc_tiles_count(W, H, S);
     uint32_t n = 0;
@@ -145,8 +145,8 @@ static uint32_t frames_dirty_tiles(const lc_frames_copy *cp, const lc_frames_job
  * cp->lm_held to j->frame: the dirty tiles; in them, texels that moved get their new value
  * (`words`), the others keep the client's (residual 0); zlib-compressed. m->keyframe when it
  * would not be smaller than a keyframe. The caller sets m's key fields. */
-static int frames_residual_compute(lc_residual_memo *m, const lc_frames_copy *cp, const lc_frames_job *j, lc_encoding enc, const uint8_t *words,
-                            uint32_t S, float thr, float floor_v) {
+static int frames_residual_compute(lc_residual_memo *m, const lc_frames_copy *cp, const lc_frames_job *j,
+                                   lc_encoding enc, const uint8_t *words, uint32_t S, float thr, float floor_v) {
     const lc_published *p = j->frame;
     const uint32_t W = p->lm_w, H = p->lm_h, T = lc_tiles_count(W, H, S);
     const size_t texels = (size_t)W * H, tb = lc_frame_texel_bytes(enc);
@@ -189,7 +189,8 @@ static int frames_residual_compute(lc_residual_memo *m, const lc_frames_copy *cp
 }
 
 /* Commits a residual delta to the session: the client will hold the moved texels' new values. */
-static void frames_commit_residual(lc_frames_copy *cp, const lc_residual_memo *m, const lc_frames_job *j, const uint8_t *words, size_t tb) {
+static void frames_commit_residual(lc_frames_copy *cp, const lc_residual_memo *m, const lc_frames_job *j,
+                                   const uint8_t *words, size_t tb) {
     const float *lightmap = j->frame->lightmap;
     for (uint32_t k = 0; k < m->n_moved; k++) {
         size_t i = m->moved[k];
@@ -205,7 +206,8 @@ static void frames_commit_residual(lc_frames_copy *cp, const lc_residual_memo *m
  * residuals when the client subscribed to them. Sessions holding the same copy (same state
  * id) share one residual computation per publication: subscribers in step cost one
  * compression per frame, not one each (100 clients: p50 228 -> 16 ms). */
-static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j, lc_frame_header *h, int force_key) {
+static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j, lc_frame_header *h,
+                                     int force_key) {
     const lc_published *p = j->frame;
     const uint32_t W = p->lm_w, H = p->lm_h, S = j->tile;
     const lc_encoding enc = (lc_encoding)h->encoding;
@@ -214,8 +216,7 @@ static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_
     const uint8_t *words = frames_lightmap_words(f, j, enc);
     if (!words) return 0;
     int key = force_key || !cp->lm_sent || cp->lm_sent_texels != texels ||
-              (residual_sub && cp->lm_held_bytes != texels * tb) ||
-              (h->sequence - 1) % (uint64_t)j->keyframe_interval == 0;
+        (residual_sub && cp->lm_held_bytes != texels * tb) || (h->sequence - 1) % (uint64_t)j->keyframe_interval == 0;
     const uint32_t *tiles = NULL;
     uint32_t *own_tiles = NULL, n_tiles = 0;
     const uint8_t *residual = NULL;
@@ -351,4 +352,3 @@ size_t lc_frames_encode(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j
     }
     return lc_frame_write(&h, NULL, stage, cp->out + j->pre, LC_FRAME_HEADER_SIZE + payload_len);
 }
-

@@ -17,12 +17,12 @@ typedef struct lc_frames lc_frames;
 /* One client's copy of the lightmap and its frame buffer. Zero-initialise; the frames
  * module owns the arrays (free with lc_frames_copy_release). */
 typedef struct lc_frames_copy {
-    float *lm_sent;       /* per texel, the value the client's copy was encoded from */
+    float *lm_sent; /* per texel, the value the client's copy was encoded from */
     size_t lm_sent_texels;
-    uint8_t *lm_held;     /* residual subscribers: the encoded texels the client holds */
+    uint8_t *lm_held; /* residual subscribers: the encoded texels the client holds */
     size_t lm_held_bytes;
     uint64_t lm_held_state; /* names lm_held's content: equal ids, bit-identical copies */
-    uint8_t *out;         /* the last frame, at out + job.pre */
+    uint8_t *out;           /* the last frame, at out + job.pre */
     size_t out_cap;
 } lc_frames_copy;
 
@@ -32,13 +32,13 @@ typedef struct lc_frames_job {
     uint64_t pub_seq;          /* the publication's sequence number (names it in the caches) */
     int stream;                /* lc_stream */
     lc_encoding enc;
-    int residual;              /* lightmap deltas as compressed residuals (§6.2.1) */
-    uint64_t sequence;         /* this frame's sequence number in its stream (1 = first) */
-    int force_key;             /* a keyframe whatever the delta would be */
-    uint32_t tile;             /* delta tile side (lc_frames_tile_size) */
-    int keyframe_interval;     /* a lightmap keyframe every this many frames */
-    double delta_threshold;    /* relative texel change that puts a tile in a delta */
-    size_t pre;                /* bytes kept free before the frame (LWS_PRE) */
+    int residual;           /* lightmap deltas as compressed residuals (§6.2.1) */
+    uint64_t sequence;      /* this frame's sequence number in its stream (1 = first) */
+    int force_key;          /* a keyframe whatever the delta would be */
+    uint32_t tile;          /* delta tile side (lc_frames_tile_size) */
+    int keyframe_interval;  /* a lightmap keyframe every this many frames */
+    double delta_threshold; /* relative texel change that puts a tile in a delta */
+    size_t pre;             /* bytes kept free before the frame (LWS_PRE) */
 } lc_frames_job;
 
 lc_frames *lc_frames_create(void);

@@ -114,8 +114,7 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
     int n = 0;
     metric_u64(body, cap, &n, "lucent_clients", "gauge", "Connected WebSocket sessions.", s->n_sessions);
     metric_u64(body, cap, &n, "lucent_revision", "gauge", "Revision of the scene state.", s->state.revision);
-    metric_u64(body, cap, &n, "lucent_frames_sent_total", "counter", "Binary frames sent to clients.",
-               s->frames_sent);
+    metric_u64(body, cap, &n, "lucent_frames_sent_total", "counter", "Binary frames sent to clients.", s->frames_sent);
     metric_u64(body, cap, &n, "lucent_sent_bytes_total", "counter", "Bytes of WebSocket payload sent to clients.",
                s->bytes_sent);
     metric_u64(body, cap, &n, "lucent_messages_received_total", "counter", "Text messages received from clients.",
@@ -139,7 +138,8 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
                 (unsigned long long)hist[LC_COMPUTE_BUCKETS - 1], sum_ms * 1e-3,
                 (unsigned long long)hist[LC_COMPUTE_BUCKETS - 1]);
     metric_u64(body, cap, &n, "lucent_journal_failures_total", "counter",
-               "Journal writes or fsyncs that failed (appends refused, or an everysec fsync).", lc_journal_failures(s->journal));
+               "Journal writes or fsyncs that failed (appends refused, or an everysec fsync).",
+               lc_journal_failures(s->journal));
     metric_u64(body, cap, &n, "lucent_journal_broken", "gauge",
                "1 while changes are refused after a failed journal fsync (until a snapshot succeeds).",
                (uint64_t)lc_journal_broken(s->journal));
@@ -155,8 +155,8 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
                "Failed accept() calls (e.g. out of file descriptors).", server_accept_errors_total());
     metric_head(body, cap, &n, "lucent_errors_total", "counter", "Error replies sent, by code.");
     for (int i = 0; i < LC_ERR_COUNT; i++)
-        http_append(body, cap, &n, "lucent_errors_total{code=\"%s\"} %llu\n", lc_proto_errcode_name((lc_proto_errcode)i),
-                    (unsigned long long)s->errors[i]);
+        http_append(body, cap, &n, "lucent_errors_total{code=\"%s\"} %llu\n",
+                    lc_proto_errcode_name((lc_proto_errcode)i), (unsigned long long)s->errors[i]);
     return n;
 }
 
@@ -226,4 +226,3 @@ int server_http_callback(struct lws *wsi, enum lws_callback_reasons reason, void
     }
     return lws_callback_http_dummy(wsi, reason, user, in, len);
 }
-

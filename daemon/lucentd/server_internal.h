@@ -12,7 +12,8 @@
 #include "server_frames.h"
 #include "state.h"
 
-#define SERVER_OUTQ 1024 /* queued text messages per session (replies to a full request burst fit); past this the client is too slow */
+#define SERVER_OUTQ \
+    1024 /* queued text messages per session (replies to a full request burst fit); past this the client is too slow */
 /* What a socket may send before its hello is accepted: a hello is a client name and a token
  * (lucent_proto.h), so an unauthenticated peer never gets the full --max-message buffer. */
 #define SERVER_HELLO_MAX 4096
@@ -30,12 +31,13 @@ typedef struct lc_session {
     char peer[64]; /* the peer's address, for the failed-hello throttle and the log */
     char *rx;
     size_t rx_len, rx_cap;
-    size_t rx_limit; /* the bound of the message being received, fixed at its first fragment (SIGHUP may change the live one) */
+    size_t
+        rx_limit; /* the bound of the message being received, fixed at its first fragment (SIGHUP may change the live one) */
     int rx_binary, rx_oversize;
     char *outq[SERVER_OUTQ];
     int outq_head, outq_n;
-    size_t outq_bytes;         /* bytes in outq: over --max-queue-bytes the client is dropped */
-    double stalled_since_ms;   /* since when output has waited without the client taking any (0 = none) */
+    size_t outq_bytes;       /* bytes in outq: over --max-queue-bytes the client is dropped */
+    double stalled_since_ms; /* since when output has waited without the client taking any (0 = none) */
     int closing, close_code;
     char close_reason[64];
     double connected_ms;
@@ -65,9 +67,9 @@ typedef struct server_auth_peer {
 } server_auth_peer;
 
 struct lc_server {
-    lc_config cfg_live;   /* the configuration in force: SIGHUP reloads its reloadable fields */
-    lc_config cfg_reload; /* SIGHUP parses into this, then copies what may change */
-    lc_config *cfg;       /* = &cfg_live */
+    lc_config cfg_live;          /* the configuration in force: SIGHUP reloads its reloadable fields */
+    lc_config cfg_reload;        /* SIGHUP parses into this, then copies what may change */
+    lc_config *cfg;              /* = &cfg_live */
     struct lws_http_mount mount; /* --www (lws keeps a pointer to it) */
     int argc;
     char **argv;
@@ -79,8 +81,8 @@ struct lc_server {
     struct lws_context *ctx;
     lc_session *sessions;
     uint32_t n_sessions;
-    uint64_t pub_seq; /* compute publications seen */
-    uint32_t tile;    /* lightmap delta tile side: --tile, or chosen from the lightmap size */
+    uint64_t pub_seq;  /* compute publications seen */
+    uint32_t tile;     /* lightmap delta tile side: --tile, or chosen from the lightmap size */
     lc_frames *frames; /* what sessions' frames share (each lightmap encoded once per encoding) */
     const char **asset_names, **material_names;
     lc_proto_limits limits;
@@ -92,13 +94,12 @@ struct lc_server {
     uint64_t frames_sent, bytes_sent, messages_in;
     uint64_t errors[LC_ERR_COUNT]; /* error replies per catalogue code */
     uint64_t origins_refused;      /* handshakes refused for their Origin */
-    uint64_t dropped_slow;      /* sessions dropped for not taking their output */
-    uint64_t auth_failures;     /* hellos with an unknown token */
-    uint64_t reloads;           /* SIGHUPs whose configuration was applied */
+    uint64_t dropped_slow;         /* sessions dropped for not taking their output */
+    uint64_t auth_failures;        /* hellos with an unknown token */
+    uint64_t reloads;              /* SIGHUPs whose configuration was applied */
     server_auth_peer auth_peers[SERVER_AUTH_PEERS];
     uint64_t relight_failures_reported; /* compute failures already told to clients */
 };
-
 
 /* server.c */
 void server_count_error(lc_server *s, const char *code);

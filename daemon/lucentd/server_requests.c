@@ -16,7 +16,6 @@
 #include "util/clock.h"
 #include "util/log.h"
 
-
 /* The failed-hello budget of the peer address (a token bucket of SERVER_AUTH_BURST, refilled
  * SERVER_AUTH_PER_S a second), kept for the SERVER_AUTH_PEERS most recent addresses. */
 static server_auth_peer *server_auth_peer_for(lc_server *s, const char *peer) {
@@ -112,7 +111,8 @@ static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *
     lc_state_release(&before);
     session_send(ss, lc_proto_build_ok(&req->id, s->state.revision));
     for (lc_session *o = s->sessions; o; o = o->next)
-        if (o != ss && o->authed) session_send(o, lc_proto_build_changed(s->state.revision, ss->client, req->ops, req->n_ops));
+        if (o != ss && o->authed)
+            session_send(o, lc_proto_build_changed(s->state.revision, ss->client, req->ops, req->n_ops));
     if (lc_journal_bytes(s->journal) > (uint64_t)s->cfg->compact_bytes &&
         lc_journal_compact(s->journal, &s->state, jerr, sizeof jerr) != 0)
         lc_error("server", "journal compaction failed: %s (will retry)", jerr);
@@ -138,7 +138,8 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
         server_auth_peer *ap = c->controller_tokens[0] ? server_auth_peer_for(s, ss->peer) : NULL;
         if (ap && ap->tokens < 1) {
             /* Refused before the token is looked at, so guessing from this address is useless. */
-            session_error(s, ss, &req.id, LC_ERR_RATE_LIMITED, "/token", "too many failed hellos from this address; wait and retry");
+            session_error(s, ss, &req.id, LC_ERR_RATE_LIMITED, "/token",
+                          "too many failed hellos from this address; wait and retry");
             session_close(ss, LWS_CLOSE_STATUS_POLICY_VIOLATION, "rate limited");
             goto done;
         }
@@ -173,9 +174,7 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
         goto done;
     }
     switch (req.type) {
-    case LC_REQ_HELLO:
-        session_error(s, ss, &req.id, LC_ERR_INVALID, "/type", "hello was already received");
-        break;
+    case LC_REQ_HELLO: session_error(s, ss, &req.id, LC_ERR_INVALID, "/type", "hello was already received"); break;
     case LC_REQ_SUBSCRIBE: {
         if (req.stream == LC_STREAM_LIGHTMAP ? !lc_frame_texel_bytes(req.encoding)
                                              : !lc_frame_sh_value_bytes(req.encoding)) {
@@ -211,15 +210,13 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
     case LC_REQ_PING: {
         struct timespec ts;
         clock_gettime(CLOCK_REALTIME, &ts);
-        session_send(ss, lc_proto_build_pong(&req.id, req.ping_t,
-                                             (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u));
+        session_send(
+            ss,
+            lc_proto_build_pong(&req.id, req.ping_t, (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u));
         break;
     }
-    default:
-        server_change(s, ss, &req);
-        break;
+    default: server_change(s, ss, &req); break;
     }
 done:
     lc_proto_request_release(&req);
 }
-

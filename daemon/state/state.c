@@ -29,7 +29,7 @@ int lc_state_init(lc_state *s, const lc_lcb *bake, const lc_state_limits *limits
     for (uint32_t m = 0; m < nm; m++) memcpy(s->emission[m], s->scene->materials[m].emission, sizeof s->emission[m]);
     lc_engine_settings d = lc_engine_default_settings(bake);
     s->settings.present = (1u << LC_SET_BOUNCES) | (1u << LC_SET_BANDS) | (1u << LC_SET_PROGRESSIVE) |
-                          (1u << LC_SET_CHROMA) | (1u << LC_SET_CHROMA_BANDS);
+        (1u << LC_SET_CHROMA) | (1u << LC_SET_CHROMA_BANDS);
     s->settings.bounces = d.bounces;
     s->settings.bands = d.bands;
     s->settings.progressive = d.progressive;
@@ -139,7 +139,8 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
         return 0;
     case LC_REQ_OBJECT_SET: {
         if (state_asset(s->scene, op->object.asset) < 0) {
-            state_err(err, LC_ERR_UNKNOWN_ASSET, batch, i, "/object/asset", "the scene has no asset '%s'", op->object.asset);
+            state_err(err, LC_ERR_UNKNOWN_ASSET, batch, i, "/object/asset", "the scene has no asset '%s'",
+                      op->object.asset);
             return -1;
         }
         if (state_find(s->objects, s->n_objects, sizeof *s->objects, op->object.id) < 0 &&
@@ -161,15 +162,14 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
     case LC_REQ_MATERIAL_SET: {
         long m = state_material(s->scene, op->target);
         if (m < 0) {
-            state_err(err, LC_ERR_UNKNOWN_MATERIAL, batch, i, "/material", "the scene has no material '%s'", op->target);
+            state_err(err, LC_ERR_UNKNOWN_MATERIAL, batch, i, "/material", "the scene has no material '%s'",
+                      op->target);
             return -1;
         }
         memcpy(s->emission[m], op->emission, sizeof s->emission[m]);
         return 0;
     }
-    case LC_REQ_ENVIRONMENT_SET:
-        s->environment = op->environment;
-        return 0;
+    case LC_REQ_ENVIRONMENT_SET: s->environment = op->environment; return 0;
     case LC_REQ_SETTINGS_SET: {
         const lc_proto_settings *n = &op->settings;
         lc_proto_settings next = s->settings;
@@ -181,15 +181,14 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
         if (!(n->present & (1u << LC_SET_CHROMA_BANDS)) && next.chroma_bands > next.bands)
             next.chroma_bands = next.bands; /* follow a band reduction */
         if (next.chroma_bands < 1 || next.chroma_bands > next.bands) {
-            state_err(err, LC_ERR_OUT_OF_RANGE, batch, i, "/settings/chroma_bands", "%s", "chroma_bands must be in 1..bands");
+            state_err(err, LC_ERR_OUT_OF_RANGE, batch, i, "/settings/chroma_bands", "%s",
+                      "chroma_bands must be in 1..bands");
             return -1;
         }
         s->settings = next;
         return 0;
     }
-    default:
-        state_err(err, LC_ERR_INVALID, batch, i, "/type", "%s", "not a change operation");
-        return -1;
+    default: state_err(err, LC_ERR_INVALID, batch, i, "/type", "%s", "not a change operation"); return -1;
     }
 }
 
@@ -322,7 +321,8 @@ int lc_state_restore(lc_state *s, const lc_proto_parsed_state *p, lc_proto_error
     next.n_lights = next.n_objects = 0;
     if (p->n_lights > s->limits.max_lights || p->n_objects > s->limits.max_objects) {
         lc_state_release(&next);
-        state_err(err, LC_ERR_LIMIT_EXCEEDED, 0, 0, "", "%s", "the snapshot holds more lights or objects than the limits");
+        state_err(err, LC_ERR_LIMIT_EXCEEDED, 0, 0, "", "%s",
+                  "the snapshot holds more lights or objects than the limits");
         return -1;
     }
     lc_proto_light *l = realloc(next.lights, ((size_t)p->n_lights + 1) * sizeof *l);

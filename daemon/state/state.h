@@ -24,7 +24,7 @@ typedef struct lc_state {
     uint32_t n_lights;
     lc_proto_object *objects; /* sorted by id */
     uint32_t n_objects;
-    float (*emission)[3];     /* per bake material */
+    float (*emission)[3]; /* per bake material */
     lc_proto_environment environment;
     lc_proto_settings settings; /* every field present */
 } lc_state;

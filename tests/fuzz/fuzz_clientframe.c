@@ -17,7 +17,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     if (!v) return 0;
     while (off + 4 <= size) {
         uint32_t len = (uint32_t)data[off] | (uint32_t)data[off + 1] << 8 | (uint32_t)data[off + 2] << 16 |
-                       (uint32_t)data[off + 3] << 24;
+            (uint32_t)data[off + 3] << 24;
         off += 4;
         if (len > size - off) len = (uint32_t)(size - off);
         /* a private copy so that reads past the frame are caught by ASan */

@@ -27,7 +27,7 @@ static void fuzz_touch(const lc_lcb *f) {
     for (uint32_t i = 0; i < v->n_triangles; i++)
         for (int k = 0; k < 3; k++)
             s += fuzz_bytes(&v->vertices[v->triangles[i].v[k]], sizeof *v->vertices) +
-                 (uint64_t)v->materials[v->triangles[i].material].flags;
+                (uint64_t)v->materials[v->triangles[i].material].flags;
     for (uint32_t i = 0; i < v->n_surfels; i++) {
         const lc_lcb_surfel *su = &v->surfels[i];
         s += v->materials[su->material].flags + fuzz_bytes(su, sizeof *su);

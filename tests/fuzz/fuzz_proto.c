@@ -65,8 +65,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
                 ms[i].name = st.material_names[i];
                 memcpy(ms[i].emission, st.material_emission[i], sizeof ms[i].emission);
             }
-            lc_proto_state s = {st.revision, st.lights, st.n_lights, st.objects, st.n_objects, ms,
-                                st.n_materials, st.environment, st.settings};
+            lc_proto_state s = {st.revision, st.lights,      st.n_lights,    st.objects, st.n_objects,
+                                ms,          st.n_materials, st.environment, st.settings};
             char *out = lc_proto_build_state(NULL, &s);
             lc_proto_parsed_state again;
             if (out && !lc_proto_utf8_valid(out, strlen(out))) abort();

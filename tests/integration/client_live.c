@@ -20,14 +20,14 @@
 #include "lucent_client.h"
 
 static int failures = 0;
-#define EXPECT(cond, ...)                                                  \
-    do {                                                                   \
-        if (!(cond)) {                                                     \
-            failures++;                                                    \
+#define EXPECT(cond, ...)                                                   \
+    do {                                                                    \
+        if (!(cond)) {                                                      \
+            failures++;                                                     \
             fprintf(stderr, "FAIL %s:%d: %s: ", __FILE__, __LINE__, #cond); \
-            fprintf(stderr, __VA_ARGS__);                                  \
-            fputc('\n', stderr);                                           \
-        }                                                                  \
+            fprintf(stderr, __VA_ARGS__);                                   \
+            fputc('\n', stderr);                                            \
+        }                                                                   \
     } while (0)
 
 typedef struct counters {
@@ -128,7 +128,8 @@ static int test_basic(const char *url) {
     EXPECT(reply && strstr(reply, "\"pong\""), "pong reply: %s", reply ? reply : "(null)");
     free(reply);
     reply = NULL;
-    EXPECT(lc_client_request(ctl, "{\"type\":\"light.remove\",\"light_id\":\"nope\"}", &reply, 5000, err, sizeof err) == 1,
+    EXPECT(lc_client_request(ctl, "{\"type\":\"light.remove\",\"light_id\":\"nope\"}", &reply, 5000, err, sizeof err) ==
+               1,
            "unknown id refused");
     EXPECT(reply && strstr(reply, "unknown_id"), "error reply: %s", reply ? reply : "(null)");
     free(reply);
@@ -223,8 +224,10 @@ static int test_basic(const char *url) {
     const float up[3] = {0, 1, 0};
     lc_sh9_irradiance(f.values + 27 * mid, up, e);
     EXPECT(isfinite(e[0]) && e[0] >= 0, "grid irradiance %g", e[0]);
-    EXPECT(lc_client_subscribe(view, LC_CLIENT_OBJECTS, LC_CLIENT_RGBA16F, 0, err, sizeof err) == 0, "objects: %s", err);
-    EXPECT(lc_client_wait_frame(view, LC_CLIENT_OBJECTS, 0, 0, 10000, &f, err, sizeof err) == 0, "objects frame: %s", err);
+    EXPECT(lc_client_subscribe(view, LC_CLIENT_OBJECTS, LC_CLIENT_RGBA16F, 0, err, sizeof err) == 0, "objects: %s",
+           err);
+    EXPECT(lc_client_wait_frame(view, LC_CLIENT_OBJECTS, 0, 0, 10000, &f, err, sizeof err) == 0, "objects frame: %s",
+           err);
     /* unsubscribe stops frames */
     /* unsubscribe returns with its ok: every lightmap frame sent before it has been taken */
     EXPECT(lc_client_unsubscribe(view, LC_CLIENT_LIGHTMAP, err, sizeof err) == 0, "unsubscribe");
@@ -304,8 +307,8 @@ static int test_reconnect(const char *url) {
     for (int i = 0; i < 600 && !(n.reconnecting && n.connected); i++) lc_client_poll(c, 50);
     EXPECT(n.reconnecting >= 1 && n.connected >= 1, "reconnecting %d connected %d", n.reconnecting, n.connected);
     /* the copy was reset at the new welcome: the first frame is the new connection's keyframe */
-    EXPECT(lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, 0, 0, 10000, &f, err, sizeof err) == 0, "frame after reconnect: %s",
-           err);
+    EXPECT(lc_client_wait_frame(c, LC_CLIENT_LIGHTMAP, 0, 0, 10000, &f, err, sizeof err) == 0,
+           "frame after reconnect: %s", err);
     EXPECT(n.after_reconnect > 0 && n.first_key, "first frame after reconnect: keyframe with sequence 1");
     EXPECT(n.frames > frames, "frames after reconnect");
     /* requests work on the new connection */

@@ -337,7 +337,9 @@ async def scenario(state_dir):
 
 async def slow_client_scenario(state_dir):
     """A client that never reads is dropped; the others keep getting the latest frames."""
-    p, port = start(state_dir + "-slow", "--slow-timeout", "2", log_level="warn")
+    # --rate: the updates below go as fast as their frames come back, which can pass the
+    # default 100/s; a rate_limited reply instead of the awaited ok would stall the loop.
+    p, port = start(state_dir + "-slow", "--slow-timeout", "2", "--rate", "100000", log_level="warn")
     try:
         # a tiny receive buffer, and it never reads
         slow = lt.RawWS(port, rcvbuf=4096)

@@ -10,26 +10,26 @@
 static int check_failures = 0;
 static int check_count = 0;
 
-#define CHECK(cond, ...)                                                   \
-    do {                                                                   \
-        check_count++;                                                     \
-        if (!(cond)) {                                                     \
-            check_failures++;                                              \
+#define CHECK(cond, ...)                                                    \
+    do {                                                                    \
+        check_count++;                                                      \
+        if (!(cond)) {                                                      \
+            check_failures++;                                               \
             fprintf(stderr, "FAIL %s:%d: %s: ", __FILE__, __LINE__, #cond); \
-            fprintf(stderr, __VA_ARGS__);                                  \
-            fputc('\n', stderr);                                           \
-        }                                                                  \
+            fprintf(stderr, __VA_ARGS__);                                   \
+            fputc('\n', stderr);                                            \
+        }                                                                   \
     } while (0)
 
 /* |a - b| <= tol * max(1, |b|) */
-#define CHECK_NEAR(a, b, tol)                                                                    \
-    CHECK(fabs((double)(a) - (double)(b)) <= (tol) * fmax(1.0, fabs((double)(b))),               \
-          "%s = %.9g, expected %.9g (tol %g)", #a, (double)(a), (double)(b), (double)(tol))
+#define CHECK_NEAR(a, b, tol)                                                                                         \
+    CHECK(fabs((double)(a) - (double)(b)) <= (tol)*fmax(1.0, fabs((double)(b))), "%s = %.9g, expected %.9g (tol %g)", \
+          #a, (double)(a), (double)(b), (double)(tol))
 
-#define CHECK_DONE()                                                                  \
-    do {                                                                              \
-        fprintf(stderr, "%d checks, %d failed\n", check_count, check_failures);      \
-        return check_failures ? 1 : 0;                                                \
+#define CHECK_DONE()                                                            \
+    do {                                                                        \
+        fprintf(stderr, "%d checks, %d failed\n", check_count, check_failures); \
+        return check_failures ? 1 : 0;                                          \
     } while (0)
 
 #define CHECK_SKIP_RC 77

@@ -76,16 +76,15 @@ static const lc_opt bake_options[] = {
     {"output", LC_OPT_STRING, OFF(output), 1, LC_BAKE_PATH_MAX, NULL, NULL,
      "output bake file (default: input name with .lcb)", "PATH", NULL},
     {"glb", LC_OPT_STRING, OFF(glb), 0, LC_BAKE_PATH_MAX, NULL, NULL,
-     "where to write the scene with lightmap UVs (TEXCOORD_1) as binary glTF for viewers (default: OUT.glb)",
-     "PATH", NULL},
+     "where to write the scene with lightmap UVs (TEXCOORD_1) as binary glTF for viewers (default: OUT.glb)", "PATH",
+     NULL},
     {"write-glb", LC_OPT_BOOL, OFF(write_glb), 0, 1, "true", NULL, "write the .glb (--no-write-glb to skip)", NULL,
      NULL},
     {"quality", LC_OPT_ENUM, OFF(quality), 0, 0, "moderate", "draft|moderate|high|ultra",
      "preset for every parameter below (flags given explicitly win)", NULL, NULL},
-    {"scale", LC_OPT_FLOAT, OFF(scale), 1e-9, 1e6, "1", NULL, "multiply positions (scene units -> metres)", NULL,
+    {"scale", LC_OPT_FLOAT, OFF(scale), 1e-9, 1e6, "1", NULL, "multiply positions (scene units -> metres)", NULL, NULL},
+    {"flip-winding", LC_OPT_BOOL, OFF(flip_winding), 0, 1, "false", NULL, "treat clockwise faces as front faces", NULL,
      NULL},
-    {"flip-winding", LC_OPT_BOOL, OFF(flip_winding), 0, 1, "false", NULL, "treat clockwise faces as front faces",
-     NULL, NULL},
     {"texel-density", LC_OPT_FLOAT, OFF(texel_density), 0, 10000, "0", NULL,
      "lightmap texels per metre (0 = fit --atlas-size)", NULL, NULL},
     {"atlas-size", LC_OPT_INT, OFF(atlas_size), 16, 8192, "128", NULL, "lightmap atlas width and height in texels",
@@ -114,16 +113,16 @@ static const lc_opt bake_options[] = {
      "also store each link's transport projected into --bands SH (LKSH)", NULL, NULL},
     {"grid-cell", LC_OPT_FLOAT, OFF(grid_cell), 0, 1e4, "0", NULL,
      "SH grid spacing in metres (0 = from --grid-max-dim)", NULL, NULL},
-    {"grid-max-dim", LC_OPT_INT, OFF(grid_max_dim), 3, 512, "24", NULL, "SH grid samples along the longest axis",
-     NULL, NULL},
-    {"grid-max-samples", LC_OPT_INT, OFF(grid_max_samples), 8, 4194304, "4096", NULL,
-     "cap on SH grid samples", NULL, NULL},
+    {"grid-max-dim", LC_OPT_INT, OFF(grid_max_dim), 3, 512, "24", NULL, "SH grid samples along the longest axis", NULL,
+     NULL},
+    {"grid-max-samples", LC_OPT_INT, OFF(grid_max_samples), 8, 4194304, "4096", NULL, "cap on SH grid samples", NULL,
+     NULL},
     {"reloc-rays", LC_OPT_INT, OFF(reloc_rays), 4, 1024, "32", NULL,
      "test rays per cache for moving caches out of geometry", NULL, NULL},
     {"reloc-offset", LC_OPT_FLOAT, OFF(reloc_offset), 0, 1, "0.005", NULL,
      "metres past the back face a moved cache ends", NULL, NULL},
-    {"asset", LC_OPT_CALLBACK, 0, 0, 0, NULL, NULL,
-     "bake a dynamic-object asset (repeatable)", "NAME=PATH", bake_add_asset},
+    {"asset", LC_OPT_CALLBACK, 0, 0, 0, NULL, NULL, "bake a dynamic-object asset (repeatable)", "NAME=PATH",
+     bake_add_asset},
     {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "random seed (same seed, same bytes)", NULL, NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", NULL, NULL},
     {"stats-json", LC_OPT_STRING, OFF(stats_json), 0, LC_BAKE_PATH_MAX, NULL, NULL,
@@ -172,8 +171,8 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     s->exposure = p->exposure;
 }
 
-int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, char **positional, int max_pos,
-                       char *err, size_t errlen) {
+int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, char **positional, int max_pos, char *err,
+                       size_t errlen) {
     memset(s, 0, sizeof *s);
     if (lc_opt_defaults(bake_options, s, err, errlen) != 0) return -1;
     /* First pass: only --quality, so the preset sits under every explicit flag. */
@@ -366,7 +365,6 @@ static const char *bake_light_type_name(lc_light_type t) {
     return "point";
 }
 
-
 /* Buried surfels: a surfel whose hemisphere mostly sees back faces lies inside closed
  * geometry (the floor under a column base, faces covered by other faces). No cache can see
  * it and no light reaches it, but in the hierarchy it shares nodes with visible surfels, so
@@ -398,8 +396,9 @@ static void bake_buried_range(void *arg, size_t begin, size_t end, int thread) {
             float z = 1.0f - ((float)j + 0.5f) / (float)R, r = sqrtf(fmaxf(0.0f, 1 - z * z));
             float phi = 2.0f * (float)M_PI * (float)j * 0.6180339887f;
             float dir[3];
-            lc_v3_store(dir, lc_v3_add(lc_v3_add(lc_v3_scale(t, r * cosf(phi)), lc_v3_scale(b, r * sinf(phi))),
-                                       lc_v3_scale(n, z)));
+            lc_v3_store(
+                dir,
+                lc_v3_add(lc_v3_add(lc_v3_scale(t, r * cosf(phi)), lc_v3_scale(b, r * sinf(phi))), lc_v3_scale(n, z)));
             lc_hit h;
             if (lc_rt_intersect(c->rt, org, dir, 0.0f, INFINITY, &h) && h.backface) back++;
         }
@@ -463,8 +462,7 @@ static cJSON *bake_settings_json(const lc_bake_settings *s) {
         const char *field = (const char *)s + opt->offset;
         /* Output paths and run-time knobs do not describe the bake's content. */
         if (!strcmp(opt->name, "output") || !strcmp(opt->name, "glb") || !strcmp(opt->name, "write-glb") ||
-            !strcmp(opt->name, "stats-json") ||
-            !strcmp(opt->name, "threads") || !strcmp(opt->name, "quiet"))
+            !strcmp(opt->name, "stats-json") || !strcmp(opt->name, "threads") || !strcmp(opt->name, "quiet"))
             continue;
         switch (opt->type) {
         case LC_OPT_INT: cJSON_AddNumberToObject(o, opt->name, *(const int *)field); break;
@@ -506,27 +504,27 @@ static cJSON *bake_settings_json(const lc_bake_settings *s) {
  * stage reads what the ones before it left here. bake_job_release frees it all. */
 typedef struct bake_job {
     const lc_bake_settings *s;
-    lc_scene scene;                 /* 1. import */
-    lc_uv_stats uvs;                /* 2. lightmap UVs */
-    lc_rt *rt;                      /* 3. ray tracing structure */
-    lc_lightmap lm;                 /* 4. texel caches ... */
-    lc_lcb_cache *caches;           /* ... then the grid caches after them (5) */
+    lc_scene scene;       /* 1. import */
+    lc_uv_stats uvs;      /* 2. lightmap UVs */
+    lc_rt *rt;            /* 3. ray tracing structure */
+    lc_lightmap lm;       /* 4. texel caches ... */
+    lc_lcb_cache *caches; /* ... then the grid caches after them (5) */
     uint32_t n_caches, n_texel_caches;
-    lc_grid grid;                   /* 5. grid caches */
+    lc_grid grid; /* 5. grid caches */
     uint32_t *cell_cache;
-    lc_relocate_stats rs;           /* 6. relocation */
-    lc_lcb_surfel *surfels;         /* 7. surfels (8 reorders them) */
+    lc_relocate_stats rs;   /* 6. relocation */
+    lc_lcb_surfel *surfels; /* 7. surfels (8 reorders them) */
     uint32_t *surfel_tri, n_surfels;
-    lc_hierarchy hier;              /* 8. hierarchy */
+    lc_hierarchy hier; /* 8. hierarchy */
     uint32_t *perm, *tri_sorted;
-    lc_lcb_link *links;             /* 9. links */
+    lc_lcb_link *links; /* 9. links */
     uint16_t *link_sh;
     uint64_t n_links;
-    uint32_t *seen;                 /* per surfel: caches that see it (--exposure only) */
+    uint32_t *seen; /* per surfel: caches that see it (--exposure only) */
     lc_link_stats ls;
     lc_exposure_stats es;
-    bake_assets assets;             /* 10. dynamic-object assets */
-    lc_lcb_material *mats;          /* 11. the file's sections */
+    bake_assets assets;    /* 10. dynamic-object assets */
+    lc_lcb_material *mats; /* 11. the file's sections */
     lc_lcb_vertex *verts;
     lc_lcb_triangle *tris;
     cJSON *meta;
@@ -660,8 +658,7 @@ static int bake_hierarchy(bake_job *b, char *err, size_t errlen) {
     b->tri_sorted = malloc((size_t)b->n_surfels * sizeof *b->tri_sorted);
     if (!b->tri_sorted) return bake_oom(err, errlen);
     for (uint32_t i = 0; i < b->n_surfels; i++) b->tri_sorted[i] = b->surfel_tri[b->perm[i]];
-    bake_surfel_caches(&b->scene, &b->lm, &b->grid, b->cell_cache, b->caches, b->surfels, b->tri_sorted,
-                       b->n_surfels);
+    bake_surfel_caches(&b->scene, &b->lm, &b->grid, b->cell_cache, b->caches, b->surfels, b->tri_sorted, b->n_surfels);
     return 0;
 }
 
@@ -717,8 +714,9 @@ static int bake_links(bake_job *b, char *err, size_t errlen) {
         return 1;
     }
     if (bake_link_counts(b, err, errlen) != 0) return 1;
-    if (b->seen && lc_exposure_apply(b->seen, b->surfels, b->n_surfels, &b->hier, b->links, b->n_links, b->link_sh,
-                                     b->link_sh ? (uint32_t)(s->bands * s->bands) : 0, &b->es) != 0) {
+    if (b->seen &&
+        lc_exposure_apply(b->seen, b->surfels, b->n_surfels, &b->hier, b->links, b->n_links, b->link_sh,
+                          b->link_sh ? (uint32_t)(s->bands * s->bands) : 0, &b->es) != 0) {
         lc_set_err(err, errlen, "exposure: no cache sees any surfel (or out of memory); bake with --exposure false");
         return 1;
     }
@@ -898,10 +896,17 @@ static const struct {
     const char *name;
     int (*run)(bake_job *b, char *err, size_t errlen);
 } bake_stages[] = {
-    {"import", bake_import_scene},  {"lightmap-uv", bake_lightmap_uv}, {"bvh", bake_bvh},
-    {"texels", bake_texel_caches},  {"grid", bake_grid_caches},        {"relocate", bake_relocate},
-    {"surfels", bake_surfels},      {"hierarchy", bake_hierarchy},     {"links", bake_links},
-    {"assets", bake_dynamic_assets}, {"write", bake_write},
+    {"import", bake_import_scene},
+    {"lightmap-uv", bake_lightmap_uv},
+    {"bvh", bake_bvh},
+    {"texels", bake_texel_caches},
+    {"grid", bake_grid_caches},
+    {"relocate", bake_relocate},
+    {"surfels", bake_surfels},
+    {"hierarchy", bake_hierarchy},
+    {"links", bake_links},
+    {"assets", bake_dynamic_assets},
+    {"write", bake_write},
 };
 _Static_assert(sizeof bake_stages / sizeof bake_stages[0] == BAKE_N_STAGES, "BAKE_N_STAGES counts the stages");
 

@@ -59,8 +59,8 @@ typedef struct lc_bake_settings {
 const lc_opt *lc_bake_options(void);
 /* Defaults, then the preset named by --quality (found in argv), then the flags.
  * Returns the number of positional arguments or -1 with err set. */
-int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, char **positional, int max_pos,
-                       char *err, size_t errlen);
+int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, char **positional, int max_pos, char *err,
+                       size_t errlen);
 /* Applies the preset's values (every field a preset controls). */
 void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q);
 

@@ -22,8 +22,8 @@
 #define LC_EXPOSURE_FLOOR 0.01
 
 typedef struct lc_exposure_stats {
-    uint32_t unseen;         /* surfels no cache sees */
-    double unseen_area;      /* their geometric area, m^2 */
+    uint32_t unseen;    /* surfels no cache sees */
+    double unseen_area; /* their geometric area, m^2 */
 } lc_exposure_stats;
 
 /* seen: n_surfels counts (lc_link_params.surfel_seen). Rewrites surfels[].area, the

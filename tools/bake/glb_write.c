@@ -12,9 +12,9 @@
 #include "util/fsutil.h"
 #include "util/log.h"
 
-#define GLB_MAGIC 0x46546C67u      /* "glTF" */
-#define GLB_CHUNK_JSON 0x4E4F534Au /* "JSON" */
-#define GLB_CHUNK_BIN 0x004E4942u  /* "BIN\0" */
+#define GLB_MAGIC 0x46546C67u       /* "glTF" */
+#define GLB_CHUNK_JSON 0x4E4F534Au  /* "JSON" */
+#define GLB_CHUNK_BIN 0x004E4942u   /* "BIN\0" */
 #define GLB_MAX_BYTES 0xFFFFFF00ull /* the header's length field is 32-bit */
 
 #define GL_FLOAT 5126
@@ -50,8 +50,8 @@ static void put_f32(unsigned char *p, float f) {
 }
 
 /* Adds an accessor (with its own bufferView) over bytes [off, off+len) of the BIN chunk. */
-static int add_accessor(cJSON *views, cJSON *accessors, size_t off, size_t len, int target, int ctype,
-                        uint32_t count, const char *type) {
+static int add_accessor(cJSON *views, cJSON *accessors, size_t off, size_t len, int target, int ctype, uint32_t count,
+                        const char *type) {
     cJSON *v = cJSON_CreateObject();
     if (!v) return -1;
     cJSON_AddItemToArray(views, v);
@@ -224,8 +224,8 @@ static cJSON *write_primitive(const lc_scene *scene, uint32_t mi, uint32_t ntri,
     }
     acc = add_accessor(views, accessors, off, bin->len - off, GL_ELEMENT_ARRAY_BUFFER, GL_UNSIGNED_INT, ntri * 3,
                        "SCALAR");
-    if (acc < 0 || !cJSON_AddNumberToObject(prim, "indices", acc) ||
-        !cJSON_AddNumberToObject(prim, "material", mi) || !cJSON_AddNumberToObject(prim, "mode", 4))
+    if (acc < 0 || !cJSON_AddNumberToObject(prim, "indices", acc) || !cJSON_AddNumberToObject(prim, "material", mi) ||
+        !cJSON_AddNumberToObject(prim, "mode", 4))
         goto err;
     free(inv);
     return prim;

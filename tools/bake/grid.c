@@ -29,8 +29,7 @@ int lc_grid_layout(const float bmin[3], const float bmax[3], double cell, uint32
     double ext[3], emax = 0;
     for (int i = 0; i < 3; i++) {
         if (!isfinite(bmin[i]) || !isfinite(bmax[i]) || bmax[i] < bmin[i]) {
-            lc_set_err(err, errlen, "grid: invalid bounds (axis %d: %g .. %g)", i, (double)bmin[i],
-                       (double)bmax[i]);
+            lc_set_err(err, errlen, "grid: invalid bounds (axis %d: %g .. %g)", i, (double)bmin[i], (double)bmax[i]);
             return -1;
         }
         ext[i] = (double)bmax[i] - (double)bmin[i];
@@ -71,8 +70,8 @@ int lc_grid_layout(const float bmin[3], const float bmax[3], double cell, uint32
     return 0;
 }
 
-int lc_grid_place(const lc_grid *grid, lc_lcb_cache **caches, uint32_t *n_caches, uint32_t **cell_cache,
-                  char *err, size_t errlen) {
+int lc_grid_place(const lc_grid *grid, lc_lcb_cache **caches, uint32_t *n_caches, uint32_t **cell_cache, char *err,
+                  size_t errlen) {
     uint64_t total = (uint64_t)grid->dims[0] * grid->dims[1] * grid->dims[2];
     uint32_t *map = NULL;
     if (total == 0 || (uint64_t)*n_caches + total >= LC_NONE) {

@@ -21,7 +21,7 @@ int lc_grid_layout(const float bmin[3], const float bmax[3], double cell, uint32
 
 /* Appends one grid cache per sample to *caches (realloc'd) and fills cell_cache
  * (malloc'd, dims product entries) with their indices. */
-int lc_grid_place(const lc_grid *grid, lc_lcb_cache **caches, uint32_t *n_caches, uint32_t **cell_cache,
-                  char *err, size_t errlen);
+int lc_grid_place(const lc_grid *grid, lc_lcb_cache **caches, uint32_t *n_caches, uint32_t **cell_cache, char *err,
+                  size_t errlen);
 
 #endif

@@ -40,7 +40,7 @@
  * "Decisions"). Material boundaries in general (not only emitters) cost Sponza 1.4-5
  * points of mean error and are not used. */
 #define HIER_CE 1.0
-#define HIER_MIXED UINT32_MAX         /* cluster of several classes */
+#define HIER_MIXED UINT32_MAX /* cluster of several classes */
 #define HIER_NONEMISSIVE (UINT32_MAX - 1)
 #define HIER_AAC_DELTA 20u
 #define HIER_AAC_EPS 0.1
@@ -51,15 +51,15 @@
 #define HIER_EXACT_BIG 1024u
 
 typedef struct {
-    uint32_t n;             /* leaves */
-    uint32_t *child;        /* 2 per internal node, indexed by 2 * (id - n) */
-    uint32_t *leaf_surfel;  /* leaf id -> original surfel index */
-    double *cen, *nrm;      /* 3 per node id: area-weighted centroid and mean normal */
-    double *area;           /* per node id */
-    uint32_t *cls;          /* per node id: emission class of every surfel below, or HIER_MIXED */
-    double ce;              /* emission term weight (0: the plain PIC metric) */
-    double inv_extent2;     /* 1 / (largest bounding-box side)^2 */
-    int threads;            /* parallel-for workers (0 = all cores), the caller's setting */
+    uint32_t n;            /* leaves */
+    uint32_t *child;       /* 2 per internal node, indexed by 2 * (id - n) */
+    uint32_t *leaf_surfel; /* leaf id -> original surfel index */
+    double *cen, *nrm;     /* 3 per node id: area-weighted centroid and mean normal */
+    double *area;          /* per node id */
+    uint32_t *cls;         /* per node id: emission class of every surfel below, or HIER_MIXED */
+    double ce;             /* emission term weight (0: the plain PIC metric) */
+    double inv_extent2;    /* 1 / (largest bounding-box side)^2 */
+    int threads;           /* parallel-for workers (0 = all cores), the caller's setting */
 } hier_tree;
 
 static int hier_is_leaf(const hier_tree *t, uint32_t id) { return id < t->n; }
@@ -88,8 +88,8 @@ static void hier_merge_attr(hier_tree *t, uint32_t id, uint32_t a, uint32_t b) {
 }
 
 /* The PIC metric on raw cluster data (shared by the build and the quality measure). */
-static double hier_metric(const double xa[3], const double na[3], double aa, const double xb[3],
-                          const double nb[3], double ab, double inv_extent2) {
+static double hier_metric(const double xa[3], const double na[3], double aa, const double xb[3], const double nb[3],
+                          double ab, double inv_extent2) {
     double dx = xa[0] - xb[0], dy = xa[1] - xb[1], dz = xa[2] - xb[2];
     double la = sqrt(na[0] * na[0] + na[1] * na[1] + na[2] * na[2]);
     double lb = sqrt(nb[0] * nb[0] + nb[1] * nb[1] + nb[2] * nb[2]);
@@ -111,7 +111,7 @@ static double hier_dist(const hier_tree *t, uint32_t a, uint32_t b) {
 typedef struct {
     const lc_lcb_surfel *s; /* reordered */
     lc_lcb_node *nodes;
-    const uint32_t *skip;   /* nonzero: radius done later from the children */
+    const uint32_t *skip; /* nonzero: radius done later from the children */
 } hier_radius_ctx;
 
 static float hier_round_up(double r) {
@@ -268,8 +268,8 @@ static int hier_radii(const hier_tree *t, const lc_lcb_surfel *surfels, lc_lcb_n
 
 /* The finished hierarchy from the built tree: surfels reordered so each node covers a
  * contiguous range (perm: new position -> old index), nodes in BFS order with their levels. */
-static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_hierarchy *out,
-                       uint32_t **perm_out, char *err, size_t errlen) {
+static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_hierarchy *out, uint32_t **perm_out,
+                       char *err, size_t errlen) {
     uint32_t n = t->n, total = 2 * n - 1;
     uint32_t *pre = NULL, *stack = NULL, *first = NULL, *count = NULL, *order = NULL, *out_index = NULL;
     uint32_t *perm = NULL, *levels = NULL;
@@ -304,10 +304,8 @@ static int hier_finish(hier_tree *t, uint32_t root, lc_lcb_surfel *surfels, lc_h
     out->n_nodes = total;
     out->levels = levels;
     out->n_levels = n_levels;
-    if (perm_out)
-        *perm_out = perm;
-    else
-        free(perm);
+    if (perm_out) *perm_out = perm;
+    else free(perm);
     nodes = NULL, levels = NULL, perm = NULL;
     rc = 0;
 err:
@@ -329,8 +327,8 @@ err:
 typedef struct {
     hier_tree *t;
     const lc_lcb_surfel *s;
-    uint32_t *idx;  /* surfel indices; ends as the leaf order */
-    uint32_t next;  /* next internal id */
+    uint32_t *idx; /* surfel indices; ends as the leaf order */
+    uint32_t next; /* next internal id */
 } hier_kd;
 
 static int hier_kd_less(const lc_lcb_surfel *s, int axis, uint32_t a, uint32_t b) {
@@ -346,8 +344,7 @@ static void hier_kd_select(const lc_lcb_surfel *s, int axis, uint32_t *idx, uint
         uint32_t piv_pos;
         if (hier_kd_less(s, axis, a, b))
             piv_pos = hier_kd_less(s, axis, b, c) ? mid : (hier_kd_less(s, axis, a, c) ? hi - 1 : lo);
-        else
-            piv_pos = hier_kd_less(s, axis, a, c) ? lo : (hier_kd_less(s, axis, b, c) ? hi - 1 : mid);
+        else piv_pos = hier_kd_less(s, axis, a, c) ? lo : (hier_kd_less(s, axis, b, c) ? hi - 1 : mid);
         uint32_t pivot = idx[piv_pos], t;
         idx[piv_pos] = idx[hi - 1];
         idx[hi - 1] = pivot;
@@ -362,10 +359,8 @@ static void hier_kd_select(const lc_lcb_surfel *s, int axis, uint32_t *idx, uint
         idx[hi - 1] = idx[store];
         idx[store] = pivot;
         if (k == store) return;
-        if (k < store)
-            hi = store;
-        else
-            lo = store + 1;
+        if (k < store) hi = store;
+        else lo = store + 1;
     }
 }
 
@@ -395,23 +390,23 @@ static uint32_t hier_kd_build(hier_kd *kd, uint32_t lo, uint32_t hi) {
 /* --- AAC ---------------------------------------------------------------------------------- */
 
 typedef struct {
-    double *d;          /* k x k distance matrix */
+    double *d; /* k x k distance matrix */
     double *dmin;
     uint32_t *closest;
     uint8_t *need;
-    size_t cap;         /* clusters */
+    size_t cap; /* clusters */
     int failed;
 } hier_scratch;
 
 typedef struct {
     hier_tree *t;
-    const uint64_t *keys;  /* sorted: morton << 32 | surfel index */
-    uint32_t *clus;        /* cluster slots; a range [lo, hi) keeps its clusters at [lo, lo + k) */
-    uint32_t *rep;         /* per node id: smallest leaf id below */
-    double fc;             /* f(x) = fc * x^(0.5 - eps) */
+    const uint64_t *keys; /* sorted: morton << 32 | surfel index */
+    uint32_t *clus;       /* cluster slots; a range [lo, hi) keeps its clusters at [lo, lo + k) */
+    uint32_t *rep;        /* per node id: smallest leaf id below */
+    double fc;            /* f(x) = fc * x^(0.5 - eps) */
     uint32_t task_max;
-    uint32_t *task;        /* 3 per task: lo, hi, bit */
-    uint32_t *task_k;      /* clusters each task left */
+    uint32_t *task;   /* 3 per task: lo, hi, bit */
+    uint32_t *task_k; /* clusters each task left */
     uint32_t n_tasks, next_task;
     hier_scratch *scratch;
 } hier_aac;
@@ -525,10 +520,8 @@ static uint32_t hier_aac_split(const uint64_t *keys, uint32_t lo, uint32_t hi, i
         uint32_t l = lo, h = hi - 1; /* keys[l] lacks the bit, keys[h] has it */
         while (h - l > 1) {
             uint32_t m = l + (h - l) / 2;
-            if (keys[m] & mask)
-                h = m;
-            else
-                l = m;
+            if (keys[m] & mask) h = m;
+            else l = m;
         }
         return h;
     }
@@ -597,8 +590,8 @@ static int hier_key_cmp(const void *a, const void *b) {
     return x < y ? -1 : x > y;
 }
 
-static int hier_aac_tree(hier_tree *t, const lc_lcb_surfel *s, const float bmin[3], const float bmax[3],
-                         uint32_t *root, char *err, size_t errlen) {
+static int hier_aac_tree(hier_tree *t, const lc_lcb_surfel *s, const float bmin[3], const float bmax[3], uint32_t *root,
+                         char *err, size_t errlen) {
     uint32_t n = t->n, total = 2 * n - 1;
     int threads = lc_parallel_threads(t->threads), rc = -1;
     hier_aac ac = {.t = t};

@@ -15,7 +15,7 @@ typedef enum { LC_HIERARCHY_AAC = 0, LC_HIERARCHY_KDTREE = 1 } lc_hierarchy_meth
 typedef struct lc_hierarchy {
     lc_lcb_node *nodes; /* 2n - 1 nodes, BFS order, node 0 = root */
     uint32_t n_nodes;
-    uint32_t *levels;   /* n_levels + 1 offsets into nodes */
+    uint32_t *levels; /* n_levels + 1 offsets into nodes */
     uint32_t n_levels;
 } lc_hierarchy;
 

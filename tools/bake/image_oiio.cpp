@@ -37,10 +37,10 @@ std::string one_line(std::string s) {
     return s.empty() ? std::string("unknown OpenImageIO error") : s;
 }
 
-}  // namespace
+} // namespace
 
-extern "C" int lc_image_read_rgb(const char *path, uint64_t max_pixels, uint32_t *width,
-                                 uint32_t *height, float **pixels, char *err, size_t errlen) {
+extern "C" int lc_image_read_rgb(const char *path, uint64_t max_pixels, uint32_t *width, uint32_t *height,
+                                 float **pixels, char *err, size_t errlen) {
     if (pixels) *pixels = nullptr;
     if (!path || !width || !height || !pixels) {
         set_err(err, errlen, "image read: missing argument");
@@ -59,9 +59,9 @@ extern "C" int lc_image_read_rgb(const char *path, uint64_t max_pixels, uint32_t
         }
         uint64_t w = (uint64_t)spec.width, h = (uint64_t)spec.height, nch = (uint64_t)spec.nchannels;
         if (w * h > max_pixels) {
-            set_err(err, errlen, std::string(path) + ": image is " + std::to_string(w) + "x" + std::to_string(h) +
-                                     ", larger than the " + std::to_string(max_pixels) +
-                                     "-pixel limit; downsize the texture");
+            set_err(err, errlen,
+                    std::string(path) + ": image is " + std::to_string(w) + "x" + std::to_string(h) +
+                        ", larger than the " + std::to_string(max_pixels) + "-pixel limit; downsize the texture");
             return -1;
         }
         if (nch > 64) {
@@ -76,8 +76,9 @@ extern "C" int lc_image_read_rgb(const char *path, uint64_t max_pixels, uint32_t
         in->close();
         float *out = (float *)std::malloc((size_t)(w * h * 3) * sizeof(float));
         if (!out) {
-            set_err(err, errlen, std::string(path) + ": out of memory for " + std::to_string(w) + "x" +
-                                     std::to_string(h) + " pixels");
+            set_err(err, errlen,
+                    std::string(path) + ": out of memory for " + std::to_string(w) + "x" + std::to_string(h) +
+                        " pixels");
             return -1;
         }
         for (uint64_t i = 0; i < w * h; i++) {
@@ -107,8 +108,9 @@ int image_write(const char *path, uint32_t width, uint32_t height, int nch, cons
                 char *err, size_t errlen) {
     if (!path || !pixels || width == 0 || height == 0 || nch < 1 || nch > 4 || width > (1u << 20) ||
         height > (1u << 20)) {
-        set_err(err, errlen, std::string("image write ") + (path ? path : "(null)") +
-                                 ": invalid arguments (need 1..4 channels, non-empty size)");
+        set_err(err, errlen,
+                std::string("image write ") + (path ? path : "(null)") +
+                    ": invalid arguments (need 1..4 channels, non-empty size)");
         return -1;
     }
     try {
@@ -119,10 +121,8 @@ int image_write(const char *path, uint32_t width, uint32_t height, int nch, cons
             return -1;
         }
         OIIO::TypeDesc fmt = OIIO::TypeDesc::UINT8;
-        if (ext == "exr")
-            fmt = exr_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::HALF;
-        else if (ext == "hdr" || ext == "tif" || ext == "tiff" || ext == "pfm")
-            fmt = OIIO::TypeDesc::FLOAT;
+        if (ext == "exr") fmt = exr_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::HALF;
+        else if (ext == "hdr" || ext == "tif" || ext == "tiff" || ext == "pfm") fmt = OIIO::TypeDesc::FLOAT;
         OIIO::ImageSpec spec((int)width, (int)height, nch, fmt);
         if (ext == "exr") spec.attribute("compression", "zip");
         if (!out->open(path, spec)) {
@@ -149,14 +149,14 @@ int image_write(const char *path, uint32_t width, uint32_t height, int nch, cons
     return -1;
 }
 
-}  // namespace
+} // namespace
 
-extern "C" int lc_image_write(const char *path, uint32_t width, uint32_t height, int nch,
-                              const float *pixels, char *err, size_t errlen) {
+extern "C" int lc_image_write(const char *path, uint32_t width, uint32_t height, int nch, const float *pixels,
+                              char *err, size_t errlen) {
     return image_write(path, width, height, nch, pixels, false, err, errlen);
 }
 
-extern "C" int lc_image_write_float(const char *path, uint32_t width, uint32_t height, int nch,
-                                    const float *pixels, char *err, size_t errlen) {
+extern "C" int lc_image_write_float(const char *path, uint32_t width, uint32_t height, int nch, const float *pixels,
+                                    char *err, size_t errlen) {
     return image_write(path, width, height, nch, pixels, true, err, errlen);
 }

@@ -25,11 +25,11 @@
 #include "util/utf8.h"
 
 #define IMPORT_MAX_TEX_PIXELS (8192ull * 8192ull) /* larger textures are rejected with a warning */
-#define IMPORT_MAX_DEPTH 512                       /* node nesting; deeper means a broken file */
+#define IMPORT_MAX_DEPTH 512                      /* node nesting; deeper means a broken file */
 #define IMPORT_MAX_VERTICES (1u << 30)
 #define IMPORT_MAX_TRIANGLES (1u << 30)
-#define IMPORT_MIN_AREA 1e-12                      /* m^2, after scaling */
-#define IMPORT_MAX_GLTF_JSON (256u << 20)          /* .gltf (may embed base64 buffers) / .glb JSON chunk */
+#define IMPORT_MIN_AREA 1e-12             /* m^2, after scaling */
+#define IMPORT_MAX_GLTF_JSON (256u << 20) /* .gltf (may embed base64 buffers) / .glb JSON chunk */
 #define IMPORT_PATH_MAX 512
 
 /* Row-major 4x4 like aiMatrix4x4 (a1..a4 is the first row; translation in column 4). */
@@ -74,7 +74,7 @@ static void mat_dir(const imp_mat4 *a, double x, double y, double z, double out[
 static double mat_det3(const imp_mat4 *a) {
     const double(*m)[4] = a->m;
     return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
-           m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+        m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
 }
 
 /* Inverse transpose of the upper 3x3 up to a positive factor (cofactor matrix times sign(det)):
@@ -121,8 +121,10 @@ static void copy_scene_name(char *dst, size_t dstlen, const char *src, const cha
         else o += (size_t)snprintf(raw + o, 5, "\\x%02x", ch);
     }
     raw[o] = 0;
-    lc_warn("import", "%s: %s %u name \"%s\" is not valid UTF-8 (another encoding?); bad bytes replaced with "
-                      "U+FFFD: '%s'", model, what, index, raw, dst);
+    lc_warn("import",
+            "%s: %s %u name \"%s\" is not valid UTF-8 (another encoding?); bad bytes replaced with "
+            "U+FFFD: '%s'",
+            model, what, index, raw, dst);
 }
 
 static const char *path_ext(const char *path) {
@@ -326,8 +328,7 @@ static int fix_normals(imp_geo *g) {
                         *c = g->pos + 3 * (size_t)ix[2];
             double e1[3] = {(double)b[0] - a[0], (double)b[1] - a[1], (double)b[2] - a[2]};
             double e2[3] = {(double)c[0] - a[0], (double)c[1] - a[1], (double)c[2] - a[2]};
-            double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                           e1[0] * e2[1] - e1[1] * e2[0]};
+            double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
             double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
             for (int k = 0; k < 3; k++) {
                 float *vn = g->nrm + 3 * (size_t)ix[k];
@@ -469,10 +470,8 @@ static int load_texture_embedded(const struct aiTexture *t, lc_texture *tex, cha
     }
     close(fd);
     int rc = -1;
-    if (off != len)
-        lc_set_err(msg, msglen, "cannot write the embedded texture to %s", tmp);
-    else
-        rc = load_texture_file(tmp, tex, msg, msglen);
+    if (off != len) lc_set_err(msg, msglen, "cannot write the embedded texture to %s", tmp);
+    else rc = load_texture_file(tmp, tex, msg, msglen);
     unlink(tmp);
     return rc;
 }
@@ -502,7 +501,8 @@ static int32_t texture_for(imp_tex_ctx *tc, const char *raw, const char *matname
         char *end = NULL;
         emb_index = strtol(rel + 1, &end, 10);
         if (!end || *end || emb_index < 0 || (unsigned long)emb_index >= tc->ai->mNumTextures) {
-            lc_warn("import", "%s: material '%s' names embedded texture '%s', which the file lacks; using the base colour factor",
+            lc_warn("import",
+                    "%s: material '%s' names embedded texture '%s', which the file lacks; using the base colour factor",
                     tc->model, matname, rel);
             return -1;
         }
@@ -521,8 +521,10 @@ static int32_t texture_for(imp_tex_ctx *tc, const char *raw, const char *matname
             snprintf(key, sizeof key, "%s", rel);
             for (uint32_t i = 0; i < tc->n_keys; i++)
                 if (!strcmp(tc->keys[i].key, key)) return tc->keys[i].index;
-            lc_warn("import", "%s: texture '%s' of material '%s' not found (also tried case-insensitively under %s); using the base colour factor",
-                    tc->model, rel, matname, tc->dir);
+            lc_warn(
+                "import",
+                "%s: texture '%s' of material '%s' not found (also tried case-insensitively under %s); using the base colour factor",
+                tc->model, rel, matname, tc->dir);
             goto remember_fail;
         }
     }
@@ -561,7 +563,7 @@ static int32_t texture_for(imp_tex_ctx *tc, const char *raw, const char *matname
         }
         return index;
     }
-remember_fail: {
+remember_fail : {
     /* remembered so a texture shared by many materials warns once */
     imp_tex_key *k = realloc(tc->keys, ((size_t)tc->n_keys + 1) * sizeof *k);
     if (k) {
@@ -695,7 +697,8 @@ static void convert_material(imp_tex_ctx *tc, const struct aiMaterial *am, uint3
     if (aiGetMaterialColor(am, AI_MATKEY_COLOR_EMISSIVE, &c) == AI_SUCCESS) {
         float strength = gltf_strength, fi = 0;
         unsigned int one = 1;
-        if (aiGetMaterialFloatArray(am, AI_MATKEY_EMISSIVE_INTENSITY, &fi, &one) == AI_SUCCESS && isfinite(fi) && fi >= 0)
+        if (aiGetMaterialFloatArray(am, AI_MATKEY_EMISSIVE_INTENSITY, &fi, &one) == AI_SUCCESS && isfinite(fi) &&
+            fi >= 0)
             strength = fi; /* a newer Assimp reads the extension itself */
         float v[3] = {c.r, c.g, c.b};
         for (int k = 0; k < 3; k++) m->emission[k] = (isfinite(v[k]) && v[k] > 0) ? v[k] * strength : 0.0f;
@@ -716,8 +719,8 @@ static void convert_material(imp_tex_ctx *tc, const struct aiMaterial *am, uint3
 
 /* ---- lights ------------------------------------------------------------------------------ */
 
-static const struct aiNode *find_node(const struct aiNode *node, const char *name, const imp_mat4 *parent,
-                                      int depth, imp_mat4 *world_out) {
+static const struct aiNode *find_node(const struct aiNode *node, const char *name, const imp_mat4 *parent, int depth,
+                                      imp_mat4 *world_out) {
     if (!node || depth > IMPORT_MAX_DEPTH) return NULL;
     imp_mat4 local = mat_from_ai(&node->mTransformation);
     imp_mat4 world = mat_mul(parent, &local);
@@ -726,7 +729,8 @@ static const struct aiNode *find_node(const struct aiNode *node, const char *nam
         return node;
     }
     for (uint32_t i = 0; i < node->mNumChildren; i++) {
-        const struct aiNode *r = node->mChildren ? find_node(node->mChildren[i], name, &world, depth + 1, world_out) : NULL;
+        const struct aiNode *r =
+            node->mChildren ? find_node(node->mChildren[i], name, &world, depth + 1, world_out) : NULL;
         if (r) return r;
     }
     return NULL;
@@ -737,9 +741,9 @@ static float node_light_range(const struct aiNode *node) {
     if (!md || !md->mKeys || !md->mValues) return 0.0f;
     for (uint32_t i = 0; i < md->mNumProperties; i++) {
         if (strcmp(md->mKeys[i].data, "PBR_LightRange") || !md->mValues[i].mData) continue;
-        double r = md->mValues[i].mType == AI_FLOAT    ? *(const float *)md->mValues[i].mData
-                   : md->mValues[i].mType == AI_DOUBLE ? *(const double *)md->mValues[i].mData
-                                                        : 0.0;
+        double r = md->mValues[i].mType == AI_FLOAT ? *(const float *)md->mValues[i].mData
+            : md->mValues[i].mType == AI_DOUBLE     ? *(const double *)md->mValues[i].mData
+                                                    : 0.0;
         return (isfinite(r) && r > 0) ? (float)r : 0.0f;
     }
     return 0.0f;
@@ -770,7 +774,8 @@ static int convert_lights(const struct aiScene *ai, const char *path, double sca
         copy_scene_name(l->name, sizeof l->name, al->mName.data, path, "light", i);
         imp_mat4 id = mat_identity(), world = id;
         const struct aiNode *node = find_node(ai->mRootNode, al->mName.data, &id, 0, &world);
-        if (!node) lc_warn("import", "%s: light '%s' has no node of that name; placed at the origin", path, al->mName.data);
+        if (!node)
+            lc_warn("import", "%s: light '%s' has no node of that name; placed at the origin", path, al->mName.data);
         double p[3], d[3];
         mat_point(&world, al->mPosition.x, al->mPosition.y, al->mPosition.z, p);
         double lx = al->mDirection.x, ly = al->mDirection.y, lz = al->mDirection.z;
@@ -815,15 +820,16 @@ static int convert_lights(const struct aiScene *ai, const char *path, double sca
  * non-empty regular file. Sets *is_gltf / *is_glb. -1 with err. */
 static int imp_check_input(const char *path, double scale, int *is_gltf, int *is_glb, char *err, size_t errlen) {
     if (!isfinite(scale) || !(scale > 0)) {
-        lc_set_err(err, errlen, "%s: scale %g is invalid; give a finite scale > 0 (e.g. 0.003 for millimetre-ish units)",
-                   path, scale);
+        lc_set_err(err, errlen,
+                   "%s: scale %g is invalid; give a finite scale > 0 (e.g. 0.003 for millimetre-ish units)", path,
+                   scale);
         return -1;
     }
     const char *ext = path_ext(path);
     *is_gltf = !strcasecmp(ext, "gltf"), *is_glb = !strcasecmp(ext, "glb");
     if (!*is_gltf && !*is_glb && strcasecmp(ext, "obj") && strcasecmp(ext, "ply")) {
-        lc_set_err(err, errlen, "%s: unsupported format '.%s'; convert it to glTF 2.0 (.gltf/.glb), OBJ or PLY",
-                   path, ext);
+        lc_set_err(err, errlen, "%s: unsupported format '.%s'; convert it to glTF 2.0 (.gltf/.glb), OBJ or PLY", path,
+                   ext);
         return -1;
     }
     struct stat st;
@@ -884,15 +890,12 @@ static int imp_materials(const struct aiScene *ai, const char *path, int is_gltf
     }
     tc->ai = ai, tc->model = path, tc->s = s;
     const char *slash = strrchr(path, '/');
-    if (!slash)
-        snprintf(tc->dir, sizeof tc->dir, ".");
-    else if (slash == path)
-        snprintf(tc->dir, sizeof tc->dir, "/");
+    if (!slash) snprintf(tc->dir, sizeof tc->dir, ".");
+    else if (slash == path) snprintf(tc->dir, sizeof tc->dir, "/");
     else if ((size_t)(slash - path) >= sizeof tc->dir) {
         lc_set_err(err, errlen, "%s: directory path longer than %d bytes", path, IMPORT_PATH_MAX - 1);
         return -1;
-    } else
-        snprintf(tc->dir, sizeof tc->dir, "%.*s", (int)(slash - path), path);
+    } else snprintf(tc->dir, sizeof tc->dir, "%.*s", (int)(slash - path), path);
     uint32_t n_strengths = 0;
     imp_gltf_strength *strengths = is_gltf || is_glb ? gltf_emissive_strengths(path, is_glb, &n_strengths) : NULL;
     for (uint32_t i = 0; i < s->n_materials; i++) {
@@ -937,8 +940,10 @@ static int imp_geometry(const struct aiScene *ai, const char *path, double scale
     if (walk_nodes(&g, ai->mRootNode, &id, 0, err, errlen) < 0) goto err;
     uint32_t dropped = 0;
     if (compact_mesh(&g, &dropped) == 0) {
-        lc_set_err(err, errlen, "%s: no triangles left after dropping %u degenerate or non-finite ones; check the geometry and the scale",
-                   path, dropped);
+        lc_set_err(
+            err, errlen,
+            "%s: no triangles left after dropping %u degenerate or non-finite ones; check the geometry and the scale",
+            path, dropped);
         goto err;
     }
     if (dropped) lc_info("import", "%s: dropped %u degenerate or non-finite triangles", path, dropped);

@@ -56,12 +56,12 @@ double lc_links_surfel_solid_angle(const lc_lcb_surfel *s, const float p[3], con
 /* --- per-cache estimation ------------------------------------------------------------------ */
 
 typedef struct {
-    double omega;   /* estimated visible solid angle */
-    double unocc;   /* the same without visibility */
-    double m[3];    /* sum of w * h1 * dir over visible samples */
-    double wsum;    /* sum of visible w (unscaled) */
-    double w2sum;   /* sum of visible w^2 (unscaled): the spread of w over the samples */
-    uint32_t n;     /* samples taken (occluded and back-facing ones count with w = 0) */
+    double omega; /* estimated visible solid angle */
+    double unocc; /* the same without visibility */
+    double m[3];  /* sum of w * h1 * dir over visible samples */
+    double wsum;  /* sum of visible w (unscaled) */
+    double w2sum; /* sum of visible w^2 (unscaled): the spread of w over the samples */
+    uint32_t n;   /* samples taken (occluded and back-facing ones count with w = 0) */
 } links_est;
 
 typedef struct {
@@ -74,10 +74,10 @@ typedef struct {
  * to their nearest surfel. */
 typedef struct {
     float origin[3], inv_cell;
-    uint32_t mask;       /* table size - 1 */
-    uint64_t *keys;      /* cell key + 1 (0 = empty slot) */
+    uint32_t mask;  /* table size - 1 */
+    uint64_t *keys; /* cell key + 1 (0 = empty slot) */
     uint32_t *start, *count;
-    uint32_t *items;     /* surfel indices grouped by cell */
+    uint32_t *items; /* surfel indices grouped by cell */
 } links_hash;
 
 typedef struct {
@@ -88,7 +88,7 @@ typedef struct {
 typedef struct {
     links_item *heap; /* refinable (internal) nodes of the cut */
     uint32_t n_heap;
-    links_hit *hits;  /* this cache's probe hits, sorted by surfel */
+    links_hit *hits; /* this cache's probe hits, sorted by surfel */
     uint32_t n_hits;
     double *cum;      /* prefix sums of hit directions: 3 * (n_hits + 1) */
     double ray_omega; /* solid angle per probe ray */
@@ -126,7 +126,7 @@ typedef struct {
 
 static inline uint64_t links_cell_key(int32_t x, int32_t y, int32_t z) {
     return ((uint64_t)(uint32_t)(x + (1 << 20)) & 0x1FFFFF) | (((uint64_t)(uint32_t)(y + (1 << 20)) & 0x1FFFFF) << 21) |
-           (((uint64_t)(uint32_t)(z + (1 << 20)) & 0x1FFFFF) << 42);
+        (((uint64_t)(uint32_t)(z + (1 << 20)) & 0x1FFFFF) << 42);
 }
 
 static inline uint32_t links_hash_slot(const links_hash *h, uint64_t key) {
@@ -319,7 +319,8 @@ static int links_probe_estimate(const links_ctx *ctx, const links_scratch *sc, c
      * surfel-area estimate, decides: that estimate runs low for grazing and close surfels,
      * exactly the ones that must go to the rays.) */
     if (d2 > 4.0f * r * r && (float)M_PI * r * r < LC_LINKS_NEAR_HITS * (float)sc->ray_omega * d2) return 0;
-    uint32_t lo = links_lower_bound(sc, nd->first_surfel), hi = links_lower_bound(sc, nd->first_surfel + nd->surfel_count);
+    uint32_t lo = links_lower_bound(sc, nd->first_surfel),
+             hi = links_lower_bound(sc, nd->first_surfel + nd->surfel_count);
     memset(e, 0, sizeof *e);
     e->omega = e->unocc = e->wsum = (hi - lo) * sc->ray_omega;
     for (int a = 0; a < 3; a++) e->m[a] = (sc->cum[3 * hi + a] - sc->cum[3 * lo + a]) * sc->ray_omega;
@@ -440,7 +441,7 @@ static int links_consider(const links_ctx *ctx, links_scratch *sc, links_cache *
     if (lc->n[0] != 0 || lc->n[1] != 0 || lc->n[2] != 0) {
         /* Whole bounding sphere behind the cache plane: every surfel gets w = 0. */
         double dz = (nd->center[0] - lc->p[0]) * lc->n[0] + (nd->center[1] - lc->p[1]) * lc->n[1] +
-                    (nd->center[2] - lc->p[2]) * lc->n[2];
+            (nd->center[2] - lc->p[2]) * lc->n[2];
         if (dz + nd->radius <= 0) return 0;
     }
     uint32_t k = ctx->prm->node_samples;
@@ -458,7 +459,7 @@ static int links_consider(const links_ctx *ctx, links_scratch *sc, links_cache *
     if (sp.n > 1)
         cv = sp.wsum > 0 ? sqrt(fmax(0.0, sp.n * sp.w2sum / (sp.wsum * sp.wsum) - 1.0)) : sqrt((double)sp.n - 1.0);
     int internal = nd->child[0] != LC_NONE && nd->child[1] != LC_NONE && nd->child[0] < ctx->h->n_nodes &&
-                   nd->child[1] < ctx->h->n_nodes;
+        nd->child[1] < ctx->h->n_nodes;
     int exhaustive = nd->surfel_count <= k && !probed;
     if (it.est.omega > 0) {
         it.prio = it.est.omega * (1.0 + LINKS_SPREAD_K * cv);
@@ -466,10 +467,8 @@ static int links_consider(const links_ctx *ctx, links_scratch *sc, links_cache *
         if (exhaustive || !internal) return 0; /* every surfel was tested and none is visible */
         it.prio = LINKS_OCCLUDED_PRIORITY * it.est.unocc;
     }
-    if (internal)
-        links_heap_push(sc, &it);
-    else
-        sc->done[sc->n_done++] = it;
+    if (internal) links_heap_push(sc, &it);
+    else sc->done[sc->n_done++] = it;
     return 1;
 }
 
@@ -543,8 +542,7 @@ static void links_one_cache(const links_ctx *ctx, links_scratch *sc, uint32_t ci
         if (near) {
             /* near field: the probe rays already give the final numbers */
         } else if (!exact || out_sh) {
-            e = links_estimate(ctx, &lc, it->node, prm->final_samples, LINKS_PASS_FINAL, out_sh ? sh : NULL,
-                               bands);
+            e = links_estimate(ctx, &lc, it->node, prm->final_samples, LINKS_PASS_FINAL, out_sh ? sh : NULL, bands);
         }
         if (!(e.omega > 0) || !(nd->area > 0)) continue;
         double mlen = sqrt(e.m[0] * e.m[0] + e.m[1] * e.m[1] + e.m[2] * e.m[2]) / e.wsum;
@@ -641,8 +639,8 @@ int lc_links_build(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_sur
     }
     const uint32_t L = params->links_per_cache;
     const size_t nsh = link_sh ? (size_t)params->sh_bands * params->sh_bands : 0;
-    ctx = (links_ctx){rt, surfels, n_surfels, h, caches, params, links, link_sh, NULL, NULL, NULL, NULL, NULL,
-                      {{0, 0, 0}, 0, 0, NULL, NULL, NULL, NULL}};
+    ctx = (links_ctx){rt,      surfels, n_surfels, h,    caches, params, links,
+                      link_sh, NULL,    NULL,      NULL, NULL,   NULL,   {{0, 0, 0}, 0, 0, NULL, NULL, NULL, NULL}};
     ctx.scratch = calloc((size_t)threads, sizeof *ctx.scratch);
     ctx.used = calloc(n_caches ? n_caches : 1, sizeof *ctx.used);
     ctx.omega = calloc(n_caches ? n_caches : 1, sizeof *ctx.omega);
@@ -739,8 +737,8 @@ int lc_links_gather_bound(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_
         return -1;
     }
     int threads = lc_parallel_threads(want_threads), rc = -1;
-    lc_link_params prm = {.links_per_cache = 1, .node_samples = 1, .final_samples = 1, .seed = seed,
-                          .probe_rays = probe_rays};
+    lc_link_params prm = {
+        .links_per_cache = 1, .node_samples = 1, .final_samples = 1, .seed = seed, .probe_rays = probe_rays};
     links_ctx ctx = {0};
     ctx.rt = rt, ctx.surfels = surfels, ctx.n_surfels = n_surfels, ctx.caches = caches, ctx.prm = &prm;
     ctx.scratch = calloc((size_t)threads, sizeof *ctx.scratch);

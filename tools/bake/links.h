@@ -24,11 +24,11 @@ typedef struct lc_link_params {
     uint32_t final_samples;   /* surfels sampled per linked node for the final factor */
     uint32_t sh_bands;        /* > 0: also project each link's transport into SH (LKSH) */
     uint64_t seed;
-    uint32_t probe_rays;      /* near-field probe rays per cache; 0 = far-field estimate only */
+    uint32_t probe_rays; /* near-field probe rays per cache; 0 = far-field estimate only */
     /* Optional output (NULL = not wanted): n_surfels counters, zeroed by the caller; each
      * cache adds 1 to every surfel its probe rays hit (see bake/exposure.h). */
     uint32_t *surfel_seen;
-    int threads;              /* parallel-for workers, 0 = all cores (the result does not depend on it) */
+    int threads; /* parallel-for workers, 0 = all cores (the result does not depend on it) */
 } lc_link_params;
 
 /* A node is near (probe-ray estimate) when the cache is within 2 bounding radii of its
@@ -38,8 +38,8 @@ typedef struct lc_link_params {
 #define LC_LINKS_NEAR_HITS 8.0f
 
 typedef struct lc_link_stats {
-    double mean_links_used;   /* links with factor > 0, mean over caches */
-    double mean_solid_angle;  /* sum of link solid angles per cache, mean */
+    double mean_links_used;  /* links with factor > 0, mean over caches */
+    double mean_solid_angle; /* sum of link solid angles per cache, mean */
     uint64_t rays;
 } lc_link_stats;
 

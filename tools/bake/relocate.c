@@ -23,7 +23,7 @@ typedef struct {
 
 typedef struct {
     uint32_t hits, back;
-    float best_t;      /* shortest back-facing hit */
+    float best_t; /* shortest back-facing hit */
     lc_vec3 best_dir;
 } reloc_probe;
 
@@ -47,8 +47,8 @@ static reloc_probe reloc_cast(const reloc_ctx *ctx, lc_vec3 org, lc_vec3 axis, i
         float f = (float)i * golden + v;
         float phi = 6.2831853f * (f - floorf(f));
         float r = sqrtf(fmaxf(0, 1 - z * z));
-        lc_vec3 d = lc_v3_add(lc_v3_add(lc_v3_scale(t, r * cosf(phi)), lc_v3_scale(b, r * sinf(phi))),
-                              lc_v3_scale(axis, z));
+        lc_vec3 d =
+            lc_v3_add(lc_v3_add(lc_v3_scale(t, r * cosf(phi)), lc_v3_scale(b, r * sinf(phi))), lc_v3_scale(axis, z));
         d = lc_v3_norm(d);
         float o[3], dd[3];
         lc_v3_store(o, org);

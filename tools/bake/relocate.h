@@ -11,12 +11,12 @@
 #include "lcb/lcb.h"
 
 typedef struct lc_relocate_params {
-    uint32_t rays;            /* test rays per cache */
-    double texel_fraction;    /* back-face fraction that triggers a move, texel caches (0.6) */
-    double grid_fraction;     /* same for grid caches (0.8, misses ignored) */
-    double offset;            /* metres past the back face */
+    uint32_t rays;         /* test rays per cache */
+    double texel_fraction; /* back-face fraction that triggers a move, texel caches (0.6) */
+    double grid_fraction;  /* same for grid caches (0.8, misses ignored) */
+    double offset;         /* metres past the back face */
     uint64_t seed;
-    int threads;              /* parallel-for workers, 0 = all cores (the result does not depend on it) */
+    int threads; /* parallel-for workers, 0 = all cores (the result does not depend on it) */
 } lc_relocate_params;
 
 typedef struct lc_relocate_stats {

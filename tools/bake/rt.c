@@ -74,8 +74,7 @@ void lc_rt_release(lc_rt *rt) {
 
 const lc_mesh *lc_rt_mesh(const lc_rt *rt) { return rt->mesh; }
 
-int lc_rt_intersect(const lc_rt *rt, const float org[3], const float dir[3], float tnear, float tfar,
-                    lc_hit *hit) {
+int lc_rt_intersect(const lc_rt *rt, const float org[3], const float dir[3], float tnear, float tfar, lc_hit *hit) {
     struct RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     struct RTCRayHit rh;

@@ -10,9 +10,9 @@
 #define LC_NONE 0xFFFFFFFFu
 
 typedef struct lc_texture {
-    char path[512];  /* the file actually read (after case-insensitive resolution) */
+    char path[512]; /* the file actually read (after case-insensitive resolution) */
     uint32_t width, height;
-    float *rgb;      /* linear RGB (sRGB-decoded), width*height*3, row 0 = top of the image */
+    float *rgb; /* linear RGB (sRGB-decoded), width*height*3, row 0 = top of the image */
 } lc_texture;
 
 typedef struct lc_material {
@@ -29,14 +29,14 @@ typedef enum { LC_LIGHT_POINT = 0, LC_LIGHT_SPOT, LC_LIGHT_DIRECTIONAL, LC_LIGHT
 typedef struct lc_light {
     char name[LC_NAME_MAX];
     lc_light_type type;
-    float color[3];       /* linear RGB, normalised so the intensity carries the magnitude */
+    float color[3]; /* linear RGB, normalised so the intensity carries the magnitude */
     float intensity;
-    float range;          /* 0 = infinite */
+    float range; /* 0 = infinite */
     float position[3];
-    float direction[3];   /* unit, the direction light travels (spot, directional, area normal) */
+    float direction[3];           /* unit, the direction light travels (spot, directional, area normal) */
     float inner_cone, outer_cone; /* radians, spot */
-    uint32_t area_shape;  /* 0 quad, 1 disc */
-    float area_size[2];   /* quad width/height or disc radius in [0] (metres) */
+    uint32_t area_shape;          /* 0 quad, 1 disc */
+    float area_size[2];           /* quad width/height or disc radius in [0] (metres) */
 } lc_light;
 
 /* Indexed triangle mesh. All arrays malloc'd and owned by the mesh. */
@@ -59,15 +59,15 @@ typedef struct lc_scene {
     lc_light *lights;
     uint32_t n_lights;
     float bounds_min[3], bounds_max[3];
-    int has_lightmap_uv;  /* the asset supplied a second UV set (mesh.uv1 filled by import) */
-    char source[512];     /* path it was imported from */
+    int has_lightmap_uv; /* the asset supplied a second UV set (mesh.uv1 filled by import) */
+    char source[512];    /* path it was imported from */
     /* Import statistics, reported in the bake file's metadata. */
     uint32_t n_degenerate_dropped; /* zero-area / non-finite triangles removed at import */
 } lc_scene;
 
 typedef struct lc_import_params {
-    double scale;         /* multiplies positions (e.g. 0.003 for the conference room) */
-    int flip_winding;     /* reverse triangle winding (assets with clockwise front faces) */
+    double scale;     /* multiplies positions (e.g. 0.003 for the conference room) */
+    int flip_winding; /* reverse triangle winding (assets with clockwise front faces) */
 } lc_import_params;
 
 /* Imports glTF 2.0 (.gltf/.glb), OBJ+MTL or PLY through Assimp, flattening the node tree
@@ -78,8 +78,7 @@ typedef struct lc_import_params {
  * file, unsupported format, no triangles, non-finite or non-positive scale. A missing or
  * unreadable texture is a warning: the material keeps its base colour factor.
  * On success returns 0 and fills *out (release with lc_scene_release). */
-int lc_scene_import(const char *path, const lc_import_params *params, lc_scene *out, char *err,
-                    size_t errlen);
+int lc_scene_import(const char *path, const lc_import_params *params, lc_scene *out, char *err, size_t errlen);
 void lc_scene_release(lc_scene *scene);
 
 /* Frees mesh arrays and zeroes the struct. */

@@ -30,16 +30,16 @@ typedef struct {
     const lc_scene *scene;
     lc_lcb_surfel *s;
     const uint32_t *tri;
-    float *bary;            /* 2 per surfel: current (b1, b2) */
-    float *bary_next;       /* Jacobi target */
+    float *bary;      /* 2 per surfel: current (b1, b2) */
+    float *bary_next; /* Jacobi target */
     uint64_t halton_offset;
-    float rot[2];           /* Cranley-Patterson rotation */
+    float rot[2]; /* Cranley-Patterson rotation */
     float area;
     /* neighbour grid */
     float radius, inv_cell, origin[3];
-    uint32_t mask;          /* hash table size - 1 */
-    uint32_t *cell_start;   /* mask + 2 entries */
-    uint32_t *cell_items;   /* surfel indices grouped by bucket */
+    uint32_t mask;        /* hash table size - 1 */
+    uint32_t *cell_start; /* mask + 2 entries */
+    uint32_t *cell_items; /* surfel indices grouped by bucket */
 } surfels_ctx;
 
 static uint32_t surfels_material(const lc_mesh *m, uint32_t tri) { return m->material ? m->material[tri] : 0; }
@@ -290,10 +290,8 @@ int lc_surfels_generate(const lc_scene *scene, const lc_surfel_params *params, l
     free(cell_start);
     free(cell_items);
     *out = s;
-    if (triangle_out)
-        *triangle_out = tri;
-    else
-        free(tri);
+    if (triangle_out) *triangle_out = tri;
+    else free(tri);
     *n_out = n;
     return 0;
 err:

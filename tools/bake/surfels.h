@@ -12,10 +12,10 @@
 #include "lcb/lcb.h"
 
 typedef struct lc_surfel_params {
-    uint32_t target_count;   /* approximate number of surfels */
+    uint32_t target_count; /* approximate number of surfels */
     uint32_t relax_iterations;
     uint64_t seed;
-    int threads;             /* parallel-for workers, 0 = all cores (the result does not depend on it) */
+    int threads; /* parallel-for workers, 0 = all cores (the result does not depend on it) */
 } lc_surfel_params;
 
 /* Generates surfels (lc_lcb_surfel records; cache = LC_NONE, filled later). *out malloc'd,

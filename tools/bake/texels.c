@@ -57,7 +57,7 @@ static int texels_setup(const lc_mesh *m, uint32_t t, uint32_t W, uint32_t H, te
         out->y[k] = (int64_t)(w * H * 0x1p40);
     }
     out->area = (texels_i128)(out->x[1] - out->x[0]) * (out->y[2] - out->y[0]) -
-                (texels_i128)(out->y[1] - out->y[0]) * (out->x[2] - out->x[0]);
+        (texels_i128)(out->y[1] - out->y[0]) * (out->x[2] - out->x[0]);
     return 1;
 }
 
@@ -348,8 +348,7 @@ int lc_texels_rasterize(const lc_scene *scene, uint32_t width, uint32_t height, 
         return -1;
     }
     if (width == 0 || height == 0 || width > TEXELS_MAX_SIZE || height > TEXELS_MAX_SIZE) {
-        lc_set_err(err, errlen, "texels: lightmap size %ux%u is out of range [1, %u]", width, height,
-                   TEXELS_MAX_SIZE);
+        lc_set_err(err, errlen, "texels: lightmap size %ux%u is out of range [1, %u]", width, height, TEXELS_MAX_SIZE);
         return -1;
     }
     for (size_t i = 0; i < 3 * (size_t)m->n_triangles; i++)
@@ -376,7 +375,8 @@ int lc_texels_rasterize(const lc_scene *scene, uint32_t width, uint32_t height, 
         texels_claim(&r, t, width, height, owner, mask, &contested, &first_contested);
     }
     if (contested)
-        lc_warn("texels", "%llu texel centres are covered by more than one triangle (overlapping lightmap UVs, "
+        lc_warn("texels",
+                "%llu texel centres are covered by more than one triangle (overlapping lightmap UVs, "
                 "first at triangle %u); the lowest triangle keeps each",
                 (unsigned long long)contested, first_contested);
 

@@ -58,10 +58,10 @@ typedef struct {
     double w, h;           /* extent in metres, w >= h */
     double au, av;         /* anchor: incentre of the largest triangle, chart-local metres */
     /* placement at the chosen density */
-    int rot;               /* rotated 90 degrees in the atlas */
-    double fx, fy;         /* sub-texel offset of the chart's min corner inside its rect */
-    uint32_t fw, fh;       /* footprint rect in texels */
-    uint32_t x, y;         /* rect origin in the atlas */
+    int rot;         /* rotated 90 degrees in the atlas */
+    double fx, fy;   /* sub-texel offset of the chart's min corner inside its rect */
+    uint32_t fw, fh; /* footprint rect in texels */
+    uint32_t x, y;   /* rect origin in the atlas */
 } uvgen_chart;
 
 typedef struct {
@@ -250,10 +250,8 @@ static int uvgen_adjacency(const lc_mesh *m, const uint32_t *weld, uint32_t **ad
                 for (size_t b = i; b < j; b++) {
                     if (a == b || e[a].tri == e[b].tri) continue;
                     if (k > 16 && b != a + 1 && a != b + 1) continue;
-                    if (pass == 0)
-                        start[e[a].tri + 1]++;
-                    else
-                        list[fill[e[a].tri]++] = e[b].tri;
+                    if (pass == 0) start[e[a].tri + 1]++;
+                    else list[fill[e[a].tri]++] = e[b].tri;
                 }
             i = j;
         }
@@ -314,7 +312,7 @@ typedef struct {
     uint32_t *order;      /* triangles, each chart a contiguous range */
     double *cu, *cv;      /* corner coordinates per order position */
     double cos_flip;
-    int threads;          /* parallel-for workers: lc_uv_params.threads */
+    int threads; /* parallel-for workers: lc_uv_params.threads */
 } uvgen_ctx;
 
 static void uvgen_basis(const double n[3], double t[3], double b[3]) {
@@ -497,7 +495,8 @@ static int uvgen_chart_overlaps(const uvgen_ctx *cx, const uvgen_chart *c) {
         if (a < -area_eps && !cx->degen[cx->order[i]]) return 1;
     }
     double cell = sqrt(fmax(c->w * c->h, ext * ext * 1e-6) / c->count);
-    uint32_t gx = (uint32_t)fmin(fmax(ceil(c->w / cell), 1), 1024), gy = (uint32_t)fmin(fmax(ceil(c->h / cell), 1), 1024);
+    uint32_t gx = (uint32_t)fmin(fmax(ceil(c->w / cell), 1), 1024),
+             gy = (uint32_t)fmin(fmax(ceil(c->h / cell), 1), 1024);
     double sx = gx / fmax(c->w, 1e-300), sy = gy / fmax(c->h, 1e-300);
     size_t ncell = (size_t)gx * gy;
     uint32_t *start = calloc(ncell + 1, sizeof *start), *items = NULL;
@@ -513,14 +512,18 @@ static int uvgen_chart_overlaps(const uvgen_ctx *cx, const uvgen_chart *c) {
             box[4 * i + 2] = 0;
             continue;
         }
-        double lo_u = uvgen_min(u[0], uvgen_min(u[1], u[2])) - c->umin, hi_u = uvgen_max(u[0], uvgen_max(u[1], u[2])) - c->umin;
-        double lo_v = uvgen_min(v[0], uvgen_min(v[1], v[2])) - c->vmin, hi_v = uvgen_max(v[0], uvgen_max(v[1], v[2])) - c->vmin;
+        double lo_u = uvgen_min(u[0], uvgen_min(u[1], u[2])) - c->umin,
+               hi_u = uvgen_max(u[0], uvgen_max(u[1], u[2])) - c->umin;
+        double lo_v = uvgen_min(v[0], uvgen_min(v[1], v[2])) - c->vmin,
+               hi_v = uvgen_max(v[0], uvgen_max(v[1], v[2])) - c->vmin;
         rb[4 * i] = lo_u;
         rb[4 * i + 1] = lo_v;
         rb[4 * i + 2] = hi_u;
         rb[4 * i + 3] = hi_v;
-        uint32_t x0 = (uint32_t)fmin(fmax(floor(lo_u * sx), 0), gx - 1), x1 = (uint32_t)fmin(fmax(floor(hi_u * sx), 0), gx - 1);
-        uint32_t y0 = (uint32_t)fmin(fmax(floor(lo_v * sy), 0), gy - 1), y1 = (uint32_t)fmin(fmax(floor(hi_v * sy), 0), gy - 1);
+        uint32_t x0 = (uint32_t)fmin(fmax(floor(lo_u * sx), 0), gx - 1),
+                 x1 = (uint32_t)fmin(fmax(floor(hi_u * sx), 0), gx - 1);
+        uint32_t y0 = (uint32_t)fmin(fmax(floor(lo_v * sy), 0), gy - 1),
+                 y1 = (uint32_t)fmin(fmax(floor(hi_v * sy), 0), gy - 1);
         box[4 * i] = x0;
         box[4 * i + 1] = y0;
         box[4 * i + 2] = x1;
@@ -599,9 +602,8 @@ static int uvgen_keyed_cmp(const void *pa, const void *pb) {
 
 /* Splits chart c (by value: the array may move) into halves along its longest 3D axis, then
  * into connected components of each half; appends them to *charts. */
-static int uvgen_split(uvgen_ctx *cx, uvgen_chart c, const uint32_t *adj_start, const uint32_t *adj,
-                       uint32_t *mark, uint32_t *stamp, uvgen_chart **charts, uint32_t *n_charts,
-                       uint32_t *cap_charts) {
+static int uvgen_split(uvgen_ctx *cx, uvgen_chart c, const uint32_t *adj_start, const uint32_t *adj, uint32_t *mark,
+                       uint32_t *stamp, uvgen_chart **charts, uint32_t *n_charts, uint32_t *cap_charts) {
     uvgen_keyed *k = malloc((size_t)c.count * sizeof *k);
     uint32_t *tmp = malloc((size_t)c.count * sizeof *tmp);
     int rc = -1;
@@ -714,8 +716,8 @@ static double uvgen_cost_texels(double w, double h, double d, uint32_t pad) {
  * fill ~80% of it: solves sum((w d + 1 + p)(h d + 1 + p)) = 0.8 W^2. Never below half the
  * density of the whole area packed perfectly: with too many charts the estimate collapses
  * (merging fixes that) and would let merges squash large surfaces. */
-static double uvgen_density_estimate(const double *w, const double *h, const uint8_t *alive, uint32_t n,
-                                     uint32_t W, uint32_t pad, double total_area) {
+static double uvgen_density_estimate(const double *w, const double *h, const uint8_t *alive, uint32_t n, uint32_t W,
+                                     uint32_t pad, double total_area) {
     double floor_d = 0.5 * W / sqrt(total_area);
     double a = 0, b = 0, c = -0.8 * W * (double)W, k = 1.0 + pad;
     for (uint32_t i = 0; i < n; i++) {
@@ -741,13 +743,13 @@ static int uvgen_cand_cmp(const void *pa, const void *pb) {
 
 typedef struct {
     uint32_t *head, *tail, *next, *chart_of, *slot, *slot_stamp, *area_n; /* area_n: triangles */
-    double *area, *nsum, *pn, *w, *h, *tri_a; /* pn: projection normal of merged charts */
-    double *beyond;                           /* area beyond the chart angle of its normal */
-    uint64_t work, budget;                    /* triangles projected by trials, and the cap */
+    double *area, *nsum, *pn, *w, *h, *tri_a;                             /* pn: projection normal of merged charts */
+    double *beyond;        /* area beyond the chart angle of its normal */
+    uint64_t work, budget; /* triangles projected by trials, and the cap */
     uint8_t *alive, *merged;
-    uvgen_keyed *sorted;                      /* scratch: live charts by area, per pass */
-    uvgen_cand *cand;                         /* scratch: one chart's neighbours */
-    uint32_t stamp;                           /* slot_stamp of the chart being scored */
+    uvgen_keyed *sorted; /* scratch: live charts by area, per pass */
+    uvgen_cand *cand;    /* scratch: one chart's neighbours */
+    uint32_t stamp;      /* slot_stamp of the chart being scored */
 } uvgen_merge_state;
 
 /* Tries to merge chart b into chart a (a keeps its id). The merged chart projects onto the
@@ -989,8 +991,8 @@ static int64_t uvgen_merge_pass(uvgen_ctx *cx, uvgen_merge_state *st, uint32_t n
 
 /* Rewrites cx->order and *charts with the alive charts of the n as contiguous ranges. -1
  * out of memory. */
-static int uvgen_merge_collect(uvgen_ctx *cx, const uvgen_merge_state *st, uvgen_chart **charts,
-                               uint32_t *n_charts, uint32_t n, uint32_t alive) {
+static int uvgen_merge_collect(uvgen_ctx *cx, const uvgen_merge_state *st, uvgen_chart **charts, uint32_t *n_charts,
+                               uint32_t n, uint32_t alive) {
     uvgen_chart *out = malloc((size_t)(alive ? alive : 1) * sizeof *out);
     if (!out) return -1;
     uint32_t k = 0, pos = 0;
@@ -1388,10 +1390,8 @@ static int uvgen_grow_charts(const uvgen_ctx *cx, const uint32_t *adj_start, con
             if (chart_of[s] != LC_NONE || (pass == 0 && cx->degen[s])) continue;
             uvgen_chart c = {0};
             c.start = n_order;
-            if (pass == 0)
-                memcpy(c.ref, cx->tri_n + 3 * (size_t)s, sizeof c.ref);
-            else
-                c.ref[2] = 1;
+            if (pass == 0) memcpy(c.ref, cx->tri_n + 3 * (size_t)s, sizeof c.ref);
+            else c.ref[2] = 1;
             uvgen_grow_chart(cx, adj_start, adj, chart_of, s, pass, cos_a, *n_charts, &c, &n_order);
             if (*n_charts == *cap_charts) {
                 *cap_charts *= 2;
@@ -1485,10 +1485,8 @@ static int uvgen_pack_in_atlas(uvgen_chart *fin, uint32_t n, uvgen_item *items, 
     if (uvgen_pack(fin, n, items, sky, hi, W, H, pad, 1) != UINT32_MAX) lo = hi;
     for (int it = 0; it < 60 && hi > lo * 1.0005; it++) {
         double mid = sqrt(lo * hi);
-        if (uvgen_pack(fin, n, items, sky, mid, W, H, pad, 1) != UINT32_MAX)
-            lo = mid;
-        else
-            hi = mid;
+        if (uvgen_pack(fin, n, items, sky, mid, W, H, pad, 1) != UINT32_MAX) lo = mid;
+        else hi = mid;
     }
     *d = lo;
     uvgen_pack(fin, n, items, sky, *d, W, H, pad, 1);
@@ -1750,8 +1748,7 @@ err:
 
 /* ---- lc_uvgen_measure ------------------------------------------------------------------ */
 
-int lc_uvgen_measure(const lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char *err,
-                     size_t errlen) {
+int lc_uvgen_measure(const lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char *err, size_t errlen) {
     if (uvgen_check(mesh, params, 1, err, errlen) != 0) return -1;
     double area = lc_mesh_total_area(mesh);
     if (!(area > 0)) {

@@ -32,7 +32,6 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
 
 /* For meshes that already have uv1 from the asset: chooses the atlas size for the density or
  * takes atlas_size, and fills stats (usage from rasterized coverage). */
-int lc_uvgen_measure(const lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char *err,
-                     size_t errlen);
+int lc_uvgen_measure(const lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char *err, size_t errlen);
 
 #endif

@@ -14,7 +14,8 @@
 #include "lcb/lcb.h"
 #include "util/log.h"
 
-static const char *stage_names[LC_STAGE_COUNT] = {"direct", "bounce", "pull", "gather", "lightmap", "grid", "objects", "chroma"};
+static const char *stage_names[LC_STAGE_COUNT] = {"direct",   "bounce", "pull",    "gather",
+                                                  "lightmap", "grid",   "objects", "chroma"};
 
 static int cmp_double(const void *a, const void *b) {
     double x = *(const double *)a, y = *(const double *)b;
@@ -25,7 +26,7 @@ typedef struct {
     char file[512], backend[16];
     uint32_t surfels, caches, links, bands, nodes;
     double stage_ms[LC_STAGE_COUNT], total_ms, peak_mib;
-    double gather_links;         /* links evaluated per relight (all passes) */
+    double gather_links; /* links evaluated per relight (all passes) */
     double gather_bytes, gather_flops, pull_bytes;
 } bench_row;
 
@@ -233,14 +234,16 @@ int main(int argc, char **argv) {
         }
         fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"memcpy_gbps\": %.2f, \"results\": [", runs, bounces, bw);
         for (int i = 0; i < nrows; i++) {
-            fprintf(out, "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"surfels\": %u, \"caches\": %u, \"links\": %u, "
-                         "\"bands\": %u, \"stages_ms\": {",
+            fprintf(out,
+                    "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"surfels\": %u, \"caches\": %u, \"links\": %u, "
+                    "\"bands\": %u, \"stages_ms\": {",
                     i ? "," : "", rows[i].file, rows[i].backend, rows[i].surfels, rows[i].caches, rows[i].links,
                     rows[i].bands);
             for (int s = 0; s < LC_STAGE_COUNT; s++)
                 fprintf(out, "%s\"%s\": %.4f", s ? ", " : "", stage_names[s], rows[i].stage_ms[s]);
-            fprintf(out, "}, \"total_ms\": %.4f, \"peak_rss_mib\": %.1f, \"gather_links\": %.0f, "
-                         "\"gather_bytes\": %.0f, \"gather_flops\": %.0f, \"pull_bytes\": %.0f}",
+            fprintf(out,
+                    "}, \"total_ms\": %.4f, \"peak_rss_mib\": %.1f, \"gather_links\": %.0f, "
+                    "\"gather_bytes\": %.0f, \"gather_flops\": %.0f, \"pull_bytes\": %.0f}",
                     rows[i].total_ms, rows[i].peak_mib, rows[i].gather_links, rows[i].gather_bytes,
                     rows[i].gather_flops, rows[i].pull_bytes);
         }

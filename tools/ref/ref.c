@@ -26,8 +26,8 @@
 struct lc_ref {
     const lc_lcb *bake;
     const lc_lcb_view *v;
-    float eps; /* ray offset scaled to the scene, as the engine's (lc_ray_lift_scene) */
-    int threads; /* the parallel-for's workers (0 = all cores), the creator's setting */
+    float eps;         /* ray offset scaled to the scene, as the engine's (lc_ray_lift_scene) */
+    int threads;       /* the parallel-for's workers (0 = all cores), the creator's setting */
     float surfel_area; /* mean surfel area: the bake's spacing (exposure reweighs surfels, not the sum) */
     /* State (copied). */
     lc_engine_light *lights;
@@ -51,7 +51,7 @@ struct lc_ref {
     float cell_inv, cell_origin[3];
     uint64_t *sk_key;
     uint32_t *sk_item;
-    uint64_t *cell_key;   /* open-addressing table: cell key + 1 (0 = empty) */
+    uint64_t *cell_key; /* open-addressing table: cell key + 1 (0 = empty) */
     uint32_t *cell_start, *cell_count;
     uint32_t cell_mask;
     float *tri_albedo; /* n_triangles*3: small textured triangles' albedo (NAN = look up per hit) */
@@ -135,8 +135,18 @@ static int ref_intersect(const lc_ref *r, const float org[3], const float dir[3]
 static int ref_occluded(const lc_ref *r, const float org[3], const float dir[3], float tfar) {
     struct RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
-    struct RTCRay ray = {.org_x = org[0], .org_y = org[1], .org_z = org[2], .tnear = 0, .dir_x = dir[0],
-                         .dir_y = dir[1], .dir_z = dir[2], .time = 0, .tfar = tfar, .mask = ~0u, .id = 0, .flags = 0};
+    struct RTCRay ray = {.org_x = org[0],
+                         .org_y = org[1],
+                         .org_z = org[2],
+                         .tnear = 0,
+                         .dir_x = dir[0],
+                         .dir_y = dir[1],
+                         .dir_z = dir[2],
+                         .time = 0,
+                         .tfar = tfar,
+                         .mask = ~0u,
+                         .id = 0,
+                         .flags = 0};
     rtcOccluded1(r->scene, &ctx, &ray);
     return ray.tfar < 0;
 }
@@ -161,8 +171,8 @@ static inline float ref_tri_normal(const float *a, const float *b, const float *
 /* --- textured albedo: nearest surfel of the material ------------------------------------------ */
 
 static inline uint64_t ref_cell_key(int32_t x, int32_t y, int32_t z) {
-    return ((uint64_t)(uint32_t)(x + (1 << 20)) & 0x1FFFFF) << 42 | ((uint64_t)(uint32_t)(y + (1 << 20)) & 0x1FFFFF) << 21 |
-           ((uint64_t)(uint32_t)(z + (1 << 20)) & 0x1FFFFF);
+    return ((uint64_t)(uint32_t)(x + (1 << 20)) & 0x1FFFFF) << 42 |
+        ((uint64_t)(uint32_t)(y + (1 << 20)) & 0x1FFFFF) << 21 | ((uint64_t)(uint32_t)(z + (1 << 20)) & 0x1FFFFF);
 }
 
 static int ref_sk_cmp(const void *a, const void *b) {
@@ -170,9 +180,7 @@ static int ref_sk_cmp(const void *a, const void *b) {
     return x[0] < y[0] ? -1 : x[0] > y[0] ? 1 : (x[1] < y[1] ? -1 : x[1] > y[1]);
 }
 
-static inline uint32_t ref_cell_slot(const lc_ref *r, uint64_t key) {
-    return (uint32_t)(lc_mix64(key) & r->cell_mask);
-}
+static inline uint32_t ref_cell_slot(const lc_ref *r, uint64_t key) { return (uint32_t)(lc_mix64(key) & r->cell_mask); }
 
 /* The surfels of a cell: [*first, *first + count) in sk_item. Returns count (0 = empty cell). */
 static inline uint32_t ref_cell_find(const lc_ref *r, uint64_t key, uint32_t *first) {
@@ -204,8 +212,9 @@ static int ref_surfels_index(lc_ref *r) {
     }
     for (uint32_t i = 0; i < n; i++) {
         const float *p = v->surfels[i].position;
-        pairs[2 * i] = ref_cell_key((int32_t)floorf((p[0] - lo[0]) * r->cell_inv), (int32_t)floorf((p[1] - lo[1]) * r->cell_inv),
-                                    (int32_t)floorf((p[2] - lo[2]) * r->cell_inv));
+        pairs[2 * i] =
+            ref_cell_key((int32_t)floorf((p[0] - lo[0]) * r->cell_inv), (int32_t)floorf((p[1] - lo[1]) * r->cell_inv),
+                         (int32_t)floorf((p[2] - lo[2]) * r->cell_inv));
         pairs[2 * i + 1] = i;
     }
     qsort(pairs, n, 2 * sizeof *pairs, ref_sk_cmp);
@@ -297,8 +306,8 @@ static void ref_tri_albedo_range(void *ctx, size_t begin, size_t end, int thread
 typedef struct {
     float p[3], ng[3], ns[3]; /* position, winding normal, shading normal (front side) */
     float albedo[3];
-    const float *emission;    /* NULL: none */
-    float emit_pdf;           /* NEE pick probability / area of this triangle (0: not sampled) */
+    const float *emission; /* NULL: none */
+    float emit_pdf;        /* NEE pick probability / area of this triangle (0: not sampled) */
     int backface;
 } ref_surface;
 
@@ -321,8 +330,7 @@ static void ref_surface_at(const lc_ref *r, const ref_hit *h, const float dir[3]
         uint32_t m = tr->material;
         if (r->textured[m] && !isnan(r->tri_albedo[3 * (size_t)h->prim]))
             memcpy(s->albedo, r->tri_albedo + 3 * (size_t)h->prim, sizeof s->albedo);
-        else if (r->textured[m])
-            ref_surfel_albedo(r, m, s->p, s->ns, s->albedo);
+        else if (r->textured[m]) ref_surfel_albedo(r, m, s->p, s->ns, s->albedo);
         else memcpy(s->albedo, r->albedo + 3 * (size_t)m, sizeof s->albedo);
         const float *em = r->emission + 3 * (size_t)m;
         if (em[0] > 0 || em[1] > 0 || em[2] > 0) {
@@ -338,7 +346,7 @@ static void ref_surface_at(const lc_ref *r, const ref_hit *h, const float dir[3]
         for (int k = 0; k < 3; k++) {
             s->p[k] = b0 * a[k] + b1 * b[k] + b2 * c[k];
             s->albedo[k] = b0 * r->obj_alb[3 * (size_t)ix[0] + k] + b1 * r->obj_alb[3 * (size_t)ix[1] + k] +
-                           b2 * r->obj_alb[3 * (size_t)ix[2] + k];
+                b2 * r->obj_alb[3 * (size_t)ix[2] + k];
             s->albedo[k] = fminf(fmaxf(s->albedo[k], 0.0f), 0.99f);
         }
     }
@@ -701,7 +709,7 @@ static int ref_build_objects(lc_ref *r, const lc_engine_state *st) {
         float m[12];
         lc_sm_object_matrix(o, m);
         float det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[3] * (m[1] * m[8] - m[2] * m[7]) +
-                    m[6] * (m[1] * m[5] - m[2] * m[4]);
+            m[6] * (m[1] * m[5] - m[2] * m[4]);
         for (uint32_t k = 0; k < a->vertex_count; k++) {
             const lc_lcb_asset_vertex *av = &v->asset_vertices[a->first_vertex + k];
             float *p = r->obj_pos + 4 * (size_t)(bv + k);
@@ -788,8 +796,7 @@ lc_ref *lc_ref_create(const lc_lcb *bake, const lc_engine_state *st, int threads
     if (r->sky_on) {
         if (st->environment.kind == LC_ENV_CONSTANT)
             for (int k = 0; k < 3; k++) r->sky[0][k] = st->environment.color[k] * (float)sqrt(4.0 * M_PI);
-        else
-            memcpy(r->sky, st->environment.sh, sizeof r->sky);
+        else memcpy(r->sky, st->environment.sh, sizeof r->sky);
         for (int j = 0; j < 9; j++)
             for (int k = 0; k < 3; k++) r->sky[j][k] *= st->environment.intensity;
     }
@@ -878,12 +885,12 @@ uint32_t lc_ref_cache_crc(const lc_lcb_view *v) {
 /* A job: one texel cache or one grid cell, with its running sums. */
 typedef struct {
     uint32_t cache;
-    uint32_t cell;    /* grid cell, or LC_NONE for a texel cache */
-    uint32_t n;       /* samples so far */
+    uint32_t cell; /* grid cell, or LC_NONE for a texel cache */
+    uint32_t n;    /* samples so far */
     int done;
-    double sum[27];   /* texel: RGB irradiance; grid: radiance SH */
+    double sum[27]; /* texel: RGB irradiance; grid: radiance SH */
     double sq[27];
-    double sqy;       /* squared luminance (texel: E; grid: coefficient 0) */
+    double sqy; /* squared luminance (texel: E; grid: coefficient 0) */
     uint64_t rays;
 } ref_job;
 
@@ -1090,8 +1097,8 @@ int lc_ref_render(lc_ref *r, const lc_ref_settings *s, lc_ref_result *out, char 
     memcpy(out->grid_origin, v->grid_origin, sizeof out->grid_origin);
     out->grid_cell = v->grid_cell;
     out->n_cells = cells;
-    static const double A[9] = {M_PI, 2 * M_PI / 3, 2 * M_PI / 3, 2 * M_PI / 3, M_PI / 4,
-                                M_PI / 4, M_PI / 4, M_PI / 4, M_PI / 4};
+    static const double A[9] = {M_PI,     2 * M_PI / 3, 2 * M_PI / 3, 2 * M_PI / 3, M_PI / 4,
+                                M_PI / 4, M_PI / 4,     M_PI / 4,     M_PI / 4};
     for (uint32_t i = n_texel; i < n_jobs; i++) {
         const ref_job *j = &jobs[i];
         float *o = out->grid_sh + 27 * (size_t)j->cell, *oe = out->grid_sh_stderr + 27 * (size_t)j->cell;

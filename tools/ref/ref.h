@@ -69,48 +69,48 @@ void lc_ref_state_free(lc_ref_state *s);
 /* --- the reference renderer -------------------------------------------------------------------- */
 
 typedef struct lc_ref_settings {
-    uint32_t spp;           /* samples per cache: fixed, or the cap when target_stderr > 0 */
-    uint32_t batch_spp;     /* samples per cache per pass (adaptive: convergence is checked per pass) */
-    double target_stderr;   /* relative standard error to reach per cache (0 = fixed spp) */
-    double floor_frac;      /* a cache darker than floor_frac x the brightest counts as converged
+    uint32_t spp;         /* samples per cache: fixed, or the cap when target_stderr > 0 */
+    uint32_t batch_spp;   /* samples per cache per pass (adaptive: convergence is checked per pass) */
+    double target_stderr; /* relative standard error to reach per cache (0 = fixed spp) */
+    double floor_frac;    /* a cache darker than floor_frac x the brightest counts as converged
                                when its stderr is below target x floor_frac x brightest */
-    uint32_t max_bounces;   /* bounces as the engine's settings.bounces counts them (default 32; 0 = emitters
+    uint32_t max_bounces; /* bounces as the engine's settings.bounces counts them (default 32; 0 = emitters
                                seen directly and light-source light reflected once, i.e. B0) */
-    uint32_t rr_depth;      /* Russian roulette after this many bounces (default 3) */
+    uint32_t rr_depth;    /* Russian roulette after this many bounces (default 3) */
     uint64_t seed;
-    int threads;            /* 0 = all cores */
-    int texels, grid;       /* which outputs to compute */
-    int quiet;              /* no progress bars */
+    int threads;      /* 0 = all cores */
+    int texels, grid; /* which outputs to compute */
+    int quiet;        /* no progress bars */
 } lc_ref_settings;
 
 lc_ref_settings lc_ref_default_settings(void);
 
 typedef struct lc_ref_stats {
-    uint32_t n;              /* caches (texel caches or valid grid cells) */
-    uint64_t samples;        /* paths traced */
+    uint32_t n;       /* caches (texel caches or valid grid cells) */
+    uint64_t samples; /* paths traced */
     double spp_mean;
     uint32_t spp_min, spp_max;
-    uint32_t n_bright;       /* caches above 1% of the brightest (the set compare uses) */
-    double mean_rel_stderr;  /* over n_bright: stderr(luminance) / luminance */
+    uint32_t n_bright;      /* caches above 1% of the brightest (the set compare uses) */
+    double mean_rel_stderr; /* over n_bright: stderr(luminance) / luminance */
     double p95_rel_stderr, max_rel_stderr;
 } lc_ref_stats;
 
 typedef struct lc_ref_result {
     uint32_t width, height;
-    float *lightmap;         /* W*H*3 irradiance; dilated texels copy their cache (as the engine) */
-    float *lightmap_stderr;  /* W*H*3 standard error per channel */
-    uint8_t *texel_mask;     /* W*H: 0 empty, 1 owns its cache, 2 dilated copy */
+    float *lightmap;        /* W*H*3 irradiance; dilated texels copy their cache (as the engine) */
+    float *lightmap_stderr; /* W*H*3 standard error per channel */
+    uint8_t *texel_mask;    /* W*H: 0 empty, 1 owns its cache, 2 dilated copy */
     uint32_t grid_dims[3];
     float grid_origin[3], grid_cell;
     uint32_t n_cells;
-    float *grid_sh;          /* cells*27: irradiance SH (cosine-convolved), engine layout */
-    float *grid_sh_stderr;   /* cells*27 */
-    uint8_t *grid_mask;      /* cells: 1 valid, 0 inside geometry (the engine outputs zero) */
+    float *grid_sh;        /* cells*27: irradiance SH (cosine-convolved), engine layout */
+    float *grid_sh_stderr; /* cells*27 */
+    uint8_t *grid_mask;    /* cells: 1 valid, 0 inside geometry (the engine outputs zero) */
     lc_ref_stats texel_stats, grid_stats;
     double seconds;
     uint64_t rays;
-    uint32_t cache_crc;      /* CRC-32 of the bake's caches (position, normal, flags, index) */
-    uint32_t max_bounces;    /* the paths' reflection limit it was rendered with */
+    uint32_t cache_crc;   /* CRC-32 of the bake's caches (position, normal, flags, index) */
+    uint32_t max_bounces; /* the paths' reflection limit it was rendered with */
 } lc_ref_result;
 
 typedef struct lc_ref lc_ref;
@@ -149,13 +149,13 @@ int lc_ref_read(const char *dir, lc_ref_result *res, char *err, size_t errlen);
 
 /* Relative error statistics over the compared set. */
 typedef struct lc_ref_errstats {
-    uint32_t n;         /* texels / cells compared */
-    uint32_t n_total;   /* candidates before the brightness threshold */
-    double threshold;   /* absolute luminance threshold used (threshold_frac x the brightest) */
+    uint32_t n;                 /* texels / cells compared */
+    uint32_t n_total;           /* candidates before the brightness threshold */
+    double threshold;           /* absolute luminance threshold used (threshold_frac x the brightest) */
     double mean, p50, p95, max; /* of |a - r| / r (luminance) */
-    double bias;        /* sum(a - r) / sum(r): the luminance-weighted signed error */
-    double mean_signed; /* mean of (a - r) / r */
-    double ref_noise;   /* mean relative standard error of the reference over the same set (0 if unknown) */
+    double bias;                /* sum(a - r) / sum(r): the luminance-weighted signed error */
+    double mean_signed;         /* mean of (a - r) / r */
+    double ref_noise;           /* mean relative standard error of the reference over the same set (0 if unknown) */
 } lc_ref_errstats;
 
 /* Luminance (Rec. 709) of linear RGB. */
@@ -188,12 +188,12 @@ char *lc_ref_errstats_json(const lc_ref_errstats *s);
 /* --- the engine side of a fidelity run --------------------------------------------------------- */
 
 typedef struct lc_ref_engine_run {
-    float *lightmap;     /* W*H*3 */
-    float *grid_sh;      /* cells*27 */
-    uint32_t relights;   /* progressive relights until converged */
-    double last_change;  /* max relative texel change of the last relight */
+    float *lightmap;    /* W*H*3 */
+    float *grid_sh;     /* cells*27 */
+    uint32_t relights;  /* progressive relights until converged */
+    double last_change; /* max relative texel change of the last relight */
     double ms_first, ms_total;
-    double b0_power[3];  /* sum of B0 x area over the surfels (one extra relight, bounces 0) */
+    double b0_power[3];      /* sum of B0 x area over the surfels (one extra relight, bounces 0) */
     float *surfel_radiosity; /* n_surfels*3: the converged B, for the gather bound */
     char backend[16];
 } lc_ref_engine_run;

@@ -99,7 +99,7 @@ static void ref_stats_parse(const cJSON *o, lc_ref_stats *s) {
     memset(s, 0, sizeof *s);
     if (!cJSON_IsObject(o)) return;
     const cJSON *it;
-#define REF_NUM(key, field, type)                                   \
+#define REF_NUM(key, field, type) \
     if (cJSON_IsNumber(it = cJSON_GetObjectItemCaseSensitive(o, key))) s->field = (type)it->valuedouble
     REF_NUM("caches", n, uint32_t);
     REF_NUM("samples", samples, uint64_t);
@@ -146,8 +146,9 @@ int lc_ref_write(const char *dir, const lc_ref_result *res, const char *extra_js
     cJSON_AddStringToObject(lm, "file", "reference_lightmap.exr");
     cJSON_AddStringToObject(lm, "stderr_file", "reference_lightmap_stderr.exr");
     cJSON_AddStringToObject(lm, "mask_file", "reference_texels.bin");
-    cJSON_AddStringToObject(lm, "layout", "float32 RGB irradiance W/m^2, row 0 = top; mask u8 per texel: 0 empty, "
-                                          "1 owns its cache, 2 dilated copy of a neighbour's cache");
+    cJSON_AddStringToObject(lm, "layout",
+                            "float32 RGB irradiance W/m^2, row 0 = top; mask u8 per texel: 0 empty, "
+                            "1 owns its cache, 2 dilated copy of a neighbour's cache");
     cJSON_AddItemToObject(lm, "stats", ref_stats_json(&res->texel_stats));
     cJSON *gr = cJSON_AddObjectToObject(root, "grid");
     cJSON *dims = cJSON_AddArrayToObject(gr, "dims");
@@ -161,9 +162,10 @@ int lc_ref_write(const char *dir, const lc_ref_result *res, const char *extra_js
     cJSON_AddStringToObject(gr, "file", "reference_grid.bin");
     cJSON_AddStringToObject(gr, "stderr_file", "reference_grid_stderr.bin");
     cJSON_AddStringToObject(gr, "mask_file", "reference_grid_mask.bin");
-    cJSON_AddStringToObject(gr, "layout", "float32 little-endian, cells (x fastest) x 9 SH coefficients x RGB: "
-                                          "cosine-convolved irradiance SH, E(n) = sum c_i y_i(n) (lc_engine_frame."
-                                          "grid_sh); mask u8 per cell: 1 valid, 0 inside geometry");
+    cJSON_AddStringToObject(gr, "layout",
+                            "float32 little-endian, cells (x fastest) x 9 SH coefficients x RGB: "
+                            "cosine-convolved irradiance SH, E(n) = sum c_i y_i(n) (lc_engine_frame."
+                            "grid_sh); mask u8 per cell: 1 valid, 0 inside geometry");
     cJSON_AddItemToObject(gr, "stats", ref_stats_json(&res->grid_stats));
     cJSON_AddNumberToObject(root, "seconds", res->seconds);
     cJSON_AddNumberToObject(root, "rays", (double)res->rays);
@@ -247,7 +249,8 @@ int lc_ref_read(const char *dir, lc_ref_result *res, char *err, size_t errlen) {
     const cJSON *crc = cJSON_GetObjectItemCaseSensitive(root, "cache_crc");
     if (cJSON_IsString(crc)) res->cache_crc = (uint32_t)strtoul(crc->valuestring, NULL, 16);
     const cJSON *mb = cJSON_GetObjectItemCaseSensitive(root, "max_bounces");
-    if (cJSON_IsNumber(mb) && mb->valuedouble >= 0 && mb->valuedouble < 1e9) res->max_bounces = (uint32_t)mb->valuedouble;
+    if (cJSON_IsNumber(mb) && mb->valuedouble >= 0 && mb->valuedouble < 1e9)
+        res->max_bounces = (uint32_t)mb->valuedouble;
     const cJSON *secs = cJSON_GetObjectItemCaseSensitive(root, "seconds");
     if (cJSON_IsNumber(secs)) res->seconds = secs->valuedouble;
     size_t texels = (size_t)res->width * res->height;

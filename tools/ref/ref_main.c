@@ -32,7 +32,8 @@ typedef struct ref_opts {
 static const lc_opt ref_options[] = {
     {"state", LC_OPT_STRING, OFF(state), 0, REF_PATH_MAX, NULL, NULL,
      "[render, fidelity] daemon state JSON (`lucentctl state --json`, a snapshot); default: the daemon's initial "
-     "state (the bake's emission, no lights)", "PATH", NULL},
+     "state (the bake's emission, no lights)",
+     "PATH", NULL},
     {"out", LC_OPT_STRING, OFF(out), 0, REF_PATH_MAX, NULL, NULL,
      "output directory (render: required; compare/fidelity: default none / fidelity-out)", "DIR", NULL},
     {"spp", LC_OPT_INT, OFF(spp), 1, 1 << 24, "4096", NULL, "[render] paths per cache (the cap with --target-stderr)",
@@ -41,8 +42,8 @@ static const lc_opt ref_options[] = {
     {"target-stderr", LC_OPT_FLOAT, OFF(target_stderr), 0, 1, "0", NULL,
      "[render] stop a cache when its relative standard error is below F (0 = fixed --spp)", "F", NULL},
     {"floor", LC_OPT_FLOAT, OFF(floor_frac), 0, 1, "0.05", NULL,
-     "[render] adaptive: caches darker than this fraction of the brightest need only the brightest x floor x F",
-     "F", NULL},
+     "[render] adaptive: caches darker than this fraction of the brightest need only the brightest x floor x F", "F",
+     NULL},
     {"max-bounces", LC_OPT_INT, OFF(max_bounces), 8, 1024, "32", NULL,
      "[render] surface reflections per path (Russian roulette cuts most paths earlier)", "N", NULL},
     {"rr-depth", LC_OPT_INT, OFF(rr_depth), 1, 1024, "3", NULL, "[render] Russian roulette from this bounce on", "N",
@@ -50,13 +51,13 @@ static const lc_opt ref_options[] = {
     {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "[render] random seed (same seed, same result)", "S",
      NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", "N", NULL},
-    {"texels", LC_OPT_BOOL, OFF(texels), 0, 1, "true", NULL, "[render] compute the lightmap texels (--no-texels)",
-     NULL, NULL},
+    {"texels", LC_OPT_BOOL, OFF(texels), 0, 1, "true", NULL, "[render] compute the lightmap texels (--no-texels)", NULL,
+     NULL},
     {"cells", LC_OPT_BOOL, OFF(grid_on), 0, 1, "true", NULL, "[render] compute the SH grid cells (--no-cells)", NULL,
      NULL},
     {"reference", LC_OPT_STRING, OFF(reference), 0, REF_PATH_MAX, NULL, NULL,
-     "[compare, fidelity] reference directory from `render` (fidelity: rendered into OUT/reference when absent)",
-     "DIR", NULL},
+     "[compare, fidelity] reference directory from `render` (fidelity: rendered into OUT/reference when absent)", "DIR",
+     NULL},
     {"lightmap", LC_OPT_STRING, OFF(lightmap), 0, REF_PATH_MAX, NULL, NULL,
      "[compare] lightmap to judge: an image (EXR...) or raw float32 RGB W*H (.f32/.bin)", "PATH", NULL},
     {"grid", LC_OPT_STRING, OFF(grid), 0, REF_PATH_MAX, NULL, NULL,
@@ -72,10 +73,12 @@ static const lc_opt ref_options[] = {
     {"max-relights", LC_OPT_INT, OFF(max_relights), 1, 100000, "500", NULL, "[fidelity] cap on relights", "N", NULL},
     {"bounce-limit", LC_OPT_INT, OFF(bounce_limit), -1, 16, "-1", NULL,
      "[render, fidelity] diagnostics: truncate both solutions at N reflections (reference paths; the engine runs one "
-     "non-progressive relight with N bounces); -1 = off (converged)", "N", NULL},
+     "non-progressive relight with N bounces); -1 = off (converged)",
+     "N", NULL},
     {"bound-rays", LC_OPT_INT, OFF(bound_rays), 0, 1 << 20, "4096", NULL,
      "[fidelity] also report the lossless-transport bound: each texel gathered from the surfels its N probe rays "
-     "hit (the engine's B, no links); 0 = off", "N", NULL},
+     "hit (the engine's B, no links); 0 = off",
+     "N", NULL},
     {"quiet", LC_OPT_BOOL, OFF(quiet), 0, 1, "false", NULL, "no progress output", NULL, NULL},
     {NULL, 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL},
 };
@@ -90,9 +93,10 @@ static void usage(FILE *out) {
             "         relight with the engine to convergence and compare (renders the reference if absent)\n\n"
             "options:\n");
     lc_opt_help(ref_options, out);
-    fprintf(out, "\nerrors are |Y_a - Y_r| / Y_r on luminance per texel that owns its cache, over texels above\n"
-                 "--threshold x the brightest; grid cells: sum over 14 directions of |dE| / sum of E.\n"
-                 "exit codes: 0 ok, 1 failure, 2 usage error\n");
+    fprintf(out,
+            "\nerrors are |Y_a - Y_r| / Y_r on luminance per texel that owns its cache, over texels above\n"
+            "--threshold x the brightest; grid cells: sum over 14 directions of |dE| / sum of E.\n"
+            "exit codes: 0 ok, 1 failure, 2 usage error\n");
 }
 
 static int parse(ref_opts *o, int argc, char **argv, char **pos, int max_pos) {
@@ -411,8 +415,8 @@ static int cmd_fidelity(int argc, char **argv) {
         if (do_render(pos[0], bake, &st, &o, path, &ref, err, sizeof err) != 0) goto done;
     }
     static const lc_backend_kind kinds[3] = {LC_BACKEND_AUTO, LC_BACKEND_CPU, LC_BACKEND_EGL};
-    if (lc_ref_engine_converge(bake, &st.st, kinds[o.backend], o.threads, o.tol, (uint32_t)o.max_relights, o.bounce_limit,
-                               &run, err, sizeof err) != 0)
+    if (lc_ref_engine_converge(bake, &st.st, kinds[o.backend], o.threads, o.tol, (uint32_t)o.max_relights,
+                               o.bounce_limit, &run, err, sizeof err) != 0)
         goto done;
     printf("engine (%s): %u relights to converge (last change %.2e), first relight %.1f ms\n", run.backend,
            run.relights, run.last_change, run.ms_first);
@@ -444,7 +448,8 @@ static int cmd_fidelity(int argc, char **argv) {
             const lc_lcb_cache *ca = &v->caches[c];
             uint32_t i = ca->index;
             if (i >= (uint32_t)(v->lightmap_width * v->lightmap_height)) continue;
-            double yr = lc_ref_luminance(ref.lightmap + 3 * (size_t)i), ya = lc_ref_luminance(run.lightmap + 3 * (size_t)i);
+            double yr = lc_ref_luminance(ref.lightmap + 3 * (size_t)i),
+                   ya = lc_ref_luminance(run.lightmap + 3 * (size_t)i);
             fprintf(csv, "%u,%u,%u,%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%d,%.6g,%.6g,%.6g,%.6g\n", c, i % v->lightmap_width,
                     i / v->lightmap_width, ca->position[0], ca->position[1], ca->position[2], ca->normal[0],
                     ca->normal[1], ca->normal[2], (ca->flags & LC_CACHE_MOVED) != 0, yr,

@@ -16,15 +16,15 @@
 typedef struct tcpu {
     const lc_lcb_view *v;
     uint32_t cells;
-    uint32_t coeff_cap;  /* bands^2 the buffers are sized for */
+    uint32_t coeff_cap;       /* bands^2 the buffers are sized for */
     lc_transport_outputs out; /* what the frame publishes; cache SH at a stride of coeff_cap */
-    float *e_ind;        /* n_surfels*3, kept across runs for progressive feedback */
-    uint8_t *feedback_cache; /* per cache: some surfel reads it */
-    uint32_t *feedback_list; /* those caches */
+    float *e_ind;             /* n_surfels*3, kept across runs for progressive feedback */
+    uint8_t *feedback_cache;  /* per cache: some surfel reads it */
+    uint32_t *feedback_list;  /* those caches */
     uint32_t n_feedback;
-    float *texel_w;          /* n_texel_caches*links_per_cache*3: tcpu_texel_weights */
+    float *texel_w; /* n_texel_caches*links_per_cache*3: tcpu_texel_weights */
     float cone[256][8];
-    int threads;             /* the parallel-for's workers: the engine's setting */
+    int threads; /* the parallel-for's workers: the engine's setting */
 } tcpu;
 
 static void tcpu_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out);
@@ -52,8 +52,7 @@ static void *tcpu_create(const lc_lcb_view *v, int threads, char *err, size_t er
     t->feedback_cache = calloc(v->n_caches ? v->n_caches : 1, 1);
     t->feedback_list = calloc(v->n_caches ? v->n_caches : 1, sizeof(uint32_t));
     t->texel_w = malloc(((size_t)v->n_texel_caches * v->links_per_cache * 3 + 1) * sizeof(float));
-    if (!t->e_ind || !t->feedback_cache || !t->feedback_list || !t->texel_w)
-        goto oom;
+    if (!t->e_ind || !t->feedback_cache || !t->feedback_list || !t->texel_w) goto oom;
     for (uint32_t s = 0; s < v->n_surfels; s++)
         if (v->surfels[s].cache != LC_NONE) t->feedback_cache[v->surfels[s].cache] = 1;
     for (uint32_t c = 0; c < v->n_caches; c++)
@@ -94,9 +93,9 @@ typedef struct {
     tcpu *t;
     const uint32_t *list; /* cache indices, or NULL = all caches */
     int bands, chroma_bands;
-    int chroma;           /* flux is YCoCg: Co/Cg use chroma_bands only */
-    int texel_bands;      /* bands gathered at texel caches (see lc_transport_texel_bands) */
-    int texel_band1;      /* texel caches: band 1 from the precomputed weights (lc_transport_texel_band1) */
+    int chroma;      /* flux is YCoCg: Co/Cg use chroma_bands only */
+    int texel_bands; /* bands gathered at texel caches (see lc_transport_texel_bands) */
+    int texel_band1; /* texel caches: band 1 from the precomputed weights (lc_transport_texel_band1) */
 } tcpu_gather_job;
 
 static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
@@ -150,8 +149,8 @@ static void tcpu_texel_weights(const lc_lcb_view *v, const float cone[256][8], f
  * arrays so the octahedral decode, the SH basis and the accumulation vectorise; per-lane
  * partial sums avoid float reductions (which the compiler may not reorder). Built for AVX2
  * and a baseline, chosen at load time. Writes acc[channel][coefficient]. */
-TCPU_CLONES static void
-tcpu_gather_blocked(const tcpu *t, const lc_lcb_link *lk, uint32_t used, int bands, int ncc, float acc[3][16]) {
+TCPU_CLONES static void tcpu_gather_blocked(const tcpu *t, const lc_lcb_link *lk, uint32_t used, int bands, int ncc,
+                                            float acc[3][16]) {
     float lane[3][16][TCPU_BLOCK];
     memset(lane, 0, sizeof lane);
     const int nc = bands * bands;
@@ -260,9 +259,9 @@ static void tcpu_gather_texel(const tcpu *t, const lc_lcb_link *lk, const float 
 /* Any bands (1..8): one link at a time through the generic SH evaluation. */
 static void tcpu_gather_generic(const tcpu *t, const lc_lcb_link *lk, uint32_t used, int bands, int ncc,
                                 float acc[3][TCPU_MAX_COEFFS]) {
-    static const int band_of[TCPU_MAX_COEFFS] = {
-        0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5,
-        5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7};
+    static const int band_of[TCPU_MAX_COEFFS] = {0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4,
+                                                 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6,
+                                                 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7};
     const int nc = bands * bands;
     memset(acc, 0, 3 * TCPU_MAX_COEFFS * sizeof(float));
     for (uint32_t k = 0; k < used; k++) {
@@ -343,8 +342,7 @@ static inline void tcpu_irradiance(const float *sh, int bands, int texel, const 
             return;
         }
         const float w = (float)(4.0 * M_PI / 3.0);
-        for (int k = 0; k < 3; k++)
-            e[k] = fmaxf(0.0f, w * (sh[3 + k] * y[1] + sh[6 + k] * y[2] + sh[9 + k] * y[3]));
+        for (int k = 0; k < 3; k++) e[k] = fmaxf(0.0f, w * (sh[3 + k] * y[1] + sh[6 + k] * y[2] + sh[9 + k] * y[3]));
         return;
     }
     static const float a[3] = {(float)M_PI, (float)(2.0 * M_PI / 3.0), (float)(M_PI / 4.0)};
@@ -451,9 +449,9 @@ static int tcpu_lightmap(tcpu *t, const lc_engine_settings *st, char *err, size_
 /* Grid: cosine-convolved L2 irradiance SH per sample. */
 static void tcpu_grid(tcpu *t, int bands) {
     const lc_lcb_view *v = t->v;
-    static const float a[9] = {(float)M_PI, (float)(2 * M_PI / 3), (float)(2 * M_PI / 3), (float)(2 * M_PI / 3),
-                               (float)(M_PI / 4), (float)(M_PI / 4), (float)(M_PI / 4), (float)(M_PI / 4),
-                               (float)(M_PI / 4)};
+    static const float a[9] = {(float)M_PI,           (float)(2 * M_PI / 3), (float)(2 * M_PI / 3),
+                               (float)(2 * M_PI / 3), (float)(M_PI / 4),     (float)(M_PI / 4),
+                               (float)(M_PI / 4),     (float)(M_PI / 4),     (float)(M_PI / 4)};
     int nc9 = bands >= 3 ? 9 : bands * bands;
     for (uint32_t i = 0; i < t->cells; i++) {
         uint32_t c = v->grid[i];
@@ -497,8 +495,13 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
         double t3 = lc_clock_ms();
         ms_pull += t3 - t2;
         /* Intermediate passes only need the caches some surfel reads. */
-        tcpu_gather_job job = {t, last ? NULL : t->feedback_list, bands, (int)st->chroma_bands, chroma,
-                               lc_transport_texel_bands(st), lc_transport_texel_band1(st)};
+        tcpu_gather_job job = {t,
+                               last ? NULL : t->feedback_list,
+                               bands,
+                               (int)st->chroma_bands,
+                               chroma,
+                               lc_transport_texel_bands(st),
+                               lc_transport_texel_band1(st)};
         lc_parallel_for(t->threads, last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
         double t4 = lc_clock_ms();
         ms_gather += t4 - t3;

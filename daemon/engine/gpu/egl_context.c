@@ -99,7 +99,7 @@ static int tgl_try_display(lc_egl_context *c, EGLDisplay dpy, const char *how, i
     /* Configless + surfaceless is the normal path; old drivers get a config and a pbuffer. */
     EGLConfig cfg = EGL_NO_CONFIG_KHR;
     int configless = epoxy_has_egl_extension(dpy, "EGL_KHR_no_config_context") ||
-                     epoxy_has_egl_extension(dpy, "EGL_MESA_configless_context");
+        epoxy_has_egl_extension(dpy, "EGL_MESA_configless_context");
     int surfaceless = epoxy_has_egl_extension(dpy, "EGL_KHR_surfaceless_context");
     if (!configless || !surfaceless) {
         const EGLint want[] = {EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT, EGL_NONE};
@@ -110,9 +110,15 @@ static int tgl_try_display(lc_egl_context *c, EGLDisplay dpy, const char *how, i
         }
     }
     const int use_debug = epoxy_egl_version(dpy) >= 15;
-    EGLint attrs[] = {EGL_CONTEXT_MAJOR_VERSION, 4, EGL_CONTEXT_MINOR_VERSION, 3, EGL_CONTEXT_OPENGL_PROFILE_MASK,
-                      EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, use_debug ? EGL_CONTEXT_OPENGL_DEBUG : EGL_NONE,
-                      EGL_TRUE, EGL_NONE};
+    EGLint attrs[] = {EGL_CONTEXT_MAJOR_VERSION,
+                      4,
+                      EGL_CONTEXT_MINOR_VERSION,
+                      3,
+                      EGL_CONTEXT_OPENGL_PROFILE_MASK,
+                      EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+                      use_debug ? EGL_CONTEXT_OPENGL_DEBUG : EGL_NONE,
+                      EGL_TRUE,
+                      EGL_NONE};
     c->ctx = eglCreateContext(dpy, cfg, EGL_NO_CONTEXT, attrs);
     if (c->ctx == EGL_NO_CONTEXT && use_debug) { /* some drivers refuse debug contexts */
         attrs[6] = EGL_NONE;

@@ -24,18 +24,14 @@ const char *lc_gl_shader_source(const char *name) {
  * unless out of memory. */
 static char *tgl_info_log(GLuint obj, int is_program) {
     GLint len = 0;
-    if (is_program)
-        glGetProgramiv(obj, GL_INFO_LOG_LENGTH, &len);
-    else
-        glGetShaderiv(obj, GL_INFO_LOG_LENGTH, &len);
+    if (is_program) glGetProgramiv(obj, GL_INFO_LOG_LENGTH, &len);
+    else glGetShaderiv(obj, GL_INFO_LOG_LENGTH, &len);
     char *log = malloc((size_t)(len > 0 ? len : 1) + 1);
     if (!log) return NULL;
     log[0] = 0;
     if (len > 0) {
-        if (is_program)
-            glGetProgramInfoLog(obj, len, NULL, log);
-        else
-            glGetShaderInfoLog(obj, len, NULL, log);
+        if (is_program) glGetProgramInfoLog(obj, len, NULL, log);
+        else glGetShaderInfoLog(obj, len, NULL, log);
     }
     /* Trailing newlines make ugly one-line errors. */
     for (size_t n = strlen(log); n > 0 && (log[n - 1] == '\n' || log[n - 1] == ' '); n--) log[n - 1] = 0;
@@ -100,7 +96,7 @@ GLuint lc_gl_compile_program(const char *name, const char *src, char *err, size_
 GLuint lc_gl_buffer(size_t bytes, const void *data, const char *what, char *err, size_t errlen) {
     GLuint b = 0;
     size_t alloc = bytes < 16 ? 16 : bytes; /* a zero-size range cannot be bound */
-    while (glGetError() != GL_NO_ERROR) { /* errors of earlier calls are not ours */
+    while (glGetError() != GL_NO_ERROR) {   /* errors of earlier calls are not ours */
     }
     glCreateBuffers(1, &b);
     glNamedBufferStorage(b, (GLsizeiptr)alloc, NULL, GL_DYNAMIC_STORAGE_BIT);

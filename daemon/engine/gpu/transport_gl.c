@@ -56,7 +56,7 @@ _Static_assert(sizeof(lc_lcb_link) == 12, "links are uploaded as mapped");
 
 enum { TGL_RADIOSITY, TGL_PULL, TGL_CHROMA, TGL_FEEDBACK, TGL_LIGHTMAP, TGL_GRID, TGL_OBJECTS, TGL_N_PROGS };
 static const char *const tgl_prog_names[TGL_N_PROGS] = {"radiosity", "pull", "chroma", "feedback",
-                                                        "lightmap", "grid", "objects"};
+                                                        "lightmap",  "grid", "objects"};
 
 typedef struct tgl {
     const lc_lcb_view *v;
@@ -64,7 +64,7 @@ typedef struct tgl {
     int lost;            /* a run saw a lost context: every later run fails fast */
     uint32_t cells;
     size_t texels;
-    uint32_t chunk;      /* caches per gather window */
+    uint32_t chunk; /* caches per gather window */
     GLuint prog[TGL_N_PROGS];
     GLuint gather[LC_SH_MAX_BANDS + 1][LC_SH_MAX_BANDS + 1]; /* [bands][Co/Cg bands], compiled on first use */
     /* Static (create): */
@@ -89,10 +89,10 @@ static void tgl_release(void *impl) {
         for (int b = 0; b <= LC_SH_MAX_BANDS; b++)
             for (int c = 0; c <= LC_SH_MAX_BANDS; c++)
                 if (t->gather[b][c]) glDeleteProgram(t->gather[b][c]);
-        GLuint bufs[] = {t->b_surfels, t->b_nodes,     t->b_links,   t->b_caches, t->b_lm_index, t->b_grid_index,
-                         t->b_cone,    t->b_shk,       t->b_list,    t->b_b0,     t->b_radiosity, t->b_e_ind,
-                         t->b_flux,    t->b_cache_sh,  t->b_sh9,     t->b_lightmap, t->b_grid_sh, t->b_obj_pos,
-                         t->b_obj_sh};
+        GLuint bufs[] = {t->b_surfels,    t->b_nodes,   t->b_links,   t->b_caches,   t->b_lm_index,
+                         t->b_grid_index, t->b_cone,    t->b_shk,     t->b_list,     t->b_b0,
+                         t->b_radiosity,  t->b_e_ind,   t->b_flux,    t->b_cache_sh, t->b_sh9,
+                         t->b_lightmap,   t->b_grid_sh, t->b_obj_pos, t->b_obj_sh};
         glDeleteBuffers((GLsizei)(sizeof bufs / sizeof bufs[0]), bufs); /* 0 names are ignored */
         if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
     }
@@ -251,8 +251,8 @@ err:
 /* The links as mapped, the lightmap and grid indices and the cone table. */
 static int tgl_upload_tables(tgl *t, char *err, size_t errlen) {
     const lc_lcb_view *v = t->v;
-    if (!(t->b_links = lc_gl_buffer((size_t)v->n_caches * v->links_per_cache * sizeof(lc_lcb_link), v->links,
-                                    "links", err, errlen)))
+    if (!(t->b_links = lc_gl_buffer((size_t)v->n_caches * v->links_per_cache * sizeof(lc_lcb_link), v->links, "links",
+                                    err, errlen)))
         return -1;
     if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) return -1;
     if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) return -1;
@@ -531,8 +531,7 @@ static int tgl_objects(tgl *t, const lc_transport_input *in, char *err, size_t e
 /* Reads every output back into the host arrays, each read timed into its stage's rb[]; the
  * cache SH goes from the GPU's stride of bands^2 to the frame's LC_SH_MAX_COEFFS (as the CPU
  * backend's). -1 with err out of memory for the SH lightmap. */
-static int tgl_read_back(tgl *t, const lc_transport_input *in, double rb[LC_STAGE_COUNT], char *err,
-                         size_t errlen) {
+static int tgl_read_back(tgl *t, const lc_transport_input *in, double rb[LC_STAGE_COUNT], char *err, size_t errlen) {
     const lc_lcb_view *v = t->v;
     const size_t nc = (size_t)in->settings.bands * in->settings.bands;
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT); /* shader writes must be visible to buffer reads */

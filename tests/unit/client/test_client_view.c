@@ -37,7 +37,8 @@ static size_t put_texel(uint8_t *p, int enc, const float rgb[3]) {
     return 12;
 }
 
-static size_t lightmap_frame(int enc, int key, uint64_t seq, uint64_t rev, int gen, const uint32_t *tiles, uint32_t nt) {
+static size_t lightmap_frame(int enc, int key, uint64_t seq, uint64_t rev, int gen, const uint32_t *tiles,
+                             uint32_t nt) {
     lc_frame_header h;
     memset(&h, 0, sizeof h);
     h.version = 1;
@@ -198,10 +199,12 @@ static void test_lightmap_residual(void) {
         /* an inflated residual one texel short: malformed, and the view is unchanged */
         const int held7[3] = {7, 7, 7};
         n = residual_frame(enc, 5, 14, held7, 9, t125, 3, lc_frame_texel_bytes((lc_encoding)enc));
-        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == -1 && strstr(err, "inflate"), "short: %s", err);
+        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == -1 && strstr(err, "inflate"), "short: %s",
+              err);
         n = residual_frame(enc, 5, 14, held7, 9, t125, 3, 0);
         err[0] = 0;
-        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == 0 && lightmap_error(&f, 0, 9, t125, 3) <= tol[enc],
+        CHECK(lc_client_view_apply(v, frame_buf, n, &f, err, sizeof err) == 0 &&
+                  lightmap_error(&f, 0, 9, t125, 3) <= tol[enc],
               "the view was unchanged by the bad frame: %s", err);
         lc_client_view_release(v);
     }
@@ -212,7 +215,8 @@ static void test_lightmap_residual(void) {
     CHECK(lc_client_view_apply(v, frame_buf, n, NULL, err, sizeof err) == 0, "f32 keyframe");
     const uint32_t t1[1] = {1};
     n = residual_frame(LC_ENC_RGB9E5, 2, 2, (const int[1]){0}, 1, t1, 1, 0);
-    CHECK(lc_client_view_apply(v, frame_buf, n, NULL, err, sizeof err) == -2 && strstr(err, "copy"), "encoding switch: %s", err);
+    CHECK(lc_client_view_apply(v, frame_buf, n, NULL, err, sizeof err) == -2 && strstr(err, "copy"),
+          "encoding switch: %s", err);
     lc_client_view_release(v);
 }
 

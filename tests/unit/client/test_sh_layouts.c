@@ -76,9 +76,9 @@ static void make_fields(void) {
     add_constant(f, 1, 0.5);
     add_constant(f, 2, 2.0);
 
-    static const double dirs[][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0},  {0, -1, 0},  {0, 0, 1},
-                                     {0, 0, -1}, {1, 2, 3}, {-2, 1, -0.5}, {0.3, -1, 0.8}, {1, 1, 0},
-                                     {-1, 0, 1}, {0, -1, -1}, {-3, -1, 2}, {2, -3, -1}};
+    static const double dirs[][3] = {{1, 0, 0},  {-1, 0, 0},  {0, 1, 0},     {0, -1, 0},     {0, 0, 1},
+                                     {0, 0, -1}, {1, 2, 3},   {-2, 1, -0.5}, {0.3, -1, 0.8}, {1, 1, 0},
+                                     {-1, 0, 1}, {0, -1, -1}, {-3, -1, 2},   {2, -3, -1}};
     static char names[14][64];
     for (int k = 0; k < 14; k++) {
         f = &fields[n_fields++];
@@ -173,10 +173,9 @@ static void threejs_getIrradianceAt(const float c[27], const double n[3], double
     const double x = n[0], y = n[1], z = n[2];
     for (int ch = 0; ch < 3; ch++) {
         const float *k = c + ch;
-        out[ch] = k[0] * 0.886227 + k[3] * 2.0 * 0.511664 * y + k[6] * 2.0 * 0.511664 * z +
-                  k[9] * 2.0 * 0.511664 * x + k[12] * 2.0 * 0.429043 * x * y + k[15] * 2.0 * 0.429043 * y * z +
-                  k[18] * (0.743125 * z * z - 0.247708) + k[21] * 2.0 * 0.429043 * x * z +
-                  k[24] * 0.429043 * (x * x - y * y);
+        out[ch] = k[0] * 0.886227 + k[3] * 2.0 * 0.511664 * y + k[6] * 2.0 * 0.511664 * z + k[9] * 2.0 * 0.511664 * x +
+            k[12] * 2.0 * 0.429043 * x * y + k[15] * 2.0 * 0.429043 * y * z + k[18] * (0.743125 * z * z - 0.247708) +
+            k[21] * 2.0 * 0.429043 * x * z + k[24] * 0.429043 * (x * x - y * y);
     }
 }
 
@@ -251,15 +250,15 @@ static void unity_hdrp_radiance_form(const float sh[27], float out[27]) {
  * which is multiplied by the albedo ("the lambertian diffuse BRDF term (1/pi) is baked into"
  * the factors): E / pi. */
 static void arcore_hello_ar(const float coefficients[27], const double n[3], double out[3]) {
-    static const double factors[9] = {0.282095, -0.325735, 0.325735, -0.325735, 0.273137,
-                                      -0.273137, 0.078848, -0.273137, 0.136569};
+    static const double factors[9] = {0.282095,  -0.325735, 0.325735,  -0.325735, 0.273137,
+                                      -0.273137, 0.078848,  -0.273137, 0.136569};
     double c[27];
     for (int i = 0; i < 27; i++) c[i] = coefficients[i] * factors[i / 3];
     const double x = n[0], y = n[1], z = n[2];
     for (int ch = 0; ch < 3; ch++) {
         const double *k = c + ch;
         double r = k[0] + k[3] * y + k[6] * z + k[9] * x + k[12] * (y * x) + k[15] * (y * z) +
-                   k[18] * (3.0 * z * z - 1.0) + k[21] * (z * x) + k[24] * (x * x - y * y);
+            k[18] * (3.0 * z * z - 1.0) + k[21] * (z * x) + k[24] * (x * x - y * y);
         out[ch] = r > 0 ? r : 0;
     }
 }
@@ -278,8 +277,8 @@ typedef void (*frame_fn)(const double n[3], double out[3]);
 
 /* Worst |scale * P(map(n)) - E_lucent(n)| / max(E_lucent(n), floor * the field's peak) over
  * normals and channels, both clamped at 0. *at gets the normal index of the worst. */
-static double worst_error(const float e[27], convert_fn conv, eval_fn eval, frame_fn map, double scale,
-                          double floor, int *at) {
+static double worst_error(const float e[27], convert_fn conv, eval_fn eval, frame_fn map, double scale, double floor,
+                          int *at) {
     float conv_out[27];
     conv(e, conv_out);
     double peak = 0, ref[N_NORMALS][3];
@@ -309,8 +308,8 @@ static double worst_error(const float e[27], convert_fn conv, eval_fn eval, fram
 }
 
 /* One platform over every field; returns the worst error and checks it against TOL. */
-static double check_platform(const char *platform, const float *received, convert_fn conv, eval_fn eval,
-                             frame_fn map, double scale) {
+static double check_platform(const char *platform, const float *received, convert_fn conv, eval_fn eval, frame_fn map,
+                             double scale) {
     double all = 0;
     for (int f = 0; f < n_fields; f++) {
         int at = 0;
@@ -398,10 +397,10 @@ int main(void) {
         CHECK_NEAR(rgb[2], PI * 2.0, 1e-5);
     }
 
-    check_platform("three.js SphericalHarmonics3.getIrradianceAt", received, lc_sh9_to_threejs,
-                   threejs_getIrradianceAt, identity, 1.0);
-    check_platform("Unity SphericalHarmonicsL2 -> ShadeSH9 (x pi)", received, lc_sh9_to_unity, unity_ShadeSH9,
-                   to_unity, PI);
+    check_platform("three.js SphericalHarmonics3.getIrradianceAt", received, lc_sh9_to_threejs, threejs_getIrradianceAt,
+                   identity, 1.0);
+    check_platform("Unity SphericalHarmonicsL2 -> ShadeSH9 (x pi)", received, lc_sh9_to_unity, unity_ShadeSH9, to_unity,
+                   PI);
     check_unity_radiance(received);
     check_platform("ARCore hello_ar environmental_hdr (x pi)", received, lc_sh9_to_arcore, arcore_hello_ar, identity,
                    PI);
@@ -442,8 +441,9 @@ int main(void) {
     double old_u_raw = worst_over_fields(received, old_unity, unity_ShadeSH9, to_unity, 1.0);
     double old_u_same_axes = worst_over_fields(received, lc_sh9_to_unity, unity_ShadeSH9, identity, PI);
     double old_a = worst_over_fields(received, old_arcore, arcore_hello_ar, identity, PI);
-    fprintf(stderr, "of the peak: old Unity (planar radiance form) %.0f%% (ShadeSH9 x pi), %.0f%% (ShadeSH9 "
-                    "read as E); Unity without the x mirror %.0f%%; old ARCore (radiance form) %.0f%%\n",
+    fprintf(stderr,
+            "of the peak: old Unity (planar radiance form) %.0f%% (ShadeSH9 x pi), %.0f%% (ShadeSH9 "
+            "read as E); Unity without the x mirror %.0f%%; old ARCore (radiance form) %.0f%%\n",
             100 * old_u, 100 * old_u_raw, 100 * old_u_same_axes, 100 * old_a);
     CHECK(old_u > 0.1 && old_u_raw > 0.1, "old Unity layout must fail: %g %g", old_u, old_u_raw);
     CHECK(old_u_same_axes > 0.1, "Unity without the handedness change must fail: %g", old_u_same_axes);

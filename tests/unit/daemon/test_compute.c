@@ -116,7 +116,8 @@ int main(void) {
             nanosleep(&ts, NULL);
         }
         CHECK(lc_compute_failure(c, &failures, why, sizeof why) == 777 && failures == 1 && strstr(why, "intensity"),
-              "the failed relight is recorded with its revision and cause (%llu: %s)", (unsigned long long)failures, why);
+              "the failed relight is recorded with its revision and cause (%llu: %s)", (unsigned long long)failures,
+              why);
         lc_state_release(&broken);
         s.revision++;
         CHECK(lc_compute_submit(c, &s, NULL) == 0, "submit a good state");

@@ -47,8 +47,7 @@ static lc_frames_job lightmap_job(const lc_published *p, uint64_t pub_seq, uint6
 }
 
 /* Parses the frame the copy holds; returns its payload (NULL on a bad frame). */
-static const uint8_t *parse(const lc_frames_copy *cp, size_t n, size_t pre, lc_frame_header *h,
-                            const uint8_t **tiles) {
+static const uint8_t *parse(const lc_frames_copy *cp, size_t n, size_t pre, lc_frame_header *h, const uint8_t **tiles) {
     const uint8_t *payload = NULL;
     lc_proto_error e;
     if (lc_frame_parse(cp->out + pre, n, h, tiles, &payload, &e) != 0) {
@@ -168,8 +167,8 @@ int main(void) {
     }
 
     /* 6. the SH grid frame carries the floats (f32) */
-    lc_frames_job g = {.frame = &p1, .pub_seq = 1, .stream = LC_STREAM_SHGRID, .enc = LC_ENC_F32, .sequence = 1,
-                       .pre = 16};
+    lc_frames_job g = {
+        .frame = &p1, .pub_seq = 1, .stream = LC_STREAM_SHGRID, .enc = LC_ENC_F32, .sequence = 1, .pre = 16};
     n = lc_frames_encode(f, &a, &g);
     pl = parse(&a, n, g.pre, &h, &tiles);
     CHECK(pl && h.width == 2 && h.payload_length == 2 * 27 * 4 && !memcmp(pl, p1.grid_sh, 2 * 27 * 4),

@@ -77,7 +77,8 @@ int main(void) {
           "batch applies once: %s", e.message);
 
     lc_proto_op d = light_op("d", 1);
-    CHECK(lc_state_apply(&s, &d, 1, 0, &e) == -1 && !strcmp(e.code, "limit_exceeded") && !strcmp(e.pointer, "/light/id"),
+    CHECK(lc_state_apply(&s, &d, 1, 0, &e) == -1 && !strcmp(e.code, "limit_exceeded") &&
+              !strcmp(e.pointer, "/light/id"),
           "light limit: %s %s", e.code, e.pointer);
     lc_proto_op rm = {0};
     rm.type = LC_REQ_LIGHT_REMOVE;

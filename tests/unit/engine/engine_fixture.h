@@ -82,12 +82,12 @@ static inline void fixture_inward_box(char *buf, size_t cap, float s, int n, con
     len += (size_t)snprintf(buf + len, cap - len, "usemtl %s\n", mtl);
     /* Each face: origin o, axes u, w; normal = u x w must point inward. */
     const float faces[6][9] = {
-        {0, 0, 0, 0, 0, 1, 1, 0, 0},  /* floor y=0: u=z, w=x -> z x x = +y */
-        {0, 1, 0, 1, 0, 0, 0, 0, 1},  /* ceiling y=s: u=x, w=z -> x x z = -y */
-        {0, 0, 0, 1, 0, 0, 0, 1, 0},  /* back z=0: u=x, w=y -> +z */
-        {0, 0, 1, 0, 1, 0, 1, 0, 0},  /* front z=s: u=y, w=x -> -z */
-        {0, 0, 0, 0, 1, 0, 0, 0, 1},  /* left x=0: u=y, w=z -> +x */
-        {1, 0, 0, 0, 0, 1, 0, 1, 0},  /* right x=s: u=z, w=y -> -x */
+        {0, 0, 0, 0, 0, 1, 1, 0, 0}, /* floor y=0: u=z, w=x -> z x x = +y */
+        {0, 1, 0, 1, 0, 0, 0, 0, 1}, /* ceiling y=s: u=x, w=z -> x x z = -y */
+        {0, 0, 0, 1, 0, 0, 0, 1, 0}, /* back z=0: u=x, w=y -> +z */
+        {0, 0, 1, 0, 1, 0, 1, 0, 0}, /* front z=s: u=y, w=x -> -z */
+        {0, 0, 0, 0, 1, 0, 0, 0, 1}, /* left x=0: u=y, w=z -> +x */
+        {1, 0, 0, 0, 0, 1, 0, 1, 0}, /* right x=s: u=z, w=y -> -x */
     };
     for (int f = 0; f < 6; f++) {
         const float *o = faces[f], *u = faces[f] + 3, *w = faces[f] + 6;

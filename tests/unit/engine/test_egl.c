@@ -53,15 +53,16 @@ static double compare_frames(const lc_engine_frame *g, const lc_engine_frame *c,
     size_t nc = (size_t)c->sh_bands * c->sh_bands;
     size_t texels = (size_t)c->lightmap_width * c->lightmap_height;
     size_t cells = (size_t)c->grid_dims[0] * c->grid_dims[1] * c->grid_dims[2];
-#define CMP(name, A, B, rec, stride, used)                                                                   \
-    do {                                                                                                     \
-        m = compare(A, B, rec, stride, used, &w);                                                            \
-        if (m > TOL) fprintf(stderr, "  %s: %s off by %.3g at %zu (egl %.9g, cpu %.9g)\n", label, name, m, w, \
-                             (double)(A)[w], (double)(B)[w]);                                                \
-        if (m > worst) {                                                                                     \
-            worst = m;                                                                                       \
-            worst_name = name;                                                                               \
-        }                                                                                                    \
+#define CMP(name, A, B, rec, stride, used)                                                                           \
+    do {                                                                                                             \
+        m = compare(A, B, rec, stride, used, &w);                                                                    \
+        if (m > TOL)                                                                                                 \
+            fprintf(stderr, "  %s: %s off by %.3g at %zu (egl %.9g, cpu %.9g)\n", label, name, m, w, (double)(A)[w], \
+                    (double)(B)[w]);                                                                                 \
+        if (m > worst) {                                                                                             \
+            worst = m;                                                                                               \
+            worst_name = name;                                                                                       \
+        }                                                                                                            \
     } while (0)
     CHECK(g->sh_bands == c->sh_bands && g->n_caches == c->n_caches && g->lightmap_width == c->lightmap_width &&
               g->n_objects == c->n_objects && memcmp(g->grid_dims, c->grid_dims, sizeof g->grid_dims) == 0,
@@ -82,8 +83,8 @@ static double compare_frames(const lc_engine_frame *g, const lc_engine_frame *c,
 }
 
 static void print_stages(const char *label, const lc_engine_frame *fr) {
-    static const char *names[LC_STAGE_COUNT] = {"direct", "bounce", "pull", "gather",
-                                                "lightmap", "grid", "objects", "chroma"};
+    static const char *names[LC_STAGE_COUNT] = {"direct",   "bounce", "pull",    "gather",
+                                                "lightmap", "grid",   "objects", "chroma"};
     fprintf(stderr, "  %-14s", label);
     for (int i = 0; i < LC_STAGE_COUNT; i++) fprintf(stderr, " %s %.2f", names[i], fr->stage_ms[i]);
     fprintf(stderr, " | total %.2f ms\n", fr->total_ms);
@@ -205,8 +206,8 @@ static void test_fuzz(void) {
     /* corners: bit0 x, bit1 y, bit2 z; CCW seen from outside */
     static const int quads[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}};
     for (int q = 0; q < 6; q++)
-        len += (size_t)snprintf(obj + len, sizeof obj - len, "f %d %d %d %d\n", base + quads[q][0],
-                                base + quads[q][1], base + quads[q][2], base + quads[q][3]);
+        len += (size_t)snprintf(obj + len, sizeof obj - len, "f %d %d %d %d\n", base + quads[q][0], base + quads[q][1],
+                                base + quads[q][2], base + quads[q][3]);
     const char *mtl = "newmtl wall\nKd 0.7 0.7 0.7\nnewmtl block\nKd 0.8 0.2 0.1\nKe 0.2 0.05 0\n";
     /* The dynamic-object asset: a small cube. */
     char asset_path[] = "/tmp/lc_egl_asset_XXXXXX.obj";
@@ -220,8 +221,8 @@ static void test_fuzz(void) {
     fclose(af);
     char asset_arg[128];
     snprintf(asset_arg, sizeof asset_arg, "cube=%s", asset_path);
-    const char *flags[] = {"--quality", "draft", "--surfels", "2048", "--links", "64", "--grid-max-dim", "5",
-                           "--asset", asset_arg, NULL};
+    const char *flags[] = {"--quality",      "draft", "--surfels", "2048",    "--links", "64",
+                           "--grid-max-dim", "5",     "--asset",   asset_arg, NULL};
     fixture f;
     int rc = fixture_bake(&f, obj, mtl, flags);
     unlink(asset_path);
@@ -311,8 +312,8 @@ static void test_fuzz(void) {
     }
     /* Bands above 5 (generic SH recurrence in the shader) once each. */
     for (uint32_t b = 6; b <= LC_SH_MAX_BANDS; b++) {
-        lc_engine_light l = {.type = LC_ENGINE_LIGHT_POINT, .color = {1, 0.8f, 0.6f}, .intensity = 5,
-                             .position = {0.5f, 0.8f, 0.5f}};
+        lc_engine_light l = {
+            .type = LC_ENGINE_LIGHT_POINT, .color = {1, 0.8f, 0.6f}, .intensity = 5, .position = {0.5f, 0.8f, 0.5f}};
         lc_engine_state st = {0};
         st.lights = &l;
         st.n_lights = 1;

@@ -24,8 +24,21 @@ static void test_closed_box(void) {
     obj[0] = 0;
     fixture_inward_box(obj, sizeof obj, 1.0f, 4, "wall", 1);
     const char *mtl = "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n";
-    const char *flags[] = {"--surfels", "4096", "--links", "160", "--atlas-size", "64", "--node-samples", "32",
-                           "--final-samples", "64", "--grid-max-dim", "5", "--bands", "3", NULL};
+    const char *flags[] = {"--surfels",
+                           "4096",
+                           "--links",
+                           "160",
+                           "--atlas-size",
+                           "64",
+                           "--node-samples",
+                           "32",
+                           "--final-samples",
+                           "64",
+                           "--grid-max-dim",
+                           "5",
+                           "--bands",
+                           "3",
+                           NULL};
     fixture f;
     if (fixture_bake(&f, obj, mtl, flags) != 0) {
         CHECK(0, "closed box bake failed");
@@ -60,7 +73,8 @@ static void test_closed_box(void) {
         for (int j = 4; j < 9; j++)
             for (int k = 0; k < 3; k++) {
                 zero_texel &= fr->cache_sh[tc * stride + 3 * j + k] == 0.0f;
-                for (uint32_t g = gc; g < f.v->n_caches; g++) band2_grid |= fr->cache_sh[(size_t)g * stride + 3 * j + k] != 0.0f;
+                for (uint32_t g = gc; g < f.v->n_caches; g++)
+                    band2_grid |= fr->cache_sh[(size_t)g * stride + 3 * j + k] != 0.0f;
             }
         for (int j = 1; j < 4; j++) band1 |= fr->cache_sh[tc * stride + 3 * j] != 0.0f;
         CHECK(zero_texel && band1 && band2_grid, "texel band limit: zeros above band 1 %d, band 1 %d, grid band 2 %d",
@@ -143,14 +157,26 @@ static double patch_irradiance(const float p[3], double L, double a, double cx, 
 }
 
 static void test_patch_form_factor(void) {
-    const char *obj =
-        "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n"
-        "usemtl lamp\nv -0.15 1 -0.15\nv 0.15 1 -0.15\nv 0.15 1 0.15\nv -0.15 1 0.15\nf 5 6 7 8\n";
+    const char *obj = "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n"
+                      "usemtl lamp\nv -0.15 1 -0.15\nv 0.15 1 -0.15\nv 0.15 1 0.15\nv -0.15 1 0.15\nf 5 6 7 8\n";
     const char *mtl = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 10 10 10\n";
     /* The patch is "near" for most floor texels (its bounding sphere spans > 8 probe rays),
      * so its solid angle comes from probe-ray counts: per-texel noise falls as 1/sqrt(rays). */
-    const char *flags[] = {"--surfels", "8192", "--links", "128", "--atlas-size", "64", "--node-samples", "16",
-                           "--final-samples", "64", "--grid-max-dim", "4", "--probe-rays", "4096", NULL};
+    const char *flags[] = {"--surfels",
+                           "8192",
+                           "--links",
+                           "128",
+                           "--atlas-size",
+                           "64",
+                           "--node-samples",
+                           "16",
+                           "--final-samples",
+                           "64",
+                           "--grid-max-dim",
+                           "4",
+                           "--probe-rays",
+                           "4096",
+                           NULL};
     fixture f;
     if (fixture_bake(&f, obj, mtl, flags) != 0) {
         CHECK(0, "patch bake failed");
@@ -183,11 +209,13 @@ static void test_patch_form_factor(void) {
 static void test_lights_and_occlusion(void) {
     /* Floor plus a closed, outward-facing box (0.4 m) standing on it at the origin. */
     static char obj[1 << 14];
-    int len = snprintf(obj, sizeof obj, "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\nusemtl box\n");
+    int len =
+        snprintf(obj, sizeof obj, "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\nusemtl box\n");
     const float b = 0.2f, h = 0.4f;
     float cv[8][3] = {{-b, 0.01f, -b}, {b, 0.01f, -b}, {b, h, -b}, {-b, h, -b},
                       {-b, 0.01f, b},  {b, 0.01f, b},  {b, h, b},  {-b, h, b}};
-    for (int i = 0; i < 8; i++) len += snprintf(obj + len, sizeof obj - len, "v %g %g %g\n", cv[i][0], cv[i][1], cv[i][2]);
+    for (int i = 0; i < 8; i++)
+        len += snprintf(obj + len, sizeof obj - len, "v %g %g %g\n", cv[i][0], cv[i][1], cv[i][2]);
     /* outward CCW faces (vertices 5..12) */
     len += snprintf(obj + len, sizeof obj - len,
                     "f 5 8 7 6\nf 9 10 11 12\nf 5 6 10 9\nf 8 12 11 7\nf 5 9 12 8\nf 6 7 11 10\n");
@@ -198,7 +226,8 @@ static void test_lights_and_occlusion(void) {
         CHECK(0, "occluder bake failed");
         return;
     }
-    lc_engine_light light = {.type = LC_ENGINE_LIGHT_POINT, .color = {1, 1, 1}, .intensity = 5, .position = {0, 0.2f, 0}};
+    lc_engine_light light = {
+        .type = LC_ENGINE_LIGHT_POINT, .color = {1, 1, 1}, .intensity = 5, .position = {0, 0.2f, 0}};
     lc_engine_state st = {0};
     st.settings = lc_engine_default_settings(f.bake);
     st.settings.bounces = 0;
@@ -212,8 +241,8 @@ static void test_lights_and_occlusion(void) {
     double lit = 0;
     for (uint32_t s = 0; s < f.v->n_surfels; s++) {
         const lc_lcb_surfel *sf = &f.v->surfels[s];
-        int inside_box_wall = fabsf(sf->position[0]) <= b + 1e-3f && fabsf(sf->position[2]) <= b + 1e-3f &&
-                              sf->position[1] <= h + 1e-3f;
+        int inside_box_wall =
+            fabsf(sf->position[0]) <= b + 1e-3f && fabsf(sf->position[2]) <= b + 1e-3f && sf->position[1] <= h + 1e-3f;
         if (!inside_box_wall) lit += fr->surfel_radiosity[3 * s];
     }
     CHECK(lit == 0, "hidden light: surfels outside the box got radiosity %g", lit);

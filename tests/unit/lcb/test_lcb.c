@@ -14,9 +14,25 @@
 #include "util/fsutil.h"
 #include "util/half.h"
 
-enum { N_MAT = 2, N_VERT = 4, N_TRI = 2, N_SURF = 4, N_NODE = 7, N_LEVL = 4, N_TEXEL = 5, N_CELL = 8,
-       N_CACHE = N_TEXEL + N_CELL, LM_W = 4, LM_H = 4, PER_CACHE = 2, N_LINK = N_CACHE * PER_CACHE,
-       LSH = 2, N_LKSH = N_LINK * LSH * LSH, N_AVRT = 3, N_ATRI = 1 };
+enum {
+    N_MAT = 2,
+    N_VERT = 4,
+    N_TRI = 2,
+    N_SURF = 4,
+    N_NODE = 7,
+    N_LEVL = 4,
+    N_TEXEL = 5,
+    N_CELL = 8,
+    N_CACHE = N_TEXEL + N_CELL,
+    LM_W = 4,
+    LM_H = 4,
+    PER_CACHE = 2,
+    N_LINK = N_CACHE * PER_CACHE,
+    LSH = 2,
+    N_LKSH = N_LINK * LSH * LSH,
+    N_AVRT = 3,
+    N_ATRI = 1
+};
 
 typedef struct bake {
     lc_lcb_material mat[N_MAT];
@@ -33,10 +49,10 @@ typedef struct bake {
     lc_lcb_asset asset[1];
     lc_lcb_asset_vertex avrt[N_AVRT];
     uint32_t aidx[3 * N_ATRI];
-    char *meta;          /* JSON text (malloc'd) */
+    char *meta; /* JSON text (malloc'd) */
     int with_lksh, with_assets;
-    int skip;            /* index into section order to leave out, or -1 */
-    int extra;           /* add an unknown "XTRA" section */
+    int skip;  /* index into section order to leave out, or -1 */
+    int extra; /* add an unknown "XTRA" section */
 } bake;
 
 static char tmpdir[256];
@@ -113,8 +129,8 @@ static void bake_init(bake *b) {
         s->reserved = 0;
     }
     /* BFS: 0 = root [0,4) -> 1 [0,2), 2 [2,4) -> leaves 3..6 = surfels 0..3. */
-    static const uint32_t child[N_NODE][2] = {{1, 2}, {3, 4}, {5, 6}, {LC_NONE, LC_NONE}, {LC_NONE, LC_NONE},
-                                              {LC_NONE, LC_NONE}, {LC_NONE, LC_NONE}};
+    static const uint32_t child[N_NODE][2] = {
+        {1, 2}, {3, 4}, {5, 6}, {LC_NONE, LC_NONE}, {LC_NONE, LC_NONE}, {LC_NONE, LC_NONE}, {LC_NONE, LC_NONE}};
     static const uint32_t first[N_NODE] = {0, 0, 2, 0, 1, 2, 3}, count[N_NODE] = {4, 2, 2, 1, 1, 1, 1};
     for (int i = 0; i < N_NODE; i++) {
         lc_lcb_node *n = &b->node[i];
@@ -329,9 +345,8 @@ static void test_round_trip(void) {
     CHECK(v->version_major == 1 && v->version_minor == 0, "version %u.%u", v->version_major, v->version_minor);
     CHECK(v->meta_len == strlen(b.meta) && strcmp(v->meta_json, b.meta) == 0, "META text differs");
     CHECK(v->sh_bands == 2, "sh_bands %u", v->sh_bands);
-#define SAME(ptr, n, arr, cnt)                                                                          \
-    CHECK((n) == (cnt) && (ptr) && memcmp((ptr), (arr), sizeof(arr)) == 0, #arr " differs (count %u)", \
-          (unsigned)(n))
+#define SAME(ptr, n, arr, cnt) \
+    CHECK((n) == (cnt) && (ptr) && memcmp((ptr), (arr), sizeof(arr)) == 0, #arr " differs (count %u)", (unsigned)(n))
     SAME(v->materials, v->n_materials, b.mat, N_MAT);
     SAME(v->vertices, v->n_vertices, b.vert, N_VERT);
     SAME(v->triangles, v->n_triangles, b.tri, N_TRI);
@@ -734,12 +749,12 @@ static cJSON *meta_at(cJSON *m, const char *obj) { return cJSON_GetObjectItem(m,
 
 static void test_semantic(void) {
     bake b;
-#define CASE(label, mutate, s1, s2) \
-    do {                            \
-        bake_init(&b);              \
-        mutate;                     \
+#define CASE(label, mutate, s1, s2)          \
+    do {                                     \
+        bake_init(&b);                       \
+        mutate;                              \
         expect_bake_fail(label, &b, s1, s2); \
-        bake_free(&b);              \
+        bake_free(&b);                       \
     } while (0)
     /* sanity: the base bake and its variants open */
     bake_init(&b);
@@ -820,31 +835,29 @@ static void test_semantic(void) {
     META_CASE("no format", cJSON_DeleteItemFromObject(m, "format"), "META", "/format");
     META_CASE("width 0", cJSON_ReplaceItemInObject(meta_at(m, "lightmap"), "width", cJSON_CreateNumber(0)), "META",
               "/lightmap/width must be an integer in 1..16384");
-    META_CASE("width 4.5", cJSON_ReplaceItemInObject(meta_at(m, "lightmap"), "width", cJSON_CreateNumber(4.5)),
-              "META", "/lightmap/width");
+    META_CASE("width 4.5", cJSON_ReplaceItemInObject(meta_at(m, "lightmap"), "width", cJSON_CreateNumber(4.5)), "META",
+              "/lightmap/width");
     META_CASE("lightmap not object", cJSON_ReplaceItemInObject(m, "lightmap", cJSON_CreateTrue()), "META",
               "/lightmap/width");
     META_CASE("width mismatch", cJSON_ReplaceItemInObject(meta_at(m, "lightmap"), "width", cJSON_CreateNumber(5)),
               "LMAP", "5x4");
     META_CASE("origin 2", cJSON_DeleteItemFromArray(cJSON_GetObjectItem(meta_at(m, "grid"), "origin"), 0), "META",
               "/grid/origin");
-    META_CASE("origin 1e300", cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "origin"), 2,
-                                                       cJSON_CreateNumber(1e300)),
+    META_CASE("origin 1e300",
+              cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "origin"), 2, cJSON_CreateNumber(1e300)),
               "META", "/grid/origin");
     META_CASE("cell 0", cJSON_ReplaceItemInObject(meta_at(m, "grid"), "cell", cJSON_CreateNumber(0)), "META",
               "/grid/cell");
-    META_CASE("dims 0", cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 1,
-                                                 cJSON_CreateNumber(0)),
+    META_CASE("dims 0",
+              cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 1, cJSON_CreateNumber(0)),
               "META", "/grid/dims");
-    META_CASE("dims mismatch", cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 1,
-                                                        cJSON_CreateNumber(3)),
+    META_CASE("dims mismatch",
+              cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 1, cJSON_CreateNumber(3)),
               "GRID", NULL);
-    META_CASE("dims too many cells", (cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 0,
-                                                               cJSON_CreateNumber(1024)),
-                                      cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 1,
-                                                               cJSON_CreateNumber(1024)),
-                                      cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 2,
-                                                               cJSON_CreateNumber(1024))),
+    META_CASE("dims too many cells",
+              (cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 0, cJSON_CreateNumber(1024)),
+               cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 1, cJSON_CreateNumber(1024)),
+               cJSON_ReplaceItemInArray(cJSON_GetObjectItem(meta_at(m, "grid"), "dims"), 2, cJSON_CreateNumber(1024))),
               "META", "2^26");
     META_CASE("surfel count", cJSON_ReplaceItemInObject(meta_at(m, "surfels"), "count", cJSON_CreateNumber(5)), "SURF",
               "/surfels/count");
@@ -856,25 +869,24 @@ static void test_semantic(void) {
               NULL);
     META_CASE("cache count", cJSON_ReplaceItemInObject(meta_at(m, "caches"), "count", cJSON_CreateNumber(14)), "CACH",
               "/caches/count");
-    META_CASE("texel > count", cJSON_ReplaceItemInObject(meta_at(m, "caches"), "texel", cJSON_CreateNumber(14)),
-              "META", "/caches/texel");
+    META_CASE("texel > count", cJSON_ReplaceItemInObject(meta_at(m, "caches"), "texel", cJSON_CreateNumber(14)), "META",
+              "/caches/texel");
     META_CASE("texel count", cJSON_ReplaceItemInObject(meta_at(m, "caches"), "texel", cJSON_CreateNumber(6)), "CACH",
               NULL);
     META_CASE("per_cache", cJSON_ReplaceItemInObject(meta_at(m, "links"), "per_cache", cJSON_CreateNumber(3)), "LINK",
               NULL);
-    META_CASE("per_cache 0", cJSON_ReplaceItemInObject(meta_at(m, "links"), "per_cache", cJSON_CreateNumber(0)),
-              "META", "/links/per_cache");
+    META_CASE("per_cache 0", cJSON_ReplaceItemInObject(meta_at(m, "links"), "per_cache", cJSON_CreateNumber(0)), "META",
+              "/links/per_cache");
     META_CASE("link sh_bands", cJSON_ReplaceItemInObject(meta_at(m, "links"), "sh_bands", cJSON_CreateNumber(3)),
               "LKSH", NULL);
     META_CASE("link sh_bands -1", cJSON_ReplaceItemInObject(meta_at(m, "links"), "sh_bands", cJSON_CreateNumber(-1)),
               "META", "/links/sh_bands");
-    META_CASE("light id not UTF-8", (cJSON_AddItemToObject(m, "lights", cJSON_CreateArray()),
-                                     cJSON_AddItemToArray(cJSON_GetObjectItem(m, "lights"), cJSON_CreateObject()),
-                                     cJSON_AddItemToArray(cJSON_GetObjectItem(m, "lights"), cJSON_CreateObject()),
-                                     cJSON_AddStringToObject(cJSON_GetArrayItem(cJSON_GetObjectItem(m, "lights"), 0),
-                                                             "id", "lamp"),
-                                     cJSON_AddStringToObject(cJSON_GetArrayItem(cJSON_GetObjectItem(m, "lights"), 1),
-                                                             "id", "l\xe9mpara")),
+    META_CASE("light id not UTF-8",
+              (cJSON_AddItemToObject(m, "lights", cJSON_CreateArray()),
+               cJSON_AddItemToArray(cJSON_GetObjectItem(m, "lights"), cJSON_CreateObject()),
+               cJSON_AddItemToArray(cJSON_GetObjectItem(m, "lights"), cJSON_CreateObject()),
+               cJSON_AddStringToObject(cJSON_GetArrayItem(cJSON_GetObjectItem(m, "lights"), 0), "id", "lamp"),
+               cJSON_AddStringToObject(cJSON_GetArrayItem(cJSON_GetObjectItem(m, "lights"), 1), "id", "l\xe9mpara")),
               "META: /lights/1/id", "not valid UTF-8");
 #undef META_CASE
     /* raw text */
@@ -890,7 +902,8 @@ static void test_semantic(void) {
     /* brackets inside strings do not count as nesting */
     bake_init(&b);
     m = bake_meta(LSH);
-    cJSON_AddStringToObject(m, "note", "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[\\\"[[[[");
+    cJSON_AddStringToObject(m, "note",
+                            "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[\\\"[[[[");
     bake_set_meta(&b, m);
     expect_bake_ok("brackets in strings", &b);
     bake_free(&b);

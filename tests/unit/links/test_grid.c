@@ -60,15 +60,13 @@ static void test_layout(void) {
     /* Flat bounds (a floor plane) still get a lattice of >= 2 samples per axis. */
     const float fmin[3] = {0, 1, 0}, fmax[3] = {4, 1, 4};
     CHECK(lc_grid_layout(fmin, fmax, 0.0, 10, 0, &g, err, sizeof err) == 0, "layout: %s", err);
-    CHECK(g.dims[0] == 10 && g.dims[2] == 10 && g.dims[1] == 2, "flat dims %u %u %u", g.dims[0], g.dims[1],
-          g.dims[2]);
+    CHECK(g.dims[0] == 10 && g.dims[2] == 10 && g.dims[1] == 2, "flat dims %u %u %u", g.dims[0], g.dims[1], g.dims[2]);
     check_covers(&g, fmin, fmax);
 
     /* Errors name the parameter. */
     CHECK(lc_grid_layout(bmin, bmax, -1.0, 32, 0, &g, err, sizeof err) == -1 && strstr(err, "cell"), "%s", err);
     CHECK(lc_grid_layout(bmin, bmax, 0.0, 2, 0, &g, err, sizeof err) == -1 && strstr(err, "max_dim"), "%s", err);
-    CHECK(lc_grid_layout(bmin, bmax, 1.0, 32, 4, &g, err, sizeof err) == -1 && strstr(err, "max_samples"), "%s",
-          err);
+    CHECK(lc_grid_layout(bmin, bmax, 1.0, 32, 4, &g, err, sizeof err) == -1 && strstr(err, "max_samples"), "%s", err);
     const float bad[3] = {0, NAN, 0};
     CHECK(lc_grid_layout(bad, bmax, 1.0, 32, 0, &g, err, sizeof err) == -1 && strstr(err, "bounds"), "%s", err);
     CHECK(lc_grid_layout(bmax, bmin, 1.0, 32, 0, &g, err, sizeof err) == -1 && strstr(err, "bounds"), "%s", err);
@@ -92,8 +90,8 @@ static void test_place(void) {
                 const lc_lcb_cache *c = &caches[cell[i]];
                 ok &= cell[i] == 2 + i;
                 ok &= c->flags == LC_CACHE_GRID && c->index == i;
-                ok &= c->position[0] == 1 + 0.5f * x && c->position[1] == 2 + 0.5f * y &&
-                      c->position[2] == 3 + 0.5f * z;
+                ok &=
+                    c->position[0] == 1 + 0.5f * x && c->position[1] == 2 + 0.5f * y && c->position[2] == 3 + 0.5f * z;
                 ok &= c->normal[0] == 0 && c->normal[1] == 0 && c->normal[2] == 0;
                 ok &= c->albedo[0] == 0 && c->albedo[1] == 0 && c->albedo[2] == 0;
             }

@@ -502,8 +502,8 @@ static void test_determinism(void) {
     lc_lcb_cache caches[NC];
     lc_rng r = lc_rng_seed(3, 1);
     for (int i = 0; i < NC; i++) {
-        lc_vec3 p = lc_v3(0.05f + 0.9f * lc_rng_float(&r), 0.05f + 0.9f * lc_rng_float(&r),
-                          0.05f + 0.9f * lc_rng_float(&r));
+        lc_vec3 p =
+            lc_v3(0.05f + 0.9f * lc_rng_float(&r), 0.05f + 0.9f * lc_rng_float(&r), 0.05f + 0.9f * lc_rng_float(&r));
         if (i % 2) {
             p.y = 0;
             caches[i] = texel_cache(p, lc_v3(0, 1, 0));
@@ -565,8 +565,7 @@ static void test_bad_params(void) {
     CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, &c, 1, &zero_links, links, NULL, NULL) == -1,
           "links_per_cache 0 rejected");
     lc_link_params bands9 = {8, 8, 16, 9, 1, 0, NULL, 0};
-    CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, &c, 1, &bands9, links, sh, NULL) == -1,
-          "9 SH bands rejected");
+    CHECK(lc_links_build(rt, w.surfels, w.n_surfels, &h, &c, 1, &bands9, links, sh, NULL) == -1, "9 SH bands rejected");
     lc_rt_release(rt);
     free(h.nodes);
     world_free(&w);
@@ -629,7 +628,6 @@ done:
     world_free(&w);
 }
 
-
 /* The lossless-transport bound gathers B straight from the probe rays' surfels: radiosity 1
  * on every wall of a closed box gives E = 1 at every texel cache (L = 1/pi over the whole
  * hemisphere); radiosity on the floor only gives B x the point-to-rectangle form factor at
@@ -651,7 +649,8 @@ static void test_gather_bound(void) {
     for (uint32_t i = 0; i < 3 * w.n_surfels; i++) b[i] = 1.0f;
     CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 6, 1024, 7, 0, b, e) == 0, "gather");
     for (int c = 0; c < 4; c++)
-        for (int k = 0; k < 3; k++) CHECK(fabsf(e[3 * c + k] - 1.0f) < 0.01f, "uniform box: cache %d E %.4f", c, e[3 * c + k]);
+        for (int k = 0; k < 3; k++)
+            CHECK(fabsf(e[3 * c + k] - 1.0f) < 0.01f, "uniform box: cache %d E %.4f", c, e[3 * c + k]);
     for (int k = 0; k < 6; k++) CHECK(e[12 + k] == 0.0f, "grid and inside caches get 0 (%d: %g)", k, e[12 + k]);
     for (uint32_t i = 0; i < w.n_surfels; i++) {
         int floor = w.surfels[i].normal[1] > 0.5f;

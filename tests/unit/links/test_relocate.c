@@ -147,9 +147,9 @@ static void test_buried_texel(void) {
 static void test_grid_caches(void) {
     world w = {0};
     lc_vec3 lo = lc_v3(-1, -1, -1), hi = lc_v3(1, 1, 1);
-    add_box(&w, lo, hi);                                                /* solid box A */
+    add_box(&w, lo, hi);                                                          /* solid box A */
     lc_vec3 lo2 = lc_v3(4.98f, -0.02f, -0.02f), hi2 = lc_v3(5.02f, 0.02f, 0.02f); /* tiny box inside box B */
-    add_box(&w, lc_v3(3, -2, -2), lc_v3(7, 2, 2));                      /* solid box B */
+    add_box(&w, lc_v3(3, -2, -2), lc_v3(7, 2, 2));                                /* solid box B */
     add_box(&w, lo2, hi2);
     char err[256];
     lc_rt *rt = lc_rt_create(&w.mesh, 2, err, sizeof err);

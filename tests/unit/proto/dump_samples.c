@@ -56,28 +56,47 @@ static int dump_errors(void) {
 int main(int argc, char **argv) {
     if (argc > 1 && !strcmp(argv[1], "--errors")) return dump_errors();
     /* --- client -> server, valid --- */
-    client(1, "{\"type\":\"hello\",\"id\":1,\"client\":\"my-viewer/2.0\",\"token\":\"secret\",\"encodings\":[\"rgb9e5\"]}");
+    client(
+        1,
+        "{\"type\":\"hello\",\"id\":1,\"client\":\"my-viewer/2.0\",\"token\":\"secret\",\"encodings\":[\"rgb9e5\"]}");
     client(1, "{\"type\":\"subscribe\",\"id\":\"s\",\"stream\":\"lightmap\",\"encoding\":\"rgb9e5\",\"max_rate\":30}");
     client(1, "{\"type\":\"subscribe\",\"stream\":\"shgrid\",\"encoding\":\"rgba16f\"}");
     client(1, "{\"type\":\"unsubscribe\",\"stream\":\"objects\"}");
     client(1, "{\"type\":\"light.set\",\"id\":2,\"light\":" L_POINT "}");
-    client(1, "{\"type\":\"light.set\",\"light\":{\"id\":\"spot\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[0,-1,0],"
-              "\"innerConeAngle\":0.2,\"outerConeAngle\":0.6,\"range\":10}}");
-    client(1, "{\"type\":\"light.set\",\"light\":{\"id\":\"sun\",\"type\":\"directional\",\"direction\":[0.3,-1,0.2],\"intensity\":1e5}}");
-    client(1, "{\"type\":\"light.set\",\"light\":{\"id\":\"panel\",\"type\":\"area\",\"position\":[0,2,0],\"direction\":[0,-1,0],"
-              "\"shape\":\"quad\",\"size\":[1,0.5],\"tangent\":[1,0,0]}}");
-    client(1, "{\"type\":\"light.set\",\"light\":{\"id\":\"disc\",\"type\":\"area\",\"position\":[0,2,0],\"direction\":[0,-1,0],"
-              "\"shape\":\"disc\",\"size\":[0.25]}}");
+    client(
+        1,
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"spot\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[0,-1,0],"
+        "\"innerConeAngle\":0.2,\"outerConeAngle\":0.6,\"range\":10}}");
+    client(
+        1,
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"sun\",\"type\":\"directional\",\"direction\":[0.3,-1,0.2],\"intensity\":1e5}}");
+    client(
+        1,
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"panel\",\"type\":\"area\",\"position\":[0,2,0],\"direction\":[0,-1,0],"
+        "\"shape\":\"quad\",\"size\":[1,0.5],\"tangent\":[1,0,0]}}");
+    client(
+        1,
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"disc\",\"type\":\"area\",\"position\":[0,2,0],\"direction\":[0,-1,0],"
+        "\"shape\":\"disc\",\"size\":[0.25]}}");
     client(1, "{\"type\":\"light.remove\",\"light_id\":\"key\"}");
-    client(1, "{\"type\":\"object.set\",\"object\":{\"id\":\"chair-1\",\"asset\":\"chair\",\"translation\":[1,0,2],"
-              "\"rotation\":[0,0.7071068,0,0.7071068],\"scale\":[1,1,-1],\"visible\":true}}");
+    client(1,
+           "{\"type\":\"object.set\",\"object\":{\"id\":\"chair-1\",\"asset\":\"chair\",\"translation\":[1,0,2],"
+           "\"rotation\":[0,0.7071068,0,0.7071068],\"scale\":[1,1,-1],\"visible\":true}}");
     client(1, "{\"type\":\"object.remove\",\"object_id\":\"chair-1\"}");
     client(1, "{\"type\":\"material.set\",\"material\":\"light\",\"emission\":[17,12,4]}");
-    client(1, "{\"type\":\"environment.set\",\"environment\":{\"type\":\"constant\",\"color\":[0.5,0.6,0.7],\"intensity\":2}}");
-    client(1, "{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\",\"sh\":[1,1,1,0,0,0,0.5,0.5,0.5,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0]}}");
-    client(1, "{\"type\":\"settings.set\",\"settings\":{\"bounces\":2,\"bands\":3,\"progressive\":true,\"chroma_compression\":true,\"chroma_bands\":2}}");
-    client(1, "{\"type\":\"batch\",\"id\":\"b1\",\"ops\":[{\"type\":\"light.set\",\"light\":" L_POINT "},"
-              "{\"type\":\"object.remove\",\"object_id\":\"chair-1\"},{\"type\":\"settings.set\",\"settings\":{\"bounces\":1}}]}");
+    client(
+        1,
+        "{\"type\":\"environment.set\",\"environment\":{\"type\":\"constant\",\"color\":[0.5,0.6,0.7],\"intensity\":2}}");
+    client(
+        1,
+        "{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\",\"sh\":[1,1,1,0,0,0,0.5,0.5,0.5,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0]}}");
+    client(
+        1,
+        "{\"type\":\"settings.set\",\"settings\":{\"bounces\":2,\"bands\":3,\"progressive\":true,\"chroma_compression\":true,\"chroma_bands\":2}}");
+    client(
+        1,
+        "{\"type\":\"batch\",\"id\":\"b1\",\"ops\":[{\"type\":\"light.set\",\"light\":" L_POINT "},"
+        "{\"type\":\"object.remove\",\"object_id\":\"chair-1\"},{\"type\":\"settings.set\",\"settings\":{\"bounces\":1}}]}");
     client(1, "{\"type\":\"state.get\",\"id\":3}");
     client(1, "{\"type\":\"snapshot\"}");
     client(1, "{\"type\":\"ping\",\"t\":12345.678}");
@@ -88,12 +107,22 @@ int main(int argc, char **argv) {
     client(0, "{\"type\":\"subscribe\",\"stream\":\"shgrid\",\"encoding\":\"rgb9e5\"}");
     client(0, "{\"type\":\"subscribe\",\"stream\":\"lightmap\",\"max_rate\":500}");
     client(0, "{\"type\":\"light.set\",\"light\":{\"type\":\"point\",\"position\":[0,0,0]}}");
-    client(0, "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,0,0],\"intensity\":-1}}");
+    client(
+        0,
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,0,0],\"intensity\":-1}}");
     client(0, "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"}}");
-    client(0, "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\",\"position\":[0,0,0],\"direction\":[0,0,0]}}");
-    client(0, "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\",\"position\":[0,0,0],\"direction\":[0,-1,0]}}");
-    client(0, "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\",\"position\":[0,0,0],\"direction\":[0,-1,0],\"shape\":\"disc\",\"size\":[1,1]}}");
-    client(0, "{\"type\":\"light.set\",\"light\":{\"id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\",\"type\":\"point\",\"position\":[0,0,0]}}");
+    client(
+        0,
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\",\"position\":[0,0,0],\"direction\":[0,0,0]}}");
+    client(
+        0,
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\",\"position\":[0,0,0],\"direction\":[0,-1,0]}}");
+    client(
+        0,
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\",\"position\":[0,0,0],\"direction\":[0,-1,0],\"shape\":\"disc\",\"size\":[1,1]}}");
+    client(
+        0,
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\",\"type\":\"point\",\"position\":[0,0,0]}}");
     client(0, "{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"scale\":[1,0,1]}}");
     client(0, "{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"rotation\":[0,0,0,0]}}");
     client(0, "{\"type\":\"material.set\",\"material\":\"m\",\"emission\":[1,1]}");
@@ -194,8 +223,10 @@ int main(int argc, char **argv) {
     puts("invalid\t{\"type\":\"error\",\"code\":\"invalid\",\"message\":\"\",\"pointer\":\"light\"}");
     puts("invalid\t{\"type\":\"pong\",\"t\":1}");
     puts("invalid\t{\"type\":\"changed\",\"revision\":1,\"by\":\"x\",\"ops\":[\"batch\"],\"ids\":[\"a\"]}");
-    puts("invalid\t{\"type\":\"welcome\",\"server\":\"s\",\"protocol\":\"lucent/2\",\"role\":\"controller\",\"revision\":0,\"scene\":{},\"limits\":{}}");
-    puts("invalid\t{\"type\":\"state\",\"revision\":1,\"lights\":[{\"id\":\"a\",\"type\":\"point\"}],\"objects\":[],\"materials\":[],"
-         "\"environment\":{\"type\":\"none\"},\"settings\":{}}");
+    puts(
+        "invalid\t{\"type\":\"welcome\",\"server\":\"s\",\"protocol\":\"lucent/2\",\"role\":\"controller\",\"revision\":0,\"scene\":{},\"limits\":{}}");
+    puts(
+        "invalid\t{\"type\":\"state\",\"revision\":1,\"lights\":[{\"id\":\"a\",\"type\":\"point\"}],\"objects\":[],\"materials\":[],"
+        "\"environment\":{\"type\":\"none\"},\"settings\":{}}");
     return failures ? 1 : 0;
 }

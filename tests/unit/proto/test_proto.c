@@ -17,11 +17,11 @@ static int parse(const char *s, lc_proto_request *r, lc_proto_error *e) {
 }
 
 /* Parses a valid message; the caller releases r. */
-#define PARSE_OK(json, r)                                                                            \
-    do {                                                                                             \
-        lc_proto_error e_;                                                                           \
-        int rc_ = parse(json, r, &e_);                                                               \
-        CHECK(rc_ == 0, "%s: %s %s %s", json, e_.code, e_.pointer, e_.message);                      \
+#define PARSE_OK(json, r)                                                       \
+    do {                                                                        \
+        lc_proto_error e_;                                                      \
+        int rc_ = parse(json, r, &e_);                                          \
+        CHECK(rc_ == 0, "%s: %s %s %s", json, e_.code, e_.pointer, e_.message); \
     } while (0)
 
 static void expect_err_len(int line, const char *json, size_t len, const char *code, const char *ptr) {
@@ -44,7 +44,9 @@ static int n_invalid_cases = 0;
 static void test_valid(void) {
     lc_proto_request r;
 
-    PARSE_OK("{\"type\":\"hello\",\"id\":1,\"client\":\"my-viewer/2.0\",\"token\":\"tok\",\"encodings\":[\"rgb9e5\",\"f32\",\"future\"]}", &r);
+    PARSE_OK(
+        "{\"type\":\"hello\",\"id\":1,\"client\":\"my-viewer/2.0\",\"token\":\"tok\",\"encodings\":[\"rgb9e5\",\"f32\",\"future\"]}",
+        &r);
     CHECK(r.type == LC_REQ_HELLO && r.id.kind == 2 && r.id.num == 1, "hello id");
     CHECK(!strcmp(r.client, "my-viewer/2.0") && !strcmp(r.token, "tok"), "hello strings");
     CHECK(r.encodings == ((1u << LC_ENC_RGB9E5) | (1u << LC_ENC_F32)), "encodings %x", r.encodings);
@@ -92,8 +94,10 @@ static void test_valid(void) {
     lc_proto_request_release(&r);
 
     /* spot: direction normalised, cones */
-    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[0,-2,0],"
-             "\"color\":[1,0.5,0.25],\"intensity\":800,\"range\":20,\"innerConeAngle\":0.2,\"outerConeAngle\":0.5,\"extra\":{\"x\":1}}}", &r);
+    PARSE_OK(
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[0,-2,0],"
+        "\"color\":[1,0.5,0.25],\"intensity\":800,\"range\":20,\"innerConeAngle\":0.2,\"outerConeAngle\":0.5,\"extra\":{\"x\":1}}}",
+        &r);
     if (r.n_ops == 1) {
         const lc_proto_light *L = &r.ops[0].light;
         CHECK(L->type == LC_PLIGHT_SPOT && L->direction[1] == -1 && L->direction[0] == 0, "spot dir");
@@ -102,28 +106,39 @@ static void test_valid(void) {
     }
     lc_proto_request_release(&r);
     /* inner wider than the default outer: outer follows */
-    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[1,1,0],\"innerConeAngle\":1.2}}", &r);
+    PARSE_OK(
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[1,1,0],\"innerConeAngle\":1.2}}",
+        &r);
     if (r.n_ops == 1) {
         CHECK(r.ops[0].light.outer_cone == 1.2f, "outer = inner");
         CHECK_NEAR(r.ops[0].light.direction[0], sqrt(0.5), 1e-6);
     }
     lc_proto_request_release(&r);
     /* outer exactly π/2 as a float prints a bit above π/2: still accepted */
-    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[1,0,0],\"outerConeAngle\":1.57079637}}", &r);
+    PARSE_OK(
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"s\",\"type\":\"spot\",\"position\":[0,3,0],\"direction\":[1,0,0],\"outerConeAngle\":1.57079637}}",
+        &r);
     lc_proto_request_release(&r);
 
-    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"sun\",\"type\":\"directional\",\"direction\":[0,0,-1e-300],\"intensity\":1e5}}", &r);
-    if (r.n_ops == 1) CHECK(r.ops[0].light.direction[2] == -1 && r.ops[0].light.intensity == 1e5f, "tiny direction normalised");
+    PARSE_OK(
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"sun\",\"type\":\"directional\",\"direction\":[0,0,-1e-300],\"intensity\":1e5}}",
+        &r);
+    if (r.n_ops == 1)
+        CHECK(r.ops[0].light.direction[2] == -1 && r.ops[0].light.intensity == 1e5f, "tiny direction normalised");
     lc_proto_request_release(&r);
 
-    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\",\"position\":[0,2,0],\"direction\":[0,-1,0],"
-             "\"size\":[0.5,2],\"tangent\":[3,0,0]}}", &r);
+    PARSE_OK(
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\",\"position\":[0,2,0],\"direction\":[0,-1,0],"
+        "\"size\":[0.5,2],\"tangent\":[3,0,0]}}",
+        &r);
     if (r.n_ops == 1) {
         const lc_proto_light *L = &r.ops[0].light;
         CHECK(L->shape == 0 && L->size[0] == 0.5f && L->size[1] == 2 && L->tangent[0] == 1, "area quad");
     }
     lc_proto_request_release(&r);
-    PARSE_OK("{\"type\":\"light.set\",\"light\":{\"id\":\"d\",\"type\":\"area\",\"shape\":\"disc\",\"position\":[0,2,0],\"direction\":[0,-1,0],\"size\":[0.3]}}", &r);
+    PARSE_OK(
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"d\",\"type\":\"area\",\"shape\":\"disc\",\"position\":[0,2,0],\"direction\":[0,-1,0],\"size\":[0.3]}}",
+        &r);
     if (r.n_ops == 1) CHECK(r.ops[0].light.shape == 1 && r.ops[0].light.size[0] == 0.3f, "disc");
     lc_proto_request_release(&r);
 
@@ -139,8 +154,10 @@ static void test_valid(void) {
         CHECK(O->translation[0] == 0 && O->translation[1] == 0, "translation default");
     }
     lc_proto_request_release(&r);
-    PARSE_OK("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"translation\":[1,2,3],\"rotation\":[0,0,2,0],"
-             "\"scale\":[-1,2,0.5],\"visible\":false}}", &r);
+    PARSE_OK(
+        "{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"translation\":[1,2,3],\"rotation\":[0,0,2,0],"
+        "\"scale\":[-1,2,0.5],\"visible\":false}}",
+        &r);
     if (r.n_ops == 1) {
         const lc_proto_object *O = &r.ops[0].object;
         CHECK(O->rotation[2] == 1 && O->rotation[3] == 0 && O->scale[0] == -1 && O->visible == 0, "object values");
@@ -155,7 +172,9 @@ static void test_valid(void) {
     CHECK(r.n_ops == 1 && !strcmp(r.ops[0].target, "light") && r.ops[0].emission[2] == 30, "material.set");
     lc_proto_request_release(&r);
 
-    PARSE_OK("{\"type\":\"environment.set\",\"environment\":{\"type\":\"constant\",\"color\":[0.1,0.2,0.3],\"intensity\":2}}", &r);
+    PARSE_OK(
+        "{\"type\":\"environment.set\",\"environment\":{\"type\":\"constant\",\"color\":[0.1,0.2,0.3],\"intensity\":2}}",
+        &r);
     if (r.n_ops == 1) {
         const lc_proto_environment *E = &r.ops[0].environment;
         CHECK(E->kind == 1 && E->color[2] == 0.3f && E->intensity == 2, "env constant");
@@ -176,29 +195,40 @@ static void test_valid(void) {
     CHECK(r.n_ops == 1 && r.ops[0].environment.kind == 0, "env none");
     lc_proto_request_release(&r);
 
-    PARSE_OK("{\"type\":\"settings.set\",\"settings\":{\"bounces\":3,\"bands\":4,\"progressive\":true,\"chroma_compression\":false,\"chroma_bands\":2}}", &r);
+    PARSE_OK(
+        "{\"type\":\"settings.set\",\"settings\":{\"bounces\":3,\"bands\":4,\"progressive\":true,\"chroma_compression\":false,\"chroma_bands\":2}}",
+        &r);
     if (r.n_ops == 1) {
         const lc_proto_settings *S = &r.ops[0].settings;
-        CHECK(S->present == 0x1F && S->bounces == 3 && S->bands == 4 && S->progressive == 1 && S->chroma_compression == 0 &&
-                  S->chroma_bands == 2, "settings");
+        CHECK(S->present == 0x1F && S->bounces == 3 && S->bands == 4 && S->progressive == 1 &&
+                  S->chroma_compression == 0 && S->chroma_bands == 2,
+              "settings");
     }
     lc_proto_request_release(&r);
     PARSE_OK("{\"type\":\"settings.set\",\"settings\":{\"bounces\":2.0}}", &r);
-    CHECK(r.n_ops == 1 && r.ops[0].settings.present == 1u << LC_SET_BOUNCES && r.ops[0].settings.bounces == 2, "subset");
+    CHECK(r.n_ops == 1 && r.ops[0].settings.present == 1u << LC_SET_BOUNCES && r.ops[0].settings.bounces == 2,
+          "subset");
     lc_proto_request_release(&r);
     PARSE_OK("{\"type\":\"settings.set\",\"settings\":{}}", &r);
     CHECK(r.n_ops == 1 && r.ops[0].settings.present == 0, "empty settings");
     lc_proto_request_release(&r);
 
-    PARSE_OK("{\"type\":\"batch\",\"id\":\"b\",\"ops\":[{\"type\":\"light.set\",\"light\":{\"id\":\"x\",\"type\":\"point\"," LIGHT_PT "}},"
-             "{\"type\":\"object.remove\",\"object_id\":\"o\"},{\"type\":\"settings.set\",\"settings\":{\"bounces\":1}}]}", &r);
+    PARSE_OK(
+        "{\"type\":\"batch\",\"id\":\"b\",\"ops\":[{\"type\":\"light.set\",\"light\":{\"id\":\"x\",\"type\":\"point\"," LIGHT_PT
+        "}},"
+        "{\"type\":\"object.remove\",\"object_id\":\"o\"},{\"type\":\"settings.set\",\"settings\":{\"bounces\":1}}]}",
+        &r);
     CHECK(r.type == LC_REQ_BATCH && r.n_ops == 3 && r.ops && r.ops[1].type == LC_REQ_OBJECT_REMOVE &&
-              r.ops[2].settings.bounces == 1 && !strcmp(r.ops[0].light.id, "x"), "batch");
+              r.ops[2].settings.bounces == 1 && !strcmp(r.ops[0].light.id, "x"),
+          "batch");
     lc_proto_request_release(&r);
-    {   /* exactly max_batch ops */
+    { /* exactly max_batch ops */
         static char buf[8192];
         strcpy(buf, "{\"type\":\"batch\",\"ops\":[");
-        for (int i = 0; i < 64; i++) strcat(buf, i ? ",{\"type\":\"light.remove\",\"light_id\":\"a\"}" : "{\"type\":\"light.remove\",\"light_id\":\"a\"}");
+        for (int i = 0; i < 64; i++)
+            strcat(buf,
+                   i ? ",{\"type\":\"light.remove\",\"light_id\":\"a\"}"
+                     : "{\"type\":\"light.remove\",\"light_id\":\"a\"}");
         strcat(buf, "]}");
         PARSE_OK(buf, &r);
         CHECK(r.n_ops == 64, "64 ops");
@@ -219,7 +249,9 @@ static void test_valid(void) {
     CHECK(r.n_ops == 1 && !strcmp(r.ops[0].target, "l\xc3\xa9\xc3\xa9\xf0\x9f\x92\xa1\xf0\x9f\x92\xa1"), "utf-8 id");
     lc_proto_request_release(&r);
     /* 64-byte id is fine */
-    PARSE_OK("{\"type\":\"light.remove\",\"light_id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\"}", &r);
+    PARSE_OK(
+        "{\"type\":\"light.remove\",\"light_id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\"}",
+        &r);
     CHECK(r.n_ops == 1 && strlen(r.ops[0].target) == 64, "64-byte id");
     lc_proto_request_release(&r);
 
@@ -250,7 +282,9 @@ static void test_limits(void) {
     PARSE_OK("{\"type\":\"ping\",\"t\":1,\"x\":\"[[[[[[[[[[[[[[[[[[[[{{{{{{{{{{{{{{{{{{\\\"[[[[[[[[[[[[[\"}", &r);
     lc_proto_request_release(&r);
     /* 17 levels of objects, unbalanced garbage after: depth is reported first */
-    INVALID("{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":", "too_deep", "");
+    INVALID(
+        "{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":{\"a\":",
+        "too_deep", "");
 
     /* size: 65536 parses, 65537 does not */
     size_t n = 65536;
@@ -273,10 +307,12 @@ static void test_limits(void) {
     lc_proto_default_limits(&lim);
     CHECK(lim.max_message == 65536 && lim.max_depth == 16 && lim.max_batch == 64, "defaults");
     lim.max_batch = 2;
-    const char *b3 = "{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"light.remove\",\"light_id\":\"a\"},"
-                     "{\"type\":\"light.remove\",\"light_id\":\"a\"}]}";
+    const char *b3 =
+        "{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"light.remove\",\"light_id\":\"a\"},"
+        "{\"type\":\"light.remove\",\"light_id\":\"a\"}]}";
     lc_proto_error e;
-    CHECK(lc_proto_parse_request(b3, strlen(b3), &lim, &r, &e) == -1 && !strcmp(e.code, "limit_exceeded"), "max_batch 2");
+    CHECK(lc_proto_parse_request(b3, strlen(b3), &lim, &r, &e) == -1 && !strcmp(e.code, "limit_exceeded"),
+          "max_batch 2");
     lc_proto_request_release(&r);
     /* not NUL-terminated: only len bytes are read */
     const char *pfx = "{\"type\":\"snapshot\"}GARBAGE";
@@ -300,10 +336,10 @@ static void test_invalid(void) {
     INVALID("{\"type\":\"ping\",\"t\":.5}", "bad_json", "");
     INVALID("{\"type\":\"ping\",\"t\":0x10}", "bad_json", "");
     INVALID("{'type':'ping'}", "bad_json", "");
-    INVALID("{\"type\":\"ping\",\"t\":1,\"s\":\"a\tb\"}", "bad_json", "");          /* raw control character */
-    INVALID("{\"type\":\"ping\",\"t\":1,\"s\":\"\\ud800\"}", "bad_json", "");      /* lone surrogate */
-    INVALID("{\"type\":\"ping\",\"t\":1,\"s\":\"\\x\"}", "bad_json", "");          /* bad escape */
-    INVALID("\xef\xbb\xbf{\"type\":\"snapshot\"}", "bad_json", "");               /* BOM */
+    INVALID("{\"type\":\"ping\",\"t\":1,\"s\":\"a\tb\"}", "bad_json", "");    /* raw control character */
+    INVALID("{\"type\":\"ping\",\"t\":1,\"s\":\"\\ud800\"}", "bad_json", ""); /* lone surrogate */
+    INVALID("{\"type\":\"ping\",\"t\":1,\"s\":\"\\x\"}", "bad_json", "");     /* bad escape */
+    INVALID("\xef\xbb\xbf{\"type\":\"snapshot\"}", "bad_json", "");           /* BOM */
     INVALID("{\"type\":\"ping\",\"t\":1e400}", "out_of_range", "/t");
     INVALID("{\"type\":\"ping\",\"t\":-1e400}", "out_of_range", "/t");
     INVALID("{\"type\":\"ping\",\"t\":\"NaN\"}", "invalid", "/t");
@@ -315,11 +351,13 @@ static void test_invalid(void) {
 
     INVALID("{\"type\":\"hello\",\"token\":\"x\"}", "invalid", "/client");
     INVALID("{\"type\":\"hello\",\"client\":\"\"}", "invalid", "/client");
-    INVALID("{\"type\":\"hello\",\"client\":\"xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx\"}", "invalid", "/client");
+    INVALID(
+        "{\"type\":\"hello\",\"client\":\"xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx\"}",
+        "invalid", "/client");
     INVALID("{\"type\":\"hello\",\"client\":\"c\",\"token\":7}", "invalid", "/token");
     INVALID("{\"type\":\"hello\",\"client\":\"c\",\"encodings\":\"rgb9e5\"}", "invalid", "/encodings");
     INVALID("{\"type\":\"hello\",\"client\":\"c\",\"encodings\":[\"f32\",1]}", "invalid", "/encodings/1");
-    INVALID("{\"type\":\"hello\",\"client\":\"\xc0\xaf\"}", "invalid", "/client");     /* overlong UTF-8 */
+    INVALID("{\"type\":\"hello\",\"client\":\"\xc0\xaf\"}", "invalid", "/client"); /* overlong UTF-8 */
 
     INVALID("{\"type\":\"subscribe\"}", "invalid", "/stream");
     INVALID("{\"type\":\"subscribe\",\"stream\":\"video\"}", "invalid", "/stream");
@@ -336,67 +374,111 @@ static void test_invalid(void) {
     INVALID("{\"type\":\"light.set\"}", "invalid", "/light");
     INVALID("{\"type\":\"light.set\",\"light\":[]}", "invalid", "/light");
     INVALID("{\"type\":\"light.set\",\"light\":{\"type\":\"point\"," LIGHT_PT "}}", "invalid", "/light/id");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\",\"type\":\"point\"," LIGHT_PT "}}", "invalid", "/light/id");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\xff\",\"type\":\"point\"," LIGHT_PT "}}", "invalid", "/light/id");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\xed\xa0\x80\",\"type\":\"point\"," LIGHT_PT "}}", "invalid", "/light/id"); /* UTF-8 surrogate */
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"laser\"," LIGHT_PT "}}", "invalid", "/light/type");
+    INVALID(
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\",\"type\":\"point\"," LIGHT_PT
+        "}}",
+        "invalid", "/light/id");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\xff\",\"type\":\"point\"," LIGHT_PT "}}", "invalid",
+            "/light/id");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\xed\xa0\x80\",\"type\":\"point\"," LIGHT_PT "}}", "invalid",
+            "/light/id"); /* UTF-8 surrogate */
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"laser\"," LIGHT_PT "}}", "invalid",
+            "/light/type");
     INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\"," LIGHT_PT "}}", "invalid", "/light/type");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":-1}}", "out_of_range", "/light/intensity");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":\"1\"}}", "invalid", "/light/intensity");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":\"NaN\"}}", "invalid", "/light/intensity");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":1e400}}", "out_of_range", "/light/intensity");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":1.5e9}}", "out_of_range", "/light/intensity");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"range\":-0.5}}", "out_of_range", "/light/range");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":-1}}",
+            "out_of_range", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":\"1\"}}",
+            "invalid", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":\"NaN\"}}",
+            "invalid", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":1e400}}",
+            "out_of_range", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":1.5e9}}",
+            "out_of_range", "/light/intensity");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"," LIGHT_PT ",\"range\":-0.5}}",
+            "out_of_range", "/light/range");
     INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\"}}", "invalid", "/light/position");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,0]}}", "invalid", "/light/position");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,\"x\",0]}}", "invalid", "/light/position/1");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,2e6,0]}}", "out_of_range", "/light/position/1");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,0,0],\"color\":[1,1,-1]}}", "out_of_range", "/light/color/2");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\"," LIGHT_PT "}}", "invalid", "/light/direction");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"directional\",\"direction\":[0,0,0]}}", "out_of_range", "/light/direction");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\"," LIGHT_PT ",\"direction\":[0,-1,0],\"innerConeAngle\":2}}", "out_of_range", "/light/innerConeAngle");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\"," LIGHT_PT ",\"direction\":[0,-1,0],\"innerConeAngle\":0.5,\"outerConeAngle\":0.4}}", "out_of_range", "/light/outerConeAngle");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0]}}", "invalid", "/light/size");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0],\"shape\":\"disc\",\"size\":[1,2]}}", "invalid", "/light/size");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0],\"size\":[0,1]}}", "out_of_range", "/light/size/0");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0],\"size\":[1,2e4]}}", "out_of_range", "/light/size/1");
-    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0],\"size\":[1,1],\"shape\":\"triangle\"}}", "invalid", "/light/shape");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,0]}}", "invalid",
+            "/light/position");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,\"x\",0]}}", "invalid",
+            "/light/position/1");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,2e6,0]}}",
+            "out_of_range", "/light/position/1");
+    INVALID(
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"point\",\"position\":[0,0,0],\"color\":[1,1,-1]}}",
+        "out_of_range", "/light/color/2");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\"," LIGHT_PT "}}", "invalid",
+            "/light/direction");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"directional\",\"direction\":[0,0,0]}}",
+            "out_of_range", "/light/direction");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\"," LIGHT_PT
+            ",\"direction\":[0,-1,0],\"innerConeAngle\":2}}",
+            "out_of_range", "/light/innerConeAngle");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"spot\"," LIGHT_PT
+            ",\"direction\":[0,-1,0],\"innerConeAngle\":0.5,\"outerConeAngle\":0.4}}",
+            "out_of_range", "/light/outerConeAngle");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT ",\"direction\":[0,-1,0]}}",
+            "invalid", "/light/size");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT
+            ",\"direction\":[0,-1,0],\"shape\":\"disc\",\"size\":[1,2]}}",
+            "invalid", "/light/size");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT
+            ",\"direction\":[0,-1,0],\"size\":[0,1]}}",
+            "out_of_range", "/light/size/0");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT
+            ",\"direction\":[0,-1,0],\"size\":[1,2e4]}}",
+            "out_of_range", "/light/size/1");
+    INVALID("{\"type\":\"light.set\",\"light\":{\"id\":\"a\",\"type\":\"area\"," LIGHT_PT
+            ",\"direction\":[0,-1,0],\"size\":[1,1],\"shape\":\"triangle\"}}",
+            "invalid", "/light/shape");
 
     INVALID("{\"type\":\"light.remove\"}", "invalid", "/light_id");
     INVALID("{\"type\":\"light.remove\",\"light_id\":7}", "invalid", "/light_id");
     INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\"}}", "invalid", "/object/asset");
-    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"rotation\":[0,0,0,0]}}", "out_of_range", "/object/rotation");
-    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"rotation\":[0,0,1]}}", "invalid", "/object/rotation");
-    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"scale\":[1,0,1]}}", "out_of_range", "/object/scale/1");
-    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"scale\":[1,1,-2e4]}}", "out_of_range", "/object/scale/2");
-    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"visible\":\"yes\"}}", "invalid", "/object/visible");
-    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"translation\":[1,2,3e7]}}", "out_of_range", "/object/translation/2");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"rotation\":[0,0,0,0]}}",
+            "out_of_range", "/object/rotation");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"rotation\":[0,0,1]}}", "invalid",
+            "/object/rotation");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"scale\":[1,0,1]}}", "out_of_range",
+            "/object/scale/1");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"scale\":[1,1,-2e4]}}",
+            "out_of_range", "/object/scale/2");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"visible\":\"yes\"}}", "invalid",
+            "/object/visible");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"translation\":[1,2,3e7]}}",
+            "out_of_range", "/object/translation/2");
     INVALID("{\"type\":\"object.remove\",\"object_id\":\"\"}", "invalid", "/object_id");
     INVALID("{\"type\":\"material.set\",\"material\":\"m\"}", "invalid", "/emission");
     INVALID("{\"type\":\"material.set\",\"emission\":[1,1,1]}", "invalid", "/material");
     INVALID("{\"type\":\"material.set\",\"material\":\"m\",\"emission\":[0,0,2e7]}", "out_of_range", "/emission/2");
     INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"hdr\"}}", "invalid", "/environment/type");
     INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\"}}", "invalid", "/environment/sh");
-    INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\",\"sh\":[1,2,3]}}", "invalid", "/environment/sh");
-    INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"none\",\"intensity\":-1}}", "out_of_range", "/environment/intensity");
+    INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\",\"sh\":[1,2,3]}}", "invalid",
+            "/environment/sh");
+    INVALID("{\"type\":\"environment.set\",\"environment\":{\"type\":\"none\",\"intensity\":-1}}", "out_of_range",
+            "/environment/intensity");
     INVALID("{\"type\":\"environment.set\",\"environment\":\"none\"}", "invalid", "/environment");
     INVALID("{\"type\":\"settings.set\",\"settings\":{\"bounces\":17}}", "out_of_range", "/settings/bounces");
     INVALID("{\"type\":\"settings.set\",\"settings\":{\"bands\":1.5}}", "invalid", "/settings/bands");
     INVALID("{\"type\":\"settings.set\",\"settings\":{\"bands\":0}}", "out_of_range", "/settings/bands");
-    INVALID("{\"type\":\"settings.set\",\"settings\":{\"bands\":2,\"chroma_bands\":3}}", "out_of_range", "/settings/chroma_bands");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"bands\":2,\"chroma_bands\":3}}", "out_of_range",
+            "/settings/chroma_bands");
     INVALID("{\"type\":\"settings.set\",\"settings\":{\"progressive\":1}}", "invalid", "/settings/progressive");
 
     INVALID("{\"type\":\"batch\"}", "invalid", "/ops");
     INVALID("{\"type\":\"batch\",\"ops\":[]}", "invalid", "/ops");
     INVALID("{\"type\":\"batch\",\"ops\":{}}", "invalid", "/ops");
-    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"object.remove\",\"object_id\":\"b\"},"
-            "{\"type\":\"light.set\",\"light\":{\"id\":\"x\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":-3}}]}",
-            "out_of_range", "/ops/2/light/intensity");
-    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"light.remove\",\"light_id\":\"a\"},"
-            "{\"type\":\"light.set\",\"light\":{\"id\":\"x\",\"type\":\"point\",\"position\":[0,1,\"z\"]}}]}",
-            "invalid", "/ops/2/light/position/2");
-    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"}]}]}",
-            "invalid", "/ops/1/type");
+    INVALID(
+        "{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"object.remove\",\"object_id\":\"b\"},"
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"x\",\"type\":\"point\"," LIGHT_PT ",\"intensity\":-3}}]}",
+        "out_of_range", "/ops/2/light/intensity");
+    INVALID(
+        "{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"light.remove\",\"light_id\":\"a\"},"
+        "{\"type\":\"light.set\",\"light\":{\"id\":\"x\",\"type\":\"point\",\"position\":[0,1,\"z\"]}}]}",
+        "invalid", "/ops/2/light/position/2");
+    INVALID(
+        "{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"},{\"type\":\"batch\",\"ops\":[{\"type\":\"light.remove\",\"light_id\":\"a\"}]}]}",
+        "invalid", "/ops/1/type");
     INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"ping\",\"t\":1}]}", "invalid", "/ops/0/type");
     INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"hello\",\"client\":\"c\"}]}", "invalid", "/ops/0/type");
     INVALID("{\"type\":\"batch\",\"ops\":[1]}", "invalid", "/ops/0");
@@ -405,29 +487,35 @@ static void test_invalid(void) {
     {
         static char buf[8192];
         strcpy(buf, "{\"type\":\"batch\",\"ops\":[");
-        for (int i = 0; i < 65; i++) strcat(buf, i ? ",{\"type\":\"light.remove\",\"light_id\":\"a\"}" : "{\"type\":\"light.remove\",\"light_id\":\"a\"}");
+        for (int i = 0; i < 65; i++)
+            strcat(buf,
+                   i ? ",{\"type\":\"light.remove\",\"light_id\":\"a\"}"
+                     : "{\"type\":\"light.remove\",\"light_id\":\"a\"}");
         strcat(buf, "]}");
         INVALID(buf, "limit_exceeded", "/ops");
     }
 
-    INVALID("{\"type\":\"snapshot\",\"id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\"}", "invalid", "/id");
+    INVALID("{\"type\":\"snapshot\",\"id\":\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\"}",
+            "invalid", "/id");
     INVALID("{\"type\":\"snapshot\",\"id\":\"\"}", "invalid", "/id");
     INVALID("{\"type\":\"snapshot\",\"id\":-1}", "out_of_range", "/id");
     INVALID("{\"type\":\"snapshot\",\"id\":1.5}", "invalid", "/id");
     INVALID("{\"type\":\"snapshot\",\"id\":9007199254740992}", "out_of_range", "/id");
     INVALID("{\"type\":\"snapshot\",\"id\":true}", "invalid", "/id");
     INVALID("{\"type\":\"snapshot\",\"id\":{}}", "invalid", "/id");
-    INVALID("{\"type\":\"snapshot\",\"x\":\"\xe2\x82\"}", "invalid", "");               /* truncated UTF-8 elsewhere */
-    INVALID("{\"type\":\"snapshot\",\"\xff\":1}", "invalid", "");                       /* in a key */
+    INVALID("{\"type\":\"snapshot\",\"x\":\"\xe2\x82\"}", "invalid", ""); /* truncated UTF-8 elsewhere */
+    INVALID("{\"type\":\"snapshot\",\"\xff\":1}", "invalid", "");         /* in a key */
     INVALID("{\"type\":\"light.remove\",\"light_id\":\"a\\u0000b\"}", "invalid", "");
 
     /* the error echoes the request id when it was readable */
     lc_proto_request r;
     lc_proto_error e;
     CHECK(parse("{\"id\":\"abc\",\"type\":\"light.set\",\"light\":{}}", &r, &e) == -1 && r.id.kind == 1 &&
-              !strcmp(r.id.str, "abc") && !strcmp(e.pointer, "/light/id"), "id echoed");
+              !strcmp(r.id.str, "abc") && !strcmp(e.pointer, "/light/id"),
+          "id echoed");
     lc_proto_request_release(&r);
-    CHECK(parse("{\"type\":\"nope\",\"id\":42}", &r, &e) == -1 && r.id.kind == 2 && r.id.num == 42, "id echoed, unknown type");
+    CHECK(parse("{\"type\":\"nope\",\"id\":42}", &r, &e) == -1 && r.id.kind == 2 && r.id.num == 42,
+          "id echoed, unknown type");
     lc_proto_request_release(&r);
     CHECK(e.message[0] != 0, "message filled");
     /* NULL err is allowed */
@@ -465,7 +553,8 @@ static void test_builders(void) {
     CHECK(cJSON_GetArraySize(j) == 3, "ok has 3 keys");
     cJSON_Delete(j);
     char *s = lc_proto_build_ok(&nid, 18446744073709551615ULL);
-    CHECK(s && strstr(s, "\"id\":9007199254740991") && strstr(s, "\"revision\":18446744073709551615"), "exact integers: %s", s);
+    CHECK(s && strstr(s, "\"id\":9007199254740991") && strstr(s, "\"revision\":18446744073709551615"),
+          "exact integers: %s", s);
     free(s);
     j = reparse(lc_proto_build_ok(&none, 0));
     CHECK(j && !cJSON_GetObjectItem(j, "id") && num(j, "revision") == 0, "ok without id");
@@ -478,15 +567,18 @@ static void test_builders(void) {
     j = reparse(lc_proto_build_error(&sid, &e));
     CHECK(j && !strcmp(str(j, "type"), "error") && !strcmp(str(j, "code"), "out_of_range") &&
               !strcmp(str(j, "pointer"), "/light/intensity") && !strcmp(str(j, "message"), e.message) &&
-              !strcmp(str(j, "id"), "req-1"), "error");
+              !strcmp(str(j, "id"), "req-1"),
+          "error");
     cJSON_Delete(j);
     lc_proto_error e2 = {"bad_json", "", "x"};
     j = reparse(lc_proto_build_error(NULL, &e2));
-    CHECK(j && cJSON_IsString(cJSON_GetObjectItem(j, "pointer")) && !strcmp(str(j, "pointer"), ""), "error empty pointer");
+    CHECK(j && cJSON_IsString(cJSON_GetObjectItem(j, "pointer")) && !strcmp(str(j, "pointer"), ""),
+          "error empty pointer");
     cJSON_Delete(j);
 
     j = reparse(lc_proto_build_pong(&nid, 1234.5678901234567, 1700000000123456ULL));
-    CHECK(j && !strcmp(str(j, "type"), "pong") && num(j, "t") == 1234.5678901234567 && num(j, "server_time_us") == 1700000000123456.0,
+    CHECK(j && !strcmp(str(j, "type"), "pong") && num(j, "t") == 1234.5678901234567 &&
+              num(j, "server_time_us") == 1700000000123456.0,
           "pong");
     cJSON_Delete(j);
 
@@ -514,19 +606,22 @@ static void test_builders(void) {
         const cJSON *sc = cJSON_GetObjectItem(j, "scene"), *lm = cJSON_GetObjectItem(sc, "lightmap"),
                     *gr = cJSON_GetObjectItem(sc, "grid"), *li = cJSON_GetObjectItem(j, "limits");
         CHECK(!strcmp(str(j, "type"), "welcome") && !strcmp(str(j, "protocol"), "lucent/1") &&
-                  !strcmp(str(j, "server"), "lucentd/0.1.0") && !strcmp(str(j, "role"), "controller") && num(j, "revision") == 42,
+                  !strcmp(str(j, "server"), "lucentd/0.1.0") && !strcmp(str(j, "role"), "controller") &&
+                  num(j, "revision") == 42,
               "welcome top");
-        CHECK(num(lm, "width") == 128 && num(lm, "height") == 64 && num(lm, "tile") == 32 && !strcmp(str(lm, "quantity"), "irradiance"),
+        CHECK(num(lm, "width") == 128 && num(lm, "height") == 64 && num(lm, "tile") == 32 &&
+                  !strcmp(str(lm, "quantity"), "irradiance"),
               "welcome lightmap");
         CHECK(num(gr, "cell") == 0.5 && cJSON_GetArrayItem(cJSON_GetObjectItem(gr, "origin"), 0)->valuedouble == -1.5 &&
-                  cJSON_GetArrayItem(cJSON_GetObjectItem(gr, "dims"), 2)->valuedouble == 12 && num(gr, "coefficients") == 9 &&
-                  !strcmp(str(gr, "quantity"), "irradiance_sh"),
+                  cJSON_GetArrayItem(cJSON_GetObjectItem(gr, "dims"), 2)->valuedouble == 12 &&
+                  num(gr, "coefficients") == 9 && !strcmp(str(gr, "quantity"), "irradiance_sh"),
               "welcome grid");
         CHECK(num(sc, "bands") == 3 && cJSON_GetArraySize(cJSON_GetObjectItem(sc, "assets")) == 2 &&
                   !strcmp(cJSON_GetArrayItem(cJSON_GetObjectItem(sc, "materials"), 2)->valuestring, "red \"q\""),
               "welcome names");
         CHECK(num(li, "max_message") == 65536 && num(li, "max_lights") == 4096 && num(li, "max_objects") == 4096 &&
-                  num(li, "max_batch") == 64 && num(li, "rate") == 100, "welcome limits");
+                  num(li, "max_batch") == 64 && num(li, "rate") == 100,
+              "welcome limits");
     }
     cJSON_Delete(j);
 
@@ -542,12 +637,15 @@ static void test_builders(void) {
     j = reparse(lc_proto_build_changed(43, "my-viewer/2.0", ops, 4));
     if (j) {
         const cJSON *o = cJSON_GetObjectItem(j, "ops"), *ids = cJSON_GetObjectItem(j, "ids");
-        CHECK(!strcmp(str(j, "type"), "changed") && num(j, "revision") == 43 && !strcmp(str(j, "by"), "my-viewer/2.0"), "changed");
+        CHECK(!strcmp(str(j, "type"), "changed") && num(j, "revision") == 43 && !strcmp(str(j, "by"), "my-viewer/2.0"),
+              "changed");
         CHECK(cJSON_GetArraySize(o) == 4 && !strcmp(cJSON_GetArrayItem(o, 0)->valuestring, "light.set") &&
-                  !strcmp(cJSON_GetArrayItem(o, 2)->valuestring, "environment.set"), "changed ops");
+                  !strcmp(cJSON_GetArrayItem(o, 2)->valuestring, "environment.set"),
+              "changed ops");
         CHECK(cJSON_GetArraySize(ids) == 4 && !strcmp(cJSON_GetArrayItem(ids, 0)->valuestring, "key") &&
                   !strcmp(cJSON_GetArrayItem(ids, 1)->valuestring, "chair-1") &&
-                  !strcmp(cJSON_GetArrayItem(ids, 3)->valuestring, "white"), "changed ids");
+                  !strcmp(cJSON_GetArrayItem(ids, 3)->valuestring, "white"),
+              "changed ids");
     }
     cJSON_Delete(j);
 
@@ -656,11 +754,14 @@ static void test_state_roundtrip(void) {
         CHECK(p.revision == 123456789 && p.n_lights == 3 && p.n_objects == 2 && p.n_materials == 2, "counts");
         /* sorted by id */
         CHECK(p.n_lights == 3 && !memcmp(&p.lights[0], &lights[1], sizeof lights[0]) &&
-                  !memcmp(&p.lights[1], &lights[2], sizeof lights[0]) && !memcmp(&p.lights[2], &lights[0], sizeof lights[0]),
+                  !memcmp(&p.lights[1], &lights[2], sizeof lights[0]) &&
+                  !memcmp(&p.lights[2], &lights[0], sizeof lights[0]),
               "lights round trip, sorted");
         CHECK(p.n_objects == 2 && !memcmp(&p.objects[0], &objects[1], sizeof objects[0]) &&
-                  !memcmp(&p.objects[1], &objects[0], sizeof objects[0]), "objects round trip, sorted");
-        CHECK(p.n_materials == 2 && !strcmp(p.material_names[1], "light") && p.material_emission[1][2] == 4.5f, "materials");
+                  !memcmp(&p.objects[1], &objects[0], sizeof objects[0]),
+              "objects round trip, sorted");
+        CHECK(p.n_materials == 2 && !strcmp(p.material_names[1], "light") && p.material_emission[1][2] == 4.5f,
+              "materials");
         CHECK(!memcmp(&p.environment, &st.environment, sizeof st.environment), "environment");
         CHECK(!memcmp(&p.settings, &st.settings, sizeof st.settings), "settings");
         /* fixed point: building the parsed state gives the same text */
@@ -682,23 +783,30 @@ static void test_state_roundtrip(void) {
     /* empty state */
     lc_proto_state empty = {0};
     char *s3 = lc_proto_build_state(NULL, &empty);
-    CHECK(s3 && lc_proto_parse_state(s3, strlen(s3), &p, &e) == 0 && p.n_lights == 0 && p.lights == NULL, "empty state: %s", s3);
+    CHECK(s3 && lc_proto_parse_state(s3, strlen(s3), &p, &e) == 0 && p.n_lights == 0 && p.lights == NULL,
+          "empty state: %s", s3);
     lc_proto_parsed_state_free(&p);
     free(s3);
 
     /* corrupt snapshots are refused with a pointer */
     const char *bad[][2] = {
         {"{\"type\":\"ok\",\"revision\":1}", "/type"},
-        {"{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[],\"materials\":[],\"environment\":{\"type\":\"none\"}}", "/settings"},
-        {"{\"type\":\"state\",\"revision\":-1,\"lights\":[],\"objects\":[],\"materials\":[],\"environment\":{\"type\":\"none\"},\"settings\":{}}", "/revision"},
+        {"{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[],\"materials\":[],\"environment\":{\"type\":\"none\"}}",
+         "/settings"},
+        {"{\"type\":\"state\",\"revision\":-1,\"lights\":[],\"objects\":[],\"materials\":[],\"environment\":{\"type\":\"none\"},\"settings\":{}}",
+         "/revision"},
         {"{\"type\":\"state\",\"revision\":1,\"lights\":[{\"id\":\"b\",\"type\":\"directional\",\"direction\":[0,1,0]},{\"id\":\"a\",\"type\":\"directional\",\"direction\":[0,1,0]}],"
-         "\"objects\":[],\"materials\":[],\"environment\":{\"type\":\"none\"},\"settings\":{}}", "/lights/1/id"},
-        {"{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[{\"id\":\"o\"}],\"materials\":[],\"environment\":{\"type\":\"none\"},\"settings\":{}}", "/objects/0/asset"},
-        {"{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[],\"materials\":[{\"name\":\"m\",\"emission\":[1,1]}],\"environment\":{\"type\":\"none\"},\"settings\":{}}", "/materials/0/emission"},
+         "\"objects\":[],\"materials\":[],\"environment\":{\"type\":\"none\"},\"settings\":{}}",
+         "/lights/1/id"},
+        {"{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[{\"id\":\"o\"}],\"materials\":[],\"environment\":{\"type\":\"none\"},\"settings\":{}}",
+         "/objects/0/asset"},
+        {"{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[],\"materials\":[{\"name\":\"m\",\"emission\":[1,1]}],\"environment\":{\"type\":\"none\"},\"settings\":{}}",
+         "/materials/0/emission"},
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         rc = lc_proto_parse_state(bad[i][0], strlen(bad[i][0]), &p, &e);
-        CHECK(rc == -1 && !strcmp(e.pointer, bad[i][1]), "bad state %zu: rc %d pointer %s (%s)", i, rc, e.pointer, e.message);
+        CHECK(rc == -1 && !strcmp(e.pointer, bad[i][1]), "bad state %zu: rc %d pointer %s (%s)", i, rc, e.pointer,
+              e.message);
         CHECK(p.lights == NULL && p.n_lights == 0, "freed after failure");
         lc_proto_parsed_state_free(&p);
     }
@@ -769,9 +877,11 @@ static void test_frames(void) {
     /* keyframe lightmap 5x3 rgb9e5 */
     size_t n = make_frame(&h, 1, 1, LC_FRAME_KEYFRAME, 5, 3, 1, 4, NULL, 0, 5 * 3 * 4);
     CHECK(n == 64 + 60, "keyframe size %zu", n);
-    CHECK(!memcmp(frame_buf, "LCF1", 4) && frame_buf[4] == 1 && frame_buf[5] == 0 && frame_buf[6] == 1 && frame_buf[10] == 64,
+    CHECK(!memcmp(frame_buf, "LCF1", 4) && frame_buf[4] == 1 && frame_buf[5] == 0 && frame_buf[6] == 1 &&
+              frame_buf[10] == 64,
           "little-endian header");
-    CHECK(frame_buf[16] == 8 && frame_buf[23] == 1 && frame_buf[40] == 5 && frame_buf[44] == 3 && frame_buf[56] == 60, "LE fields");
+    CHECK(frame_buf[16] == 8 && frame_buf[23] == 1 && frame_buf[40] == 5 && frame_buf[44] == 3 && frame_buf[56] == 60,
+          "LE fields");
     uint32_t crc = lc_crc32(lc_crc32(0, frame_buf, 60), frame_buf + 64, n - 64);
     CHECK(frame_buf[60] == (crc & 0xFF) && frame_buf[63] == crc >> 24, "CRC stored LE");
     CHECK(frame_ok(n, &h), "keyframe parses");
@@ -795,7 +905,8 @@ static void test_frames(void) {
 
     /* delta: 10x7, tile 4 -> 3x2 tiles; tile 1 = 4x4 texels, tile 5 = 2x3 (clipped) */
     CHECK(lc_tiles_count(10, 7, 4) == 6 && lc_tiles_count(8, 8, 4) == 4 && lc_tiles_count(8, 8, 0) == 0 &&
-              lc_tiles_count(1, 1, 32) == 1, "tiles_count");
+              lc_tiles_count(1, 1, 32) == 1,
+          "tiles_count");
     uint32_t x0, y0, x1, y1;
     lc_tile_rect(10, 7, 4, 5, &x0, &y0, &x1, &y1);
     CHECK(x0 == 8 && y0 == 4 && x1 == 10 && y1 == 7, "tile 5 rect %u %u %u %u", x0, y0, x1, y1);
@@ -863,17 +974,17 @@ static void test_frames(void) {
     make_frame(&h, 1, 1, LC_FRAME_KEYFRAME, 5, 3, 1, 4, NULL, 0, 60);
     uint8_t small[100];
     CHECK(lc_frame_write(&h, NULL, frame_buf, small, sizeof small) == 0, "cap respected");
-    CHECK(lc_frame_texel_bytes(LC_ENC_RGB9E5) == 4 && lc_frame_texel_bytes(LC_ENC_RGBA16F) == 8 && lc_frame_texel_bytes(LC_ENC_F32) == 12,
+    CHECK(lc_frame_texel_bytes(LC_ENC_RGB9E5) == 4 && lc_frame_texel_bytes(LC_ENC_RGBA16F) == 8 &&
+              lc_frame_texel_bytes(LC_ENC_F32) == 12,
           "texel bytes");
     CHECK(lc_frame_sh_value_bytes(LC_ENC_RGB9E5) == 0 && lc_frame_sh_value_bytes(LC_ENC_RGBA16F) == 2 &&
-              lc_frame_sh_value_bytes(LC_ENC_F32) == 4, "sh bytes");
+              lc_frame_sh_value_bytes(LC_ENC_F32) == 4,
+          "sh bytes");
 }
 
 /* --- residual deltas (§6.2.1) ------------------------------------------------------------- */
 
-static uint32_t pack9e5(uint32_t r, uint32_t g, uint32_t b, uint32_t e) {
-    return r | g << 9 | b << 18 | e << 27;
-}
+static uint32_t pack9e5(uint32_t r, uint32_t g, uint32_t b, uint32_t e) { return r | g << 9 | b << 18 | e << 27; }
 
 static void put_u32(uint8_t *p, uint32_t v) {
     for (int i = 0; i < 4; i++) p[i] = (uint8_t)(v >> (8 * i));
@@ -892,7 +1003,7 @@ static void test_residual(void) {
     const uint32_t cases[][3] = {
         /* held, now, expected residual */
         {pack9e5(100, 200, 300, 15), pack9e5(101, 198, 300, 16), pack9e5(2, 3, 0, 2)},
-        {pack9e5(511, 0, 7, 31), pack9e5(0, 511, 7, 0), pack9e5(2, 1, 0, 2)}, /* wraps: +1, -1, 0, +1 */
+        {pack9e5(511, 0, 7, 31), pack9e5(0, 511, 7, 0), pack9e5(2, 1, 0, 2)},      /* wraps: +1, -1, 0, +1 */
         {pack9e5(0, 0, 0, 0), pack9e5(256, 255, 0, 16), pack9e5(511, 510, 0, 31)}, /* -256 -> 511, +255 -> 510 */
         {pack9e5(5, 6, 7, 8), pack9e5(5, 6, 7, 8), 0},
     };
@@ -915,7 +1026,8 @@ static void test_residual(void) {
     CHECK(get_u32(rf) == 2 && get_u32(rf + 4) == 1 && get_u32(rf + 8) == 1, "f32 residual %u %u %u", get_u32(rf),
           get_u32(rf + 4), get_u32(rf + 8));
     /* half: one 16-bit field per u16 (A included) */
-    uint8_t hh[8] = {0x00, 0x3C, 0x00, 0x3C, 0xFF, 0xFF, 0x00, 0x3C}, nh[8] = {0x03, 0x3C, 0xFE, 0x3B, 0x00, 0x00, 0x00, 0x3C}, rh[8];
+    uint8_t hh[8] = {0x00, 0x3C, 0x00, 0x3C, 0xFF, 0xFF, 0x00, 0x3C},
+            nh[8] = {0x03, 0x3C, 0xFE, 0x3B, 0x00, 0x00, 0x00, 0x3C}, rh[8];
     lc_residual_make(LC_ENC_RGBA16F, nh, hh, 1, rh);
     CHECK(rh[0] == 6 && rh[1] == 0 && rh[2] == 3 && rh[3] == 0 && rh[4] == 2 && rh[5] == 0 && rh[6] == 0 && rh[7] == 0,
           "half residual %u %u %u %u", rh[0] | rh[1] << 8, rh[2] | rh[3] << 8, rh[4] | rh[5] << 8, rh[6] | rh[7] << 8);
@@ -954,7 +1066,8 @@ static void test_residual(void) {
     size_t n = make_frame(&h, 1, 1, LC_FRAME_DELTA | LC_FRAME_RESIDUAL, 10, 7, 1, 4, tiles, 2, 37);
     CHECK(frame_ok(n, &h), "residual delta parses (compressed payload of any length)");
     const uint8_t *tt = NULL;
-    CHECK(lc_frame_parse(frame_buf, n, &h, &tt, NULL, NULL) == 0 && lc_frame_tile_texels(&h, tt) == 16 + 6, "tile texels");
+    CHECK(lc_frame_parse(frame_buf, n, &h, &tt, NULL, NULL) == 0 && lc_frame_tile_texels(&h, tt) == 16 + 6,
+          "tile texels");
     n = make_frame(&h, 1, 1, LC_FRAME_RESIDUAL, 10, 7, 1, 4, tiles, 2, 37);
     CHECK(frame_bad(n, "flags"), "residual without delta");
     n = make_frame(&h, 1, 1, LC_FRAME_KEYFRAME | LC_FRAME_RESIDUAL, 10, 7, 1, 4, NULL, 0, 10 * 7 * 4);
@@ -1038,7 +1151,6 @@ static void test_rgb9e5(void) {
     fprintf(stderr, "rgb9e5: worst relative error %.3g (bound %.3g)\n", worst, 0x1p-9);
 }
 
-
 /* --- UTF-8: the helpers, and every reply built from client text --------------------------- */
 
 typedef struct {
@@ -1046,31 +1158,64 @@ typedef struct {
     size_t n;
     int ok;
 } utf8_case;
-#define U8(lit, ok) {lit, sizeof lit - 1, ok}
+#define U8(lit, ok) \
+    { lit, sizeof lit - 1, ok }
 
 static void test_utf8_valid(void) {
     static const utf8_case cases[] = {
-        U8("", 1), U8("abc", 1), U8("a\0b", 1), /* NUL is a character; the length decides */
-        U8("\xc2\x80", 1), U8("\xc3\xa9", 1), U8("\xdf\xbf", 1),                    /* 2 bytes: U+0080, é, U+07FF */
-        U8("\xe0\xa0\x80", 1), U8("\xe2\x82\xac", 1), U8("\xef\xbf\xbf", 1),        /* 3 bytes: U+0800, €, U+FFFF */
-        U8("\xed\x9f\xbf", 1), U8("\xee\x80\x80", 1),                               /* around the surrogates */
-        U8("\xf0\x90\x80\x80", 1), U8("\xf0\x9f\x92\xa1", 1), U8("\xf4\x8f\xbf\xbf", 1), /* 4 bytes .. U+10FFFF */
+        U8("", 1),
+        U8("abc", 1),
+        U8("a\0b", 1), /* NUL is a character; the length decides */
+        U8("\xc2\x80", 1),
+        U8("\xc3\xa9", 1),
+        U8("\xdf\xbf", 1), /* 2 bytes: U+0080, é, U+07FF */
+        U8("\xe0\xa0\x80", 1),
+        U8("\xe2\x82\xac", 1),
+        U8("\xef\xbf\xbf", 1), /* 3 bytes: U+0800, €, U+FFFF */
+        U8("\xed\x9f\xbf", 1),
+        U8("\xee\x80\x80", 1), /* around the surrogates */
+        U8("\xf0\x90\x80\x80", 1),
+        U8("\xf0\x9f\x92\xa1", 1),
+        U8("\xf4\x8f\xbf\xbf", 1), /* 4 bytes .. U+10FFFF */
         U8("l\xc3\xa9\xe2\x82\xac\xf0\x9f\x92\xa1!", 1),
         /* overlong forms */
-        U8("\xc0\x80", 0), U8("\xc0\xaf", 0), U8("\xc1\xbf", 0), U8("\xe0\x80\xaf", 0), U8("\xe0\x9f\xbf", 0),
-        U8("\xf0\x80\x80\xaf", 0), U8("\xf0\x8f\xbf\xbf", 0),
+        U8("\xc0\x80", 0),
+        U8("\xc0\xaf", 0),
+        U8("\xc1\xbf", 0),
+        U8("\xe0\x80\xaf", 0),
+        U8("\xe0\x9f\xbf", 0),
+        U8("\xf0\x80\x80\xaf", 0),
+        U8("\xf0\x8f\xbf\xbf", 0),
         /* surrogates, alone and paired (CESU-8) */
-        U8("\xed\xa0\x80", 0), U8("\xed\xad\xbf", 0), U8("\xed\xb0\x80", 0), U8("\xed\xbf\xbf", 0),
+        U8("\xed\xa0\x80", 0),
+        U8("\xed\xad\xbf", 0),
+        U8("\xed\xb0\x80", 0),
+        U8("\xed\xbf\xbf", 0),
         U8("\xed\xa0\xbd\xed\xb2\xa1", 0),
         /* above U+10FFFF, 5/6-byte forms, bytes never used */
-        U8("\xf4\x90\x80\x80", 0), U8("\xf5\x80\x80\x80", 0), U8("\xf7\xbf\xbf\xbf", 0), U8("\xf8\x88\x80\x80\x80", 0),
-        U8("\xfc\x84\x80\x80\x80\x80", 0), U8("\xfe", 0), U8("\xff", 0),
+        U8("\xf4\x90\x80\x80", 0),
+        U8("\xf5\x80\x80\x80", 0),
+        U8("\xf7\xbf\xbf\xbf", 0),
+        U8("\xf8\x88\x80\x80\x80", 0),
+        U8("\xfc\x84\x80\x80\x80\x80", 0),
+        U8("\xfe", 0),
+        U8("\xff", 0),
         /* lone continuation bytes */
-        U8("\x80", 0), U8("\xbf", 0), U8("a\x80z", 0),
+        U8("\x80", 0),
+        U8("\xbf", 0),
+        U8("a\x80z", 0),
         /* truncated sequences */
-        U8("\xc3", 0), U8("\xe2\x82", 0), U8("\xf0\x9f\x92", 0), U8("ab\xe2", 0), U8("caf\xe9", 0),
+        U8("\xc3", 0),
+        U8("\xe2\x82", 0),
+        U8("\xf0\x9f\x92", 0),
+        U8("ab\xe2", 0),
+        U8("caf\xe9", 0),
         /* a bad continuation */
-        U8("\xc3\x28", 0), U8("\xe2\x28\xa1", 0), U8("\xe2\x82\x28", 0), U8("\xf0\x9f\x28\xa1", 0), U8("\xf0\x9f\x92\x28", 0),
+        U8("\xc3\x28", 0),
+        U8("\xe2\x28\xa1", 0),
+        U8("\xe2\x82\x28", 0),
+        U8("\xf0\x9f\x28\xa1", 0),
+        U8("\xf0\x9f\x92\x28", 0),
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
         CHECK(lc_proto_utf8_valid(cases[i].s, cases[i].n) == cases[i].ok, "utf8_valid case %zu (%zu bytes): want %d", i,
@@ -1084,16 +1229,32 @@ static void test_utf8_cut(void) {
         const char *s;
         size_t len, max, want;
     } cases[] = {
-        {"abc", 3, 0, 0}, {"abc", 3, 2, 2}, {"abc", 3, 3, 3}, {"abc", 3, 99, 3},
+        {"abc", 3, 0, 0},
+        {"abc", 3, 2, 2},
+        {"abc", 3, 3, 3},
+        {"abc", 3, 99, 3},
         /* a 2-, 3- and 4-byte character across the cut */
-        {"a\xc3\xa9", 3, 1, 1}, {"a\xc3\xa9", 3, 2, 1}, {"a\xc3\xa9", 3, 3, 3},
-        {"a\xe2\x82\xac", 4, 2, 1}, {"a\xe2\x82\xac", 4, 3, 1}, {"a\xe2\x82\xac", 4, 4, 4},
-        {"a\xf0\x9f\x92\xa1", 5, 2, 1}, {"a\xf0\x9f\x92\xa1", 5, 3, 1}, {"a\xf0\x9f\x92\xa1", 5, 4, 1},
-        {"a\xf0\x9f\x92\xa1", 5, 5, 5}, {"\xf0\x9f\x92\xa1\xf0\x9f\x92\xa1", 8, 7, 4}, {"\xc3\xa9", 2, 1, 0},
+        {"a\xc3\xa9", 3, 1, 1},
+        {"a\xc3\xa9", 3, 2, 1},
+        {"a\xc3\xa9", 3, 3, 3},
+        {"a\xe2\x82\xac", 4, 2, 1},
+        {"a\xe2\x82\xac", 4, 3, 1},
+        {"a\xe2\x82\xac", 4, 4, 4},
+        {"a\xf0\x9f\x92\xa1", 5, 2, 1},
+        {"a\xf0\x9f\x92\xa1", 5, 3, 1},
+        {"a\xf0\x9f\x92\xa1", 5, 4, 1},
+        {"a\xf0\x9f\x92\xa1", 5, 5, 5},
+        {"\xf0\x9f\x92\xa1\xf0\x9f\x92\xa1", 8, 7, 4},
+        {"\xc3\xa9", 2, 1, 0},
         /* a sequence the length cuts short is not a character either */
-        {"ab\xe2\x82", 4, 10, 2}, {"ab\xf0\x9f\x92", 5, 5, 2}, {"\xc3", 1, 1, 0}, {"a\xc3\xa9", 2, 9, 1},
+        {"ab\xe2\x82", 4, 10, 2},
+        {"ab\xf0\x9f\x92", 5, 5, 2},
+        {"\xc3", 1, 1, 0},
+        {"a\xc3\xa9", 2, 9, 1},
         /* ill-formed bytes elsewhere are units of their own (not repaired by a cut) */
-        {"a\xffz", 3, 3, 3}, {"a\xffz", 3, 2, 2}, {"a\xc0\xafz", 4, 3, 3},
+        {"a\xffz", 3, 3, 3},
+        {"a\xffz", 3, 2, 2},
+        {"a\xc0\xafz", 4, 3, 3},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         size_t got = lc_proto_utf8_cut(cases[i].s, cases[i].len, cases[i].max);
@@ -1118,15 +1279,16 @@ static void test_utf8_sanitize(void) {
         unsigned flags;
         const char *want;
     } cases[] = {
-        {"caf\xe9", 4, 0, "caf\xef\xbf\xbd"},                              /* Latin-1 é */
-        {"\xe2\x82x", 3, 0, "\xef\xbf\xbdx"},                              /* one U+FFFD per truncated sequence */
-        {"\xed\xa0\x80", 3, 0, "\xef\xbf\xbd\xef\xbf\xbd\xef\xbf\xbd"},    /* surrogate: ED, A0, 80 */
-        {"\xc0\xaf", 2, 0, "\xef\xbf\xbd\xef\xbf\xbd"},                    /* overlong */
+        {"caf\xe9", 4, 0, "caf\xef\xbf\xbd"},                           /* Latin-1 é */
+        {"\xe2\x82x", 3, 0, "\xef\xbf\xbdx"},                           /* one U+FFFD per truncated sequence */
+        {"\xed\xa0\x80", 3, 0, "\xef\xbf\xbd\xef\xbf\xbd\xef\xbf\xbd"}, /* surrogate: ED, A0, 80 */
+        {"\xc0\xaf", 2, 0, "\xef\xbf\xbd\xef\xbf\xbd"},                 /* overlong */
         {"\xf4\x90\x80\x80", 4, 0, "\xef\xbf\xbd\xef\xbf\xbd\xef\xbf\xbd\xef\xbf\xbd"},
         {"l\xc3\xa9\xe2\x82\xac\xf0\x9f\x92\xa1", 10, 0, "l\xc3\xa9\xe2\x82\xac\xf0\x9f\x92\xa1"}, /* valid: as is */
         {"a\nb\x7f\xc2\x85z", 7, 0, "a\nb\x7f\xc2\x85z"},
         {"a\nb\x7f\xc2\x85\xc2\xa0z", 9, LC_PROTO_UTF8_NO_CONTROLS,
-         "a\xef\xbf\xbd" "b\xef\xbf\xbd\xef\xbf\xbd\xc2\xa0z"}, /* C0, DEL, C1 go; U+00A0 stays */
+         "a\xef\xbf\xbd"
+         "b\xef\xbf\xbd\xef\xbf\xbd\xc2\xa0z"}, /* C0, DEL, C1 go; U+00A0 stays */
     };
     char out[64];
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
@@ -1141,8 +1303,8 @@ static void test_utf8_sanitize(void) {
     out[0] = 'x';
     CHECK(lc_proto_utf8_sanitize(out, 0, "ab", 2, 0) == 0 && out[0] == 'x', "cap 0 writes nothing");
     /* random bytes: the output is always valid, and valid input comes back unchanged */
-    static const unsigned char pool[] = {'a', 0x00, 0x0a, 0x7f, 0x80, 0x9f, 0xa0, 0xbf, 0xc0, 0xc2, 0xc3, 0xdf, 0xe0,
-                                         0xe2, 0xed, 0xef, 0xf0, 0xf4, 0xf5, 0xff, 0x82, 0xac, 0x90, 0x8f};
+    static const unsigned char pool[] = {'a',  0x00, 0x0a, 0x7f, 0x80, 0x9f, 0xa0, 0xbf, 0xc0, 0xc2, 0xc3, 0xdf,
+                                         0xe0, 0xe2, 0xed, 0xef, 0xf0, 0xf4, 0xf5, 0xff, 0x82, 0xac, 0x90, 0x8f};
     uint64_t x = 0x2545F4914F6CDD1DULL;
     int bad = 0;
     for (int it = 0; it < 20000; it++) {
@@ -1200,7 +1362,8 @@ static void test_utf8_replies(void) {
     /* ill-formed bytes and control characters in the type are not copied */
     CHECK(parse("{\"type\":\"caf\xe9\",\"id\":\"q\"}", &r, &e) == -1 && !strcmp(e.code, "unknown_type") &&
               lc_proto_utf8_valid(e.message, strlen(e.message)) && strstr(e.message, "caf\xef\xbf\xbd") &&
-              r.id.kind == 1, "Latin-1 type: %s", e.message);
+              r.id.kind == 1,
+          "Latin-1 type: %s", e.message);
     lc_proto_request_release(&r);
     CHECK(parse("{\"type\":\"a\\nb\\u001b[2J\"}", &r, &e) == -1 && !strpbrk(e.message, "\n\x1b"),
           "control characters in the message: %s", e.message);
@@ -1268,39 +1431,49 @@ static void test_nul_escape(void) {
           "string id kept: kind %d '%s' (%s)", r.id.kind, r.id.str, e.message);
     lc_proto_request_release(&r);
     CHECK(parse("{\"type\":\"light.remove\",\"light_id\":\"\\u0000\",\"id\":7}", &r, &e) == -1 && r.id.kind == 2 &&
-              r.id.num == 7, "integer id after the NUL kept");
+              r.id.num == 7,
+          "integer id after the NUL kept");
     lc_proto_request_release(&r);
     CHECK(parse("{\"id\":5,\"type\":\"light.set\",\"light\":{\"id\":\"a\\u0000\",\"type\":\"point\"," LIGHT_PT "}}", &r,
-                &e) == -1 && r.id.kind == 2 && r.id.num == 5, "a nested \"id\" is not the request id");
+                &e) == -1 &&
+              r.id.kind == 2 && r.id.num == 5,
+          "a nested \"id\" is not the request id");
     lc_proto_request_release(&r);
     CHECK(parse("{\"id\":\"q\",\"type\":\"snapshot\",\"x\\u0000\":1}", &r, &e) == -1 && r.id.kind == 1 &&
-              !strcmp(r.id.str, "q"), "NUL in another key");
+              !strcmp(r.id.str, "q"),
+          "NUL in another key");
     lc_proto_request_release(&r);
     /* the id itself: not echoed (cJSON would cut it at the NUL), pointer /id */
     CHECK(parse("{\"id\":\"ab\\u0000c\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 0 &&
-              !strcmp(e.code, "invalid") && !strcmp(e.pointer, "/id"), "NUL in the id: kind %d, %s", r.id.kind, e.pointer);
+              !strcmp(e.code, "invalid") && !strcmp(e.pointer, "/id"),
+          "NUL in the id: kind %d, %s", r.id.kind, e.pointer);
     lc_proto_request_release(&r);
     CHECK(parse("{\"\\u0069d\":\"\\u0000\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 0 &&
-              !strcmp(e.pointer, "/id"), "escaped member name");
+              !strcmp(e.pointer, "/id"),
+          "escaped member name");
     lc_proto_request_release(&r);
     CHECK(parse("{\"id\\u0000\":\"x\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 0 &&
-              !strcmp(e.pointer, "/id"), "NUL in the id's member name");
+              !strcmp(e.pointer, "/id"),
+          "NUL in the id's member name");
     lc_proto_request_release(&r);
     /* the first "id" member is the one cJSON reads */
     CHECK(parse("{\"id\":\"one\",\"id\":\"t\\u0000\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 1 &&
-              !strcmp(r.id.str, "one"), "duplicate id: the first counts");
+              !strcmp(r.id.str, "one"),
+          "duplicate id: the first counts");
     lc_proto_request_release(&r);
     CHECK(parse("{\"id\":\"o\\u0000\",\"id\":\"two\",\"type\":\"snapshot\"}", &r, &e) == -1 && r.id.kind == 0,
           "duplicate id with the NUL in the first");
     lc_proto_request_release(&r);
     /* an invalid id is still not echoed */
     CHECK(parse("{\"id\":-1,\"type\":\"snapshot\",\"s\":\"\\u0000\"}", &r, &e) == -1 && r.id.kind == 0 &&
-              !strcmp(e.pointer, "/id"), "invalid id");
+              !strcmp(e.pointer, "/id"),
+          "invalid id");
     lc_proto_request_release(&r);
     /* snapshot files still refuse it */
     lc_proto_parsed_state ps;
-    const char *st = "{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[],\"materials\":[{\"name\":\"a\\u0000\","
-                     "\"emission\":[0,0,0]}],\"environment\":{\"type\":\"none\"},\"settings\":{}}";
+    const char *st =
+        "{\"type\":\"state\",\"revision\":1,\"lights\":[],\"objects\":[],\"materials\":[{\"name\":\"a\\u0000\","
+        "\"emission\":[0,0,0]}],\"environment\":{\"type\":\"none\"},\"settings\":{}}";
     CHECK(lc_proto_parse_state(st, strlen(st), &ps, &e) == -1 && !strcmp(e.code, "invalid"), "state with NUL");
 }
 

@@ -41,8 +41,8 @@ static void test_lightmap_stats(void) {
     CHECK(s.n == 100, "compared %u texels, expected 100", s.n);
     CHECK(s.n_total == 108, "candidates %u, expected 108 (100 bright + 8 dark owners)", s.n_total);
     CHECK_NEAR(s.mean, 0.495, 1e-5);
-    CHECK_NEAR(s.p50, 0.49, 1e-5);  /* nearest rank: the 50th of 100 sorted */
-    CHECK_NEAR(s.p95, 0.94, 1e-5);  /* the 95th */
+    CHECK_NEAR(s.p50, 0.49, 1e-5); /* nearest rank: the 50th of 100 sorted */
+    CHECK_NEAR(s.p95, 0.94, 1e-5); /* the 95th */
     CHECK_NEAR(s.max, 0.99, 1e-5);
     CHECK_NEAR(s.ref_noise, 0.02, 1e-5);
     /* Signed: +0, -0.01, +0.02, ... : sum = (0 + 2 + ... + 98 - 1 - 3 - ... - 99) / 100 = -0.5. */
@@ -106,7 +106,8 @@ static void test_roundtrip(void) {
     a.grid_sh = calloc(4 * 27, sizeof(float));
     a.grid_sh_stderr = calloc(4 * 27, sizeof(float));
     a.grid_mask = calloc(4, 1);
-    for (int i = 0; i < 45; i++) a.lightmap[i] = 1.0f / 3.0f + (float)i * 1.2345678e-3f, a.lightmap_stderr[i] = 1e-7f * i;
+    for (int i = 0; i < 45; i++)
+        a.lightmap[i] = 1.0f / 3.0f + (float)i * 1.2345678e-3f, a.lightmap_stderr[i] = 1e-7f * i;
     for (int i = 0; i < 15; i++) a.texel_mask[i] = (uint8_t)(i % 3);
     for (int i = 0; i < 108; i++) a.grid_sh[i] = (float)i / 7.0f, a.grid_sh_stderr[i] = (float)i / 700.0f;
     a.grid_mask[1] = 1;
@@ -130,8 +131,8 @@ static void test_roundtrip(void) {
     lc_ref_result_free(&b);
     /* A directory that is not a reference is refused with a message. */
     CHECK(lc_ref_read("/nonexistent-lc-ref", &b, err, sizeof err) != 0 && err[0], "missing dir must fail");
-    const char *names[] = {"reference.json", "reference_lightmap.exr", "reference_lightmap_stderr.exr",
-                           "reference_texels.bin", "reference_grid.bin", "reference_grid_stderr.bin",
+    const char *names[] = {"reference.json",         "reference_lightmap.exr", "reference_lightmap_stderr.exr",
+                           "reference_texels.bin",   "reference_grid.bin",     "reference_grid_stderr.bin",
                            "reference_grid_mask.bin"};
     for (size_t i = 0; i < sizeof names / sizeof *names; i++) {
         char path[128];

@@ -34,7 +34,7 @@
 static double ff_corner(double x, double z, double c) {
     double X = fabs(x) / c, Z = fabs(z) / c;
     double f = (X / sqrt(1 + X * X) * atan(Z / sqrt(1 + X * X)) + Z / sqrt(1 + Z * Z) * atan(X / sqrt(1 + Z * Z))) /
-               (2 * M_PI);
+        (2 * M_PI);
     return (x < 0 ? -1 : 1) * (z < 0 ? -1 : 1) * f;
 }
 /* Point at (px, pz) facing a parallel rectangle [x0,x1]x[z0,z1] at distance c. */
@@ -73,7 +73,8 @@ static void agree_check(const agree *a, const char *what, double margin) {
 }
 
 /* Renders with the fixture's bake and state. */
-static int render(const fixture *f, const lc_engine_state *st, uint32_t spp, int grid, int threads, lc_ref_result *res) {
+static int render(const fixture *f, const lc_engine_state *st, uint32_t spp, int grid, int threads,
+                  lc_ref_result *res) {
     char err[256];
     lc_ref *r = lc_ref_create(f->bake, st, threads, err, sizeof err);
     if (!r) {
@@ -92,16 +93,42 @@ static int render(const fixture *f, const lc_engine_state *st, uint32_t spp, int
     return rc;
 }
 
-static const char *small_bake[] = {"--surfels", "1024", "--links", "16", "--node-samples", "4", "--final-samples", "4",
-                                   "--probe-rays", "64", "--atlas-size", "64", "--grid-max-dim", "4", NULL};
+static const char *small_bake[] = {"--surfels",
+                                   "1024",
+                                   "--links",
+                                   "16",
+                                   "--node-samples",
+                                   "4",
+                                   "--final-samples",
+                                   "4",
+                                   "--probe-rays",
+                                   "64",
+                                   "--atlas-size",
+                                   "64",
+                                   "--grid-max-dim",
+                                   "4",
+                                   NULL};
 
 static void test_closed_box(void) {
     static char obj[1 << 16];
     obj[0] = 0;
     fixture_inward_box(obj, sizeof obj, 1.0f, 4, "wall", 1);
     const char *mtl = "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n";
-    const char *flags[] = {"--surfels", "1024", "--links", "16", "--node-samples", "4", "--final-samples", "4",
-                           "--probe-rays", "64", "--atlas-size", "32", "--grid-max-dim", "5", NULL};
+    const char *flags[] = {"--surfels",
+                           "1024",
+                           "--links",
+                           "16",
+                           "--node-samples",
+                           "4",
+                           "--final-samples",
+                           "4",
+                           "--probe-rays",
+                           "64",
+                           "--atlas-size",
+                           "32",
+                           "--grid-max-dim",
+                           "5",
+                           NULL};
     fixture f;
     if (fixture_bake(&f, obj, mtl, flags) != 0) {
         CHECK(0, "closed box bake failed");
@@ -143,8 +170,8 @@ static void test_closed_box(void) {
         }
         /* Isotropic: the band-1 and band-2 coefficients vanish. */
         for (int j = 1; j < 9; j++)
-            CHECK(fabs(sh[3 * j]) < 5 * se[3 * j] + 0.01 * expect, "closed box cell %u: c_%d = %.4f (stderr %.4f)", i, j,
-                  sh[3 * j], se[3 * j]);
+            CHECK(fabs(sh[3 * j]) < 5 * se[3 * j] + 0.01 * expect, "closed box cell %u: c_%d = %.4f (stderr %.4f)", i,
+                  j, sh[3 * j], se[3 * j]);
     }
     agree_check(&g, "closed box grid", 0.003);
     CHECK(res.texel_stats.mean_rel_stderr > 0 && res.texel_stats.mean_rel_stderr < 0.05,
@@ -154,9 +181,8 @@ static void test_closed_box(void) {
 }
 
 static void test_patch(void) {
-    const char *obj =
-        "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n"
-        "usemtl lamp\nv -0.15 1 -0.15\nv 0.15 1 -0.15\nv 0.15 1 0.15\nv -0.15 1 0.15\nf 5 6 7 8\n";
+    const char *obj = "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n"
+                      "usemtl lamp\nv -0.15 1 -0.15\nv 0.15 1 -0.15\nv 0.15 1 0.15\nv -0.15 1 0.15\nf 5 6 7 8\n";
     const char *mtl = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 10 10 10\n";
     fixture f;
     if (fixture_bake(&f, obj, mtl, small_bake) != 0) {
@@ -177,8 +203,8 @@ static void test_patch(void) {
         const lc_lcb_cache *ca = &f.v->caches[c];
         uint32_t i = ca->index;
         if (ca->normal[1] > 0.99f && ca->position[1] < 0.01f) {
-            double exact = M_PI * 10.0 * ff_rect(ca->position[0], ca->position[2], -0.15, 0.15, -0.15, 0.15,
-                                                 1.0 - ca->position[1]);
+            double exact = M_PI * 10.0 *
+                ff_rect(ca->position[0], ca->position[2], -0.15, 0.15, -0.15, 0.15, 1.0 - ca->position[1]);
             agree_add(&a, res.lightmap[3 * i], res.lightmap_stderr[3 * i], exact);
         } else if (ca->normal[1] < -0.99f) {
             lamp_texels++; /* lit by the floor's reflection: see the surfel pair */
@@ -194,12 +220,24 @@ static void test_surfel_pair(void) {
     /* Emitter A (side 0.2, black) at y = 0.5 facing down; receiver B (side 0.2, albedo 0.8) at
      * y = 0 facing up. B sees A only (exact); A sees B's reflection, E_B varying over B. */
     const double h = 0.5, a2 = 0.1, rho = 0.8, le = 50;
-    const char *obj =
-        "usemtl recv\nv -0.1 0 -0.1\nv -0.1 0 0.1\nv 0.1 0 0.1\nv 0.1 0 -0.1\nf 1 2 3 4\n"
-        "usemtl lamp\nv -0.1 0.5 -0.1\nv 0.1 0.5 -0.1\nv 0.1 0.5 0.1\nv -0.1 0.5 0.1\nf 5 6 7 8\n";
+    const char *obj = "usemtl recv\nv -0.1 0 -0.1\nv -0.1 0 0.1\nv 0.1 0 0.1\nv 0.1 0 -0.1\nf 1 2 3 4\n"
+                      "usemtl lamp\nv -0.1 0.5 -0.1\nv 0.1 0.5 -0.1\nv 0.1 0.5 0.1\nv -0.1 0.5 0.1\nf 5 6 7 8\n";
     const char *mtl = "newmtl recv\nKd 0.8 0.8 0.8\nnewmtl lamp\nKd 0 0 0\nKe 50 50 50\n";
-    const char *flags[] = {"--surfels", "1024", "--links", "16", "--node-samples", "4", "--final-samples", "4",
-                           "--probe-rays", "64", "--atlas-size", "32", "--grid-max-dim", "3", NULL};
+    const char *flags[] = {"--surfels",
+                           "1024",
+                           "--links",
+                           "16",
+                           "--node-samples",
+                           "4",
+                           "--final-samples",
+                           "4",
+                           "--probe-rays",
+                           "64",
+                           "--atlas-size",
+                           "32",
+                           "--grid-max-dim",
+                           "3",
+                           NULL};
     fixture f;
     if (fixture_bake(&f, obj, mtl, flags) != 0) {
         CHECK(0, "surfel pair bake failed");
@@ -244,9 +282,8 @@ static void test_surfel_pair(void) {
 
 static void test_lights(void) {
     /* Floor 4 x 4 (albedo 0.5) and a black 0.6 x 0.6 patch at y = 1 facing down. */
-    const char *obj =
-        "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n"
-        "usemtl black\nv -0.3 1 -0.3\nv 0.3 1 -0.3\nv 0.3 1 0.3\nv -0.3 1 0.3\nf 5 6 7 8\n";
+    const char *obj = "usemtl floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n"
+                      "usemtl black\nv -0.3 1 -0.3\nv 0.3 1 -0.3\nv 0.3 1 0.3\nv -0.3 1 0.3\nf 5 6 7 8\n";
     const char *mtl = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl black\nKd 0 0 0\n";
     fixture f;
     if (fixture_bake(&f, obj, mtl, small_bake) != 0) {
@@ -254,7 +291,10 @@ static void test_lights(void) {
         return;
     }
     /* 1. Sun straight down, 1000 lux: the floor gets 1000 lux except the patch's shadow. */
-    lc_engine_light sun = {.id = "sun", .type = LC_ENGINE_LIGHT_DIRECTIONAL, .color = {1, 1, 1}, .intensity = 1000,
+    lc_engine_light sun = {.id = "sun",
+                           .type = LC_ENGINE_LIGHT_DIRECTIONAL,
+                           .color = {1, 1, 1},
+                           .intensity = 1000,
                            .direction = {0, -1, 0}};
     lc_engine_state st = {0};
     st.settings = lc_engine_default_settings(f.bake);
@@ -273,7 +313,7 @@ static void test_lights(void) {
         if (ca->normal[1] < -0.99f) {
             double c0 = ca->position[1];
             double ff = ff_rect(ca->position[0], ca->position[2], -2, 2, -2, 2, c0) -
-                        ff_rect(ca->position[0], ca->position[2], -0.3, 0.3, -0.3, 0.3, c0);
+                ff_rect(ca->position[0], ca->position[2], -0.3, 0.3, -0.3, 0.3, c0);
             agree_add(&a, res.lightmap[3 * i], res.lightmap_stderr[3 * i], 0.5 * 1000 * ff);
         } else {
             /* The floor sees only the black patch: its lightmap is empty (direct sun is not in it). */
@@ -284,8 +324,8 @@ static void test_lights(void) {
     lc_ref_result_free(&res);
 
     /* 2. Point light (100 cd) at y = 0.5 under the patch: the floor gets I h / d^3. */
-    lc_engine_light pt = {.id = "bulb", .type = LC_ENGINE_LIGHT_POINT, .color = {1, 1, 1}, .intensity = 100,
-                          .position = {0, 0.5f, 0}};
+    lc_engine_light pt = {
+        .id = "bulb", .type = LC_ENGINE_LIGHT_POINT, .color = {1, 1, 1}, .intensity = 100, .position = {0, 0.5f, 0}};
     st.lights = &pt;
     if (render(&f, &st, REF_SPP(2048), 0, 0, &res) != 0) {
         CHECK(0, "point render failed");

@@ -17,9 +17,7 @@ static int rm_entry(const char *p, const struct stat *st, int flag, struct FTW *
     return remove(p);
 }
 
-static uint32_t rd_u32(const unsigned char *p) {
-    return p[0] | p[1] << 8 | p[2] << 16 | (uint32_t)p[3] << 24;
-}
+static uint32_t rd_u32(const unsigned char *p) { return p[0] | p[1] << 8 | p[2] << 16 | (uint32_t)p[3] << 24; }
 
 static const lc_material *find_material(const lc_scene *s, const char *name) {
     for (uint32_t i = 0; i < s->n_materials; i++)
@@ -100,8 +98,8 @@ static void check_container(const char *path, const lc_scene *src) {
             const cJSON *mn = cJSON_GetObjectItem(acc, "min"), *mx = cJSON_GetObjectItem(acc, "max");
             CHECK(cJSON_GetArraySize(mn) == 3 && cJSON_GetArraySize(mx) == 3, "POSITION min/max");
             /* verify min/max against the actual data in the BIN chunk */
-            const cJSON *view =
-                cJSON_GetArrayItem(cJSON_GetObjectItem(j, "bufferViews"), cJSON_GetObjectItem(acc, "bufferView")->valueint);
+            const cJSON *view = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "bufferViews"),
+                                                   cJSON_GetObjectItem(acc, "bufferView")->valueint);
             size_t off = (size_t)cJSON_GetObjectItem(view, "byteOffset")->valuedouble;
             int count = cJSON_GetObjectItem(acc, "count")->valueint;
             float dlo[3] = {INFINITY, INFINITY, INFINITY}, dhi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -140,9 +138,9 @@ static void check_container(const char *path, const lc_scene *src) {
             const cJSON *ef = cJSON_GetObjectItem(mat, "emissiveFactor");
             CHECK_NEAR(cJSON_GetArrayItem(ef, 0)->valuedouble, 1.0, 1e-6);
             CHECK_NEAR(cJSON_GetArrayItem(ef, 1)->valuedouble, 12.0 / 17.0, 1e-6);
-            const cJSON *es = cJSON_GetObjectItem(cJSON_GetObjectItem(cJSON_GetObjectItem(mat, "extensions"),
-                                                                      "KHR_materials_emissive_strength"),
-                                                  "emissiveStrength");
+            const cJSON *es = cJSON_GetObjectItem(
+                cJSON_GetObjectItem(cJSON_GetObjectItem(mat, "extensions"), "KHR_materials_emissive_strength"),
+                "emissiveStrength");
             CHECK(cJSON_IsNumber(es) && fabs(es->valuedouble - 17) < 1e-5, "emissiveStrength");
         }
         CHECK(found_light, "light material in JSON");

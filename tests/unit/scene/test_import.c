@@ -281,8 +281,7 @@ static void test_gltf(void) {
     int rc = lc_scene_import(tmp_path("quad.gltf", path, sizeof path), &prm, &s, err, sizeof err);
     CHECK(rc == 0, "gltf import failed: %s", err);
     if (rc) return;
-    CHECK(s.mesh.n_triangles == 2 && s.mesh.n_vertices == 4, "%u tris %u verts", s.mesh.n_triangles,
-          s.mesh.n_vertices);
+    CHECK(s.mesh.n_triangles == 2 && s.mesh.n_vertices == 4, "%u tris %u verts", s.mesh.n_triangles, s.mesh.n_vertices);
     CHECK(s.has_lightmap_uv == 1 && s.mesh.uv1, "has_lightmap_uv %d", s.has_lightmap_uv);
     int matched = 0;
     for (uint32_t v = 0; v < s.mesh.n_vertices; v++) {
@@ -367,10 +366,9 @@ static void test_gltf(void) {
 }
 
 static void test_ply(void) {
-    const char *ply =
-        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
-        "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
-        "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n";
+    const char *ply = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                      "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+                      "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n";
     CHECK(write_text("quad.ply", ply) == 0, "write quad.ply");
     char path[512], err[512] = "";
     lc_import_params prm = {1.0, 0};
@@ -378,8 +376,7 @@ static void test_ply(void) {
     int rc = lc_scene_import(tmp_path("quad.ply", path, sizeof path), &prm, &s, err, sizeof err);
     CHECK(rc == 0, "ply import failed: %s", err);
     if (rc) return;
-    CHECK(s.mesh.n_triangles == 2 && s.mesh.n_vertices == 4, "%u tris %u verts", s.mesh.n_triangles,
-          s.mesh.n_vertices);
+    CHECK(s.mesh.n_triangles == 2 && s.mesh.n_vertices == 4, "%u tris %u verts", s.mesh.n_triangles, s.mesh.n_vertices);
     CHECK_NEAR(lc_mesh_total_area(&s.mesh), 1.0, 1e-6);
     CHECK(s.n_materials >= 1 && !s.has_lightmap_uv, "materials %u", s.n_materials);
     for (uint32_t v = 0; v < s.mesh.n_vertices; v++) CHECK_NEAR(s.mesh.normal[3 * v + 2], 1.0, 1e-5);
@@ -424,12 +421,14 @@ static void test_texture(void) {
         for (int c = 0; c < 3; c++) px[3 * i + c] = k[i][c] / 255.0f;
     int rc = lc_image_write(tmp_path("Textures/TEX.PNG", path, sizeof path), 2, 2, 3, px, err, sizeof err);
     CHECK(rc == 0, "png write failed: %s", err);
-    CHECK(write_text("tex.mtl", "newmtl tex\nKd 0.5 0.8 1.0\nmap_Kd textures\\tex.png\n"
-                                "newmtl gone\nKd 0.3 0.3 0.3\nmap_Kd missing.png\n") == 0,
+    CHECK(write_text("tex.mtl",
+                     "newmtl tex\nKd 0.5 0.8 1.0\nmap_Kd textures\\tex.png\n"
+                     "newmtl gone\nKd 0.3 0.3 0.3\nmap_Kd missing.png\n") == 0,
           "write mtl");
-    CHECK(write_text("tex.obj", "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
-                                "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl tex\nf 1/1 2/2 3/3 4/4\n"
-                                "v 0 0 1\nv 1 0 1\nv 1 1 1\nusemtl gone\nf 5/1 6/2 7/3\n") == 0,
+    CHECK(write_text("tex.obj",
+                     "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                     "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl tex\nf 1/1 2/2 3/3 4/4\n"
+                     "v 0 0 1\nv 1 0 1\nv 1 1 1\nusemtl gone\nf 5/1 6/2 7/3\n") == 0,
           "write obj");
     lc_import_params prm = {1.0, 0};
     lc_scene s;
@@ -443,8 +442,7 @@ static void test_texture(void) {
     CHECK(tex->base_texture == 0, "tex texture %d", tex->base_texture);
     CHECK(gone->base_texture == -1, "missing texture keeps the factor only (%d)", gone->base_texture);
     CHECK(strstr(s.textures[0].path, "Textures/TEX.PNG") != NULL, "resolved path '%s'", s.textures[0].path);
-    CHECK(s.textures[0].width == 2 && s.textures[0].height == 2, "%ux%u", s.textures[0].width,
-          s.textures[0].height);
+    CHECK(s.textures[0].width == 2 && s.textures[0].height == 2, "%ux%u", s.textures[0].width, s.textures[0].height);
     /* texel centres: (u, v) = ((col + 0.5) / 2, 1 - (row + 0.5) / 2) */
     const float kd[3] = {0.5f, 0.8f, 1.0f};
     for (int i = 0; i < 4; i++) {
@@ -463,7 +461,6 @@ static void test_texture(void) {
 done:
     lc_scene_release(&s);
 }
-
 
 /* Material names go to every client: a Latin-1 .mtl name gets U+FFFD for its bad bytes, a
  * long name is cut on a character boundary, UTF-8 names stay as they are (issue 13). */
@@ -499,10 +496,10 @@ static void test_names(void) {
         const unsigned char *n = (const unsigned char *)s.materials[i].name;
         int ascii_or_known = 1;
         for (size_t k = 0; n[k]; k++) /* only ASCII, é and U+FFFD here */
-            if (n[k] >= 0x80 && !(n[k] == 0xc3 && n[k + 1] == 0xa9) && !(n[k] == 0xef && n[k + 1] == 0xbf && n[k + 2] == 0xbd))
+            if (n[k] >= 0x80 && !(n[k] == 0xc3 && n[k + 1] == 0xa9) &&
+                !(n[k] == 0xef && n[k + 1] == 0xbf && n[k + 2] == 0xbd))
                 ascii_or_known = 0;
-            else if (n[k] >= 0x80)
-                k += n[k] == 0xc3 ? 1 : 2;
+            else if (n[k] >= 0x80) k += n[k] == 0xc3 ? 1 : 2;
         CHECK(ascii_or_known, "material %u name '%s' has stray bytes", i, s.materials[i].name);
     }
     lc_scene_release(&s);
@@ -536,7 +533,7 @@ static void test_sponza(int *skipped) {
             want++;
             const lc_material *m = find_material(&s, cur);
             int ok = m && m->base_texture >= 0 && (uint32_t)m->base_texture < s.n_textures &&
-                     s.textures[m->base_texture].rgb;
+                s.textures[m->base_texture].rgb;
             have += ok;
             CHECK(ok, "sponza material '%s' texture not loaded", cur);
         }
@@ -586,8 +583,9 @@ static void test_bad_inputs(void) {
     expect_fail("scale too small", cornell, 1e-9, "no triangles");
 
     /* one good triangle + one degenerate: the bad one is dropped and counted, its vertices too */
-    CHECK(write_text("mixed.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 5 5\nv 6 6 6\nv 7 7 7\n"
-                                  "v 0 0 3\nv 1e-7 0 3\nv 0 1e-7 3\nf 1 2 3\nf 4 5 6\nf 7 8 9\n") == 0,
+    CHECK(write_text("mixed.obj",
+                     "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 5 5\nv 6 6 6\nv 7 7 7\n"
+                     "v 0 0 3\nv 1e-7 0 3\nv 0 1e-7 3\nf 1 2 3\nf 4 5 6\nf 7 8 9\n") == 0,
           "write mixed obj");
     char err[512] = "";
     lc_import_params prm = {1.0, 0};

@@ -104,16 +104,15 @@ static lc_lcb_surfel *make_corridor(uint32_t n, uint64_t seed) {
 static int verify(const lc_lcb_surfel *orig, const lc_lcb_surfel *s, uint32_t n, const lc_hierarchy *h,
                   const uint32_t *perm, int report, const char *what) {
     int bad = 0;
-#define V(cond, ...)                                       \
-    do {                                                   \
-        if (report) CHECK(cond, __VA_ARGS__);              \
-        if (!(cond)) bad++;                                \
+#define V(cond, ...)                          \
+    do {                                      \
+        if (report) CHECK(cond, __VA_ARGS__); \
+        if (!(cond)) bad++;                   \
     } while (0)
     V(h->n_nodes == 2 * n - 1, "%s: %u nodes for %u surfels", what, h->n_nodes, n);
     if (h->n_nodes != 2 * n - 1) return bad;
     V(h->n_levels >= 1 && h->levels[0] == 0 && h->levels[h->n_levels] == h->n_nodes, "%s: level bounds", what);
-    for (uint32_t l = 0; l < h->n_levels; l++)
-        V(h->levels[l] < h->levels[l + 1], "%s: empty level %u", what, l);
+    for (uint32_t l = 0; l < h->n_levels; l++) V(h->levels[l] < h->levels[l + 1], "%s: empty level %u", what, l);
     V(h->levels[1] == 1, "%s: root level holds %u nodes", what, h->levels[1]);
 
     /* perm */
@@ -250,7 +249,8 @@ static void run_case(lc_lcb_surfel *(*make)(uint32_t, uint64_t), uint32_t n, lc_
     free(s2);
 }
 
-static double build_quality(lc_lcb_surfel *(*make)(uint32_t, uint64_t), uint32_t n, lc_hierarchy_method m, double *secs) {
+static double build_quality(lc_lcb_surfel *(*make)(uint32_t, uint64_t), uint32_t n, lc_hierarchy_method m,
+                            double *secs) {
     char err[256] = "";
     lc_lcb_surfel *s = make(n, 3);
     lc_hierarchy h = {0};
@@ -259,7 +259,9 @@ static double build_quality(lc_lcb_surfel *(*make)(uint32_t, uint64_t), uint32_t
     *secs = now_s() - t0;
     CHECK(rc == 0, "build failed: %s", err);
     double q = rc == 0 ? lc_hierarchy_quality(s, &h) : 1e30;
-    if (rc == 0) fprintf(stderr, "  n=%u %s: %.3f s, %u levels, quality %.6f\n", n, m == LC_HIERARCHY_AAC ? "aac" : "kd ", *secs, h.n_levels, q);
+    if (rc == 0)
+        fprintf(stderr, "  n=%u %s: %.3f s, %u levels, quality %.6f\n", n, m == LC_HIERARCHY_AAC ? "aac" : "kd ", *secs,
+                h.n_levels, q);
     lc_hierarchy_release(&h);
     free(s);
     return q;

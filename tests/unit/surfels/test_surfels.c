@@ -57,7 +57,8 @@ static void add_tri(builder *b, const double p0[3], const double p1[3], const do
 }
 
 /* Quad a, b, c, d counter-clockwise seen from the front. */
-static void add_quad(builder *b, const double a[3], const double bb[3], const double c[3], const double d[3], uint32_t mat) {
+static void add_quad(builder *b, const double a[3], const double bb[3], const double c[3], const double d[3],
+                     uint32_t mat) {
     add_tri(b, a, bb, c, mat);
     add_tri(b, a, c, d, mat);
 }
@@ -167,10 +168,12 @@ static void nn_stats(const lc_lcb_surfel *s, uint32_t n, double *min_out, double
         double best = INFINITY;
         for (uint32_t j = 0; j < n; j++) {
             if (j == i) continue;
-            double dn = s[i].normal[0] * s[j].normal[0] + s[i].normal[1] * s[j].normal[1] + s[i].normal[2] * s[j].normal[2];
+            double dn =
+                s[i].normal[0] * s[j].normal[0] + s[i].normal[1] * s[j].normal[1] + s[i].normal[2] * s[j].normal[2];
             if (dn <= 0.5) continue;
             double d = 0;
-            for (int c = 0; c < 3; c++) d += ((double)s[i].position[c] - s[j].position[c]) * ((double)s[i].position[c] - s[j].position[c]);
+            for (int c = 0; c < 3; c++)
+                d += ((double)s[i].position[c] - s[j].position[c]) * ((double)s[i].position[c] - s[j].position[c]);
             if (d < best) best = d;
         }
         best = sqrt(best);

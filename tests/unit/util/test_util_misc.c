@@ -32,7 +32,8 @@ static _Atomic long parallel_sum;
 static _Atomic int parallel_max_thread; /* the largest worker index a loop handed out */
 static void sum_range(void *ctx, size_t b, size_t e, int t) {
     int seen = atomic_load(&parallel_max_thread);
-    while (t > seen && !atomic_compare_exchange_weak(&parallel_max_thread, &seen, t)) {}
+    while (t > seen && !atomic_compare_exchange_weak(&parallel_max_thread, &seen, t)) {
+    }
     int *hits = ctx;
     for (size_t i = b; i < e; i++) {
         hits[i]++;

@@ -124,7 +124,8 @@ static void test_quad_exact(void) {
     lc_lcb_cache *c = NULL;
     uint32_t n = 0;
     char err[256];
-    CHECK(lc_texels_rasterize(&b.s, 10, 10, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0, "rasterize: %s", err);
+    CHECK(lc_texels_rasterize(&b.s, 10, 10, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0, "rasterize: %s",
+          err);
     CHECK(n == 64 && lm.n_covered == 64, "quad [0.1,0.9]^2 on 10x10: %u caches, expected 8*8", n);
     uint32_t bad_order = 0, bad_map = 0, bad_pos = 0, bad_attr = 0;
     for (uint32_t i = 0; i < n; i++) {
@@ -150,10 +151,8 @@ static void test_quad_exact(void) {
     uint32_t empty = 0, bad_fill = 0;
     for (uint32_t i = 0; i < 100; i++) {
         uint32_t x = i % 10, y = i / 10, cx = x < 1 ? 1 : x > 8 ? 8 : x, cy = y < 1 ? 1 : y > 8 ? 8 : y;
-        if (lm.texel_cache[i] == LC_NONE)
-            empty++;
-        else if (c[lm.texel_cache[i]].index != cy * 10 + cx)
-            bad_fill++;
+        if (lm.texel_cache[i] == LC_NONE) empty++;
+        else if (c[lm.texel_cache[i]].index != cy * 10 + cx) bad_fill++;
     }
     CHECK(empty == 0 && lm.n_dilated == 36, "%u empty texels, %u filled, expected 0 and 36", empty, lm.n_dilated);
     CHECK(bad_fill == 0, "%u border texels not filled from the nearest covered texel", bad_fill);
@@ -161,7 +160,8 @@ static void test_quad_exact(void) {
     /* appending keeps earlier caches and offsets indices */
     lc_lightmap lm2;
     uint32_t n2 = n;
-    CHECK(lc_texels_rasterize(&b.s, 10, 10, TEXELS_TEST_THREADS, &lm2, &c, &n2, err, sizeof err) == 0, "append: %s", err);
+    CHECK(lc_texels_rasterize(&b.s, 10, 10, TEXELS_TEST_THREADS, &lm2, &c, &n2, err, sizeof err) == 0, "append: %s",
+          err);
     CHECK(n2 == 128 && lm2.texel_cache[11] == 64 && c[64].index == 11, "append: n %u, texel 11 -> %u", n2,
           lm2.texel_cache[11]);
     free(c);
@@ -191,7 +191,8 @@ static void test_fill_rule(void) {
         init(&b);
         add_uv_quad(&b, 0, 0, 1, 1, 1, diag);
         long joint = count_caches(&b.s, 8, 8), single = sum_single(&b.s, 8, 8);
-        CHECK(joint == 64 && single == 64, "diagonal through centres: %ld joint, %ld summed, expected 64", joint, single);
+        CHECK(joint == 64 && single == 64, "diagonal through centres: %ld joint, %ld summed, expected 64", joint,
+              single);
         lc_scene_release(&b.s);
     }
     /* a fan of 8 triangles around a vertex sitting exactly on a centre, both windings */
@@ -206,10 +207,8 @@ static void test_fill_rule(void) {
                             cy + r * round(sin(a) * 1e6) / 1e6);
         }
         for (int k = 0; k < 8; k++) {
-            if (flip)
-                add_t(&b, centre, ring[(k + 1) % 8], ring[k], 0);
-            else
-                add_t(&b, centre, ring[k], ring[(k + 1) % 8], 0);
+            if (flip) add_t(&b, centre, ring[(k + 1) % 8], ring[k], 0);
+            else add_t(&b, centre, ring[k], ring[(k + 1) % 8], 0);
         }
         long joint = count_caches(&b.s, 8, 8), single = sum_single(&b.s, 8, 8);
         CHECK(joint == single, "fan (flip %d): joint %ld != per-triangle sum %ld", flip, joint, single);
@@ -258,19 +257,22 @@ static void test_overlap_and_errors(void) {
     lc_lcb_cache *c = NULL;
     uint32_t n = 0;
     char err[256];
-    CHECK(lc_texels_rasterize(&b.s, 16, 16, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0, "overlap: %s", err);
+    CHECK(lc_texels_rasterize(&b.s, 16, 16, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0, "overlap: %s",
+          err);
     uint32_t from_second = 0;
     for (uint32_t i = 0; i < n; i++) from_second += c[i].position[0] > 2 || fabsf(c[i].albedo[1] - 0.6f) < 1e-6f;
     CHECK(n > 0 && from_second == 0, "overlap: %u of %u caches from the later triangle", from_second, n);
     free(c);
     c = NULL;
     lc_lightmap_release(&lm);
-    CHECK(lc_texels_rasterize(&b.s, 0, 16, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == -1 && strstr(err, "size"), "size 0: %s",
-          err);
+    CHECK(lc_texels_rasterize(&b.s, 0, 16, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == -1 &&
+              strstr(err, "size"),
+          "size 0: %s", err);
     free(b.s.mesh.uv1);
     b.s.mesh.uv1 = NULL;
-    CHECK(lc_texels_rasterize(&b.s, 16, 16, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == -1 && strstr(err, "uv1"), "no uv1: %s",
-          err);
+    CHECK(lc_texels_rasterize(&b.s, 16, 16, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == -1 &&
+              strstr(err, "uv1"),
+          "no uv1: %s", err);
     lc_scene_release(&b.s);
 }
 
@@ -455,7 +457,8 @@ static uint32_t run_atlas(const char *name, builder *b, lc_uv_params p, int per_
     lc_lcb_cache *c = NULL;
     uint32_t n = 0;
     double t0 = now();
-    CHECK(lc_texels_rasterize(&b->s, st.width, st.height, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0, "%s: %s", name, err);
+    CHECK(lc_texels_rasterize(&b->s, st.width, st.height, TEXELS_TEST_THREADS, &lm, &c, &n, err, sizeof err) == 0,
+          "%s: %s", name, err);
     double t1 = now();
     const uint32_t W = st.width, H = st.height, n_fill = lm.n_dilated;
     /* rasterize alone already covers every bilinear read, from the right chart */
@@ -466,9 +469,10 @@ static uint32_t run_atlas(const char *name, builder *b, lc_uv_params p, int per_
     double t2 = now();
     lc_texels_dilate(&lm, 2, TEXELS_TEST_THREADS);
     double t3 = now();
-    fprintf(stderr, "%s: %u tris, %ux%u, %u covered, %u filled (source up to %u texels away), %u dilated; "
-            "rasterize %.3f s, dilate %.3f s\n", name, b->s.mesh.n_triangles, W, H, lm.n_covered, n_fill, far,
-            lm.n_dilated - n_fill, t1 - t0, t3 - t2);
+    fprintf(stderr,
+            "%s: %u tris, %ux%u, %u covered, %u filled (source up to %u texels away), %u dilated; "
+            "rasterize %.3f s, dilate %.3f s\n",
+            name, b->s.mesh.n_triangles, W, H, lm.n_covered, n_fill, far, lm.n_dilated - n_fill, t1 - t0, t3 - t2);
     CHECK(n == lm.n_covered && n > 0, "%s: %u caches, %u covered", name, n, lm.n_covered);
     /* owners and fill unchanged; a dilated texel copies the cache of a texel within 2 that
      * had it before dilation */
@@ -493,7 +497,8 @@ static uint32_t run_atlas(const char *name, builder *b, lc_uv_params p, int per_
           n_fill);
     uint32_t bad_cache = 0;
     for (uint32_t i = 0; i < n; i++) {
-        float l = sqrtf(c[i].normal[0] * c[i].normal[0] + c[i].normal[1] * c[i].normal[1] + c[i].normal[2] * c[i].normal[2]);
+        float l =
+            sqrtf(c[i].normal[0] * c[i].normal[0] + c[i].normal[1] * c[i].normal[1] + c[i].normal[2] * c[i].normal[2]);
         if (fabsf(l - 1) > 1e-4f || !isfinite(c[i].position[0]) || (i && c[i].index <= c[i - 1].index)) bad_cache++;
     }
     CHECK(bad_cache == 0, "%s: %u malformed caches", name, bad_cache);
@@ -523,7 +528,8 @@ static void test_generated(void) {
     init(&b);
     double lo[3] = {0, 0, 0}, hi[3] = {1, 2, 0.5};
     make_box(&b, lo, hi, 0);
-    uint32_t n = run_atlas("box/density32", &b, (lc_uv_params){.texels_per_metre = 32, .padding = 2, .chart_angle_deg = 30}, 1);
+    uint32_t n =
+        run_atlas("box/density32", &b, (lc_uv_params){.texels_per_metre = 32, .padding = 2, .chart_angle_deg = 30}, 1);
     double expect = 2 * (1 * 2 + 1 * 0.5 + 2 * 0.5) * 32 * 32;
     CHECK(fabs(n - expect) < 0.03 * expect, "box: %u texels vs area * density^2 = %.0f", n, expect);
     lc_scene_release(&b.s);

@@ -190,7 +190,8 @@ static lc_mesh make_cracked_grid(int n, double jitter) {
             uint32_t v[4];
             for (int k = 0; k < 4; k++) {
                 double x = (i + (k == 1 || k == 2)) * c, z = (j + (k >= 2)) * c;
-                v[k] = add_v(&b, x + jitter * (rnd() - 0.5), jitter * (rnd() - 0.5), z + jitter * (rnd() - 0.5), 0, 1, 0);
+                v[k] =
+                    add_v(&b, x + jitter * (rnd() - 0.5), jitter * (rnd() - 0.5), z + jitter * (rnd() - 0.5), 0, 1, 0);
             }
             add_t(&b, v[0], v[3], v[2]);
             add_t(&b, v[0], v[2], v[1]);
@@ -288,10 +289,8 @@ static verify_result verify(const lc_mesh *m, uint32_t W, uint32_t H, uint32_t p
     for (uint32_t t = 0; t < m->n_triangles; t++)
         for (int c = 0; c < 3; c++) {
             uint32_t v = canon[m->index[3 * (size_t)t + c]];
-            if (vt[v] == 0xFFFFFFFFu)
-                vt[v] = t;
-            else
-                parent[find(parent, t)] = (uint32_t)find(parent, vt[v]);
+            if (vt[v] == 0xFFFFFFFFu) vt[v] = t;
+            else parent[find(parent, t)] = (uint32_t)find(parent, vt[v]);
         }
     uint32_t *comp = malloc(sizeof(uint32_t) * m->n_triangles);
     for (uint32_t t = 0; t < m->n_triangles; t++) comp[t] = (uint32_t)find(parent, t);
@@ -338,7 +337,8 @@ static verify_result verify(const lc_mesh *m, uint32_t W, uint32_t H, uint32_t p
                 for (int e = 0; e < 3 && in && area != 0; e++) {
                     double best = -INFINITY;
                     for (int q = 0; q < 4; q++)
-                        best = fmax(best, s * orient(x[e], y[e], x[(e + 1) % 3], y[(e + 1) % 3], tx + (q & 1), ty + (q >> 1)));
+                        best = fmax(
+                            best, s * orient(x[e], y[e], x[(e + 1) % 3], y[(e + 1) % 3], tx + (q & 1), ty + (q >> 1)));
                     if (best < 0) in = 0; /* touching (== 0) counts as in */
                 }
                 if (!in) continue;
@@ -402,7 +402,8 @@ static lc_uv_stats run_case(const char *name, const lc_mesh *src, lc_uv_params p
         CHECK(memcmp(a.uv1, b.uv1, 8 * (size_t)a.n_vertices) == 0, "%s: uv1 deterministic", name);
         CHECK(memcmp(a.index, b.index, 12 * (size_t)a.n_triangles) == 0, "%s: index deterministic", name);
     }
-    CHECK(sa.n_charts == sb.n_charts && sa.width == sb.width && sa.height == sb.height, "%s: stats deterministic", name);
+    CHECK(sa.n_charts == sb.n_charts && sa.width == sb.width && sa.height == sb.height, "%s: stats deterministic",
+          name);
     CHECK(a.n_triangles == src->n_triangles, "%s: triangle count kept", name);
     CHECK(memcmp(a.material, src->material, 4 * (size_t)src->n_triangles) == 0, "%s: materials kept", name);
     /* triangles keep their corners' positions in order */
@@ -559,8 +560,8 @@ int main(void) {
     lc_mesh plate = make_studded_plate(30, 1.0);
     s = run_case("studs/atlas64", &plate, (lc_uv_params){.atlas_size = 64, .padding = 2, .chart_angle_deg = 30}, 1);
     CHECK(s.n_charts == 1, "sub-texel pyramids merged into the plate: %u charts", s.n_charts);
-    s = run_case("studs/density300", &plate, (lc_uv_params){.texels_per_metre = 300, .padding = 2, .chart_angle_deg = 30},
-                 1);
+    s = run_case("studs/density300", &plate,
+                 (lc_uv_params){.texels_per_metre = 300, .padding = 2, .chart_angle_deg = 30}, 1);
     CHECK(s.n_charts > 300, "pyramids of many texels keep their faces: %u charts", s.n_charts);
     lc_mesh_release(&plate);
 
