@@ -15,4 +15,26 @@ RTCDevice lc_embree_device_new(int threads, const char *module, char *err, size_
  * |vertex coordinate| of the static mesh; the engine and the reference both take it. */
 float lc_embree_scene_epsilon(const lc_lcb_view *v);
 
+/* 1 when something in `sc` lies on the ray org + t*dir, 0 < t < tfar (a shadow or
+ * visibility query; the caller has lifted org off its surface). Inline: it is the shadow
+ * rays' hot loop in both callers. */
+static inline int lc_embree_occluded(RTCScene sc, const float org[3], const float dir[3], float tfar) {
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    struct RTCRay ray = {.org_x = org[0],
+                         .org_y = org[1],
+                         .org_z = org[2],
+                         .tnear = 0,
+                         .dir_x = dir[0],
+                         .dir_y = dir[1],
+                         .dir_z = dir[2],
+                         .time = 0,
+                         .tfar = tfar,
+                         .mask = ~0u,
+                         .id = 0,
+                         .flags = 0};
+    rtcOccluded1(sc, &ctx, &ray);
+    return ray.tfar < 0;
+}
+
 #endif

@@ -110,25 +110,6 @@ static void engine_build_top(lc_engine *e, const lc_engine_object *objects, uint
     rtcCommitScene(e->top);
 }
 
-static int engine_occluded(RTCScene sc, const float org[3], const float dir[3], float tfar) {
-    struct RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    struct RTCRay ray = {.org_x = org[0],
-                         .org_y = org[1],
-                         .org_z = org[2],
-                         .tnear = 0,
-                         .dir_x = dir[0],
-                         .dir_y = dir[1],
-                         .dir_z = dir[2],
-                         .time = 0,
-                         .tfar = tfar,
-                         .mask = ~0u,
-                         .id = 0,
-                         .flags = 0};
-    rtcOccluded1(sc, &ctx, &ray);
-    return ray.tfar < 0;
-}
-
 /* --- create / release ------------------------------------------------------------------------ */
 
 void lc_engine_release(lc_engine *e) {
@@ -350,7 +331,7 @@ static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread)
                 float dl = engine_len(l->direction);
                 float w[3] = {-l->direction[0] / dl, -l->direction[1] / dl, -l->direction[2] / dl};
                 float cosn = n[0] * w[0] + n[1] * w[1] + n[2] * w[2];
-                if (cosn <= 0 || engine_occluded(e->top, org, w, INFINITY)) continue;
+                if (cosn <= 0 || lc_embree_occluded(e->top, org, w, INFINITY)) continue;
                 for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn;
             } else if (l->type == LC_ENGINE_LIGHT_AREA) {
                 /* Stratified samples over the emitter, one shadow ray each. */
@@ -371,7 +352,7 @@ static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread)
                     float cos_s = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
                     float cos_l = -(ln[0] * d[0] + ln[1] * d[1] + ln[2] * d[2]);
                     if (cos_s <= 0 || cos_l <= 0) continue;
-                    if (engine_occluded(e->top, org, d, lc_ray_shadow_tfar(dist, e->scene_eps))) continue;
+                    if (lc_embree_occluded(e->top, org, d, lc_ray_shadow_tfar(dist, e->scene_eps))) continue;
                     sum += cos_s * cos_l / d2 * lc_sm_range_window(d2, l->range);
                 }
                 float g = scale * sum * fr.area / ENGINE_AREA_SAMPLES;
@@ -387,7 +368,7 @@ static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread)
                 float att = lc_sm_range_window(d2, l->range) / d2;
                 if (l->type == LC_ENGINE_LIGHT_SPOT) att *= lc_sm_spot_cone(l, d);
                 if (att <= 0) continue;
-                if (engine_occluded(e->top, org, d, lc_ray_shadow_tfar(dist, e->scene_eps))) continue;
+                if (lc_embree_occluded(e->top, org, d, lc_ray_shadow_tfar(dist, e->scene_eps))) continue;
                 for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn * att;
             }
         }
@@ -419,7 +400,7 @@ static void engine_sky_range(void *ctx, size_t begin, size_t end, int thread) {
             float lx = r * cosf(phi), ly = r * sinf(phi);
             float d[3] = {lx * t[0] + ly * bt[0] + z * nx, lx * t[1] + ly * bt[1] + z * ny,
                           lx * t[2] + ly * bt[2] + z * nz};
-            if (engine_occluded(e->top, org, d, INFINITY)) continue;
+            if (lc_embree_occluded(e->top, org, d, INFINITY)) continue;
             float y[9];
             lc_sh_eval_fast(3, d[0], d[1], d[2], y);
             for (int k = 0; k < 9; k++) acc[k] += y[k];

@@ -199,7 +199,7 @@ int lc_config_load(lc_config *c, int argc, char **argv, char *err, size_t errlen
     return lc_config_validate(c, err, errlen);
 }
 
-int lc_config_token_in(const char *list, const char *token) {
+int lc_config_has_token(const char *list, const char *token) {
     /* Constant time in the token's content: every element is compared over its whole length
      * and nothing returns early, so response timing does not reveal a matching prefix. */
     const size_t tl = strlen(token);
@@ -214,18 +214,6 @@ int lc_config_token_in(const char *list, const char *token) {
         p = comma + 1;
     }
     return (int)found;
-}
-
-int lc_config_has_token(const char *list, const char *token) {
-    size_t tl = strlen(token);
-    for (const char *p = list; *p;) {
-        const char *comma = strchr(p, ',');
-        size_t len = comma ? (size_t)(comma - p) : strlen(p);
-        if (len == tl && strncmp(p, token, len) == 0) return 1;
-        if (!comma) break;
-        p = comma + 1;
-    }
-    return 0;
 }
 
 void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *restart_needed, size_t len) {

@@ -56,9 +56,8 @@ int lc_config_load(lc_config *c, int argc, char **argv, char *err, size_t errlen
 void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *restart_needed, size_t len);
 /* Cross-field checks (tokens, paths). */
 int lc_config_validate(const lc_config *c, char *err, size_t errlen);
-/* 1 if token is in the comma-separated list. */
+/* 1 if token is in the comma-separated list; constant time in the token's content (the
+ * lists hold secrets), and an empty token matches nothing. */
 int lc_config_has_token(const char *list, const char *token);
-/* The same for secrets: constant time in the token's content; an empty token matches nothing. */
-int lc_config_token_in(const char *list, const char *token);
 
 #endif

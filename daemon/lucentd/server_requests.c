@@ -144,8 +144,8 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
             goto done;
         }
         if (!c->controller_tokens[0]) ss->controller = 1; /* no tokens configured: local, open server */
-        else if (lc_config_token_in(c->controller_tokens, req.token)) ss->controller = 1;
-        else if (lc_config_token_in(c->viewer_tokens, req.token)) ss->controller = 0;
+        else if (lc_config_has_token(c->controller_tokens, req.token)) ss->controller = 1;
+        else if (lc_config_has_token(c->viewer_tokens, req.token)) ss->controller = 0;
         else {
             ap->tokens -= 1;
             s->auth_failures++;

@@ -132,25 +132,6 @@ static int ref_intersect(const lc_ref *r, const float org[3], const float dir[3]
     return 1;
 }
 
-static int ref_occluded(const lc_ref *r, const float org[3], const float dir[3], float tfar) {
-    struct RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    struct RTCRay ray = {.org_x = org[0],
-                         .org_y = org[1],
-                         .org_z = org[2],
-                         .tnear = 0,
-                         .dir_x = dir[0],
-                         .dir_y = dir[1],
-                         .dir_z = dir[2],
-                         .time = 0,
-                         .tfar = tfar,
-                         .mask = ~0u,
-                         .id = 0,
-                         .flags = 0};
-    rtcOccluded1(r->scene, &ctx, &ray);
-    return ray.tfar < 0;
-}
-
 /* Static triangle corners. */
 static inline void ref_tri(const lc_ref *r, uint32_t t, const float **a, const float **b, const float **c) {
     const lc_lcb_triangle *tr = &r->v->triangles[t];
@@ -369,7 +350,7 @@ static void ref_direct(const lc_ref *r, const float org[3], const float n[3], co
             float cosn = ref_dot(n, w);
             if (cosn <= 0 || ref_dot(ng, w) <= 0) continue;
             (*rays)++;
-            if (ref_occluded(r, org, w, INFINITY)) continue;
+            if (lc_embree_occluded(r->scene, org, w, INFINITY)) continue;
             for (int k = 0; k < 3; k++) out[k] += scale * l->color[k] * cosn;
         } else if (l->type == LC_ENGINE_LIGHT_AREA) {
             lc_sm_area_frame fr = lc_sm_area_frame_of(l);
@@ -385,7 +366,7 @@ static void ref_direct(const lc_ref *r, const float org[3], const float n[3], co
             float cos_s = ref_dot(n, d), cos_l = -ref_dot(ln, d);
             if (cos_s <= 0 || cos_l <= 0 || ref_dot(ng, d) <= 0) continue;
             (*rays)++;
-            if (ref_occluded(r, org, d, lc_ray_shadow_tfar(dist, r->eps))) continue;
+            if (lc_embree_occluded(r->scene, org, d, lc_ray_shadow_tfar(dist, r->eps))) continue;
             float g = scale * fr.area * cos_s * cos_l / d2 * lc_sm_range_window(d2, l->range);
             for (int k = 0; k < 3; k++) out[k] += g * l->color[k];
         } else { /* point, spot */
@@ -400,7 +381,7 @@ static void ref_direct(const lc_ref *r, const float org[3], const float n[3], co
             if (l->type == LC_ENGINE_LIGHT_SPOT) att *= lc_sm_spot_cone(l, d);
             if (att <= 0) continue;
             (*rays)++;
-            if (ref_occluded(r, org, d, lc_ray_shadow_tfar(dist, r->eps))) continue;
+            if (lc_embree_occluded(r->scene, org, d, lc_ray_shadow_tfar(dist, r->eps))) continue;
             for (int k = 0; k < 3; k++) out[k] += scale * l->color[k] * cosn * att;
         }
     }
@@ -437,7 +418,7 @@ static int ref_emit_sample(const lc_ref *r, const float org[3], const float *n, 
     if (n && ref_dot(n, d) <= 0) return 0;
     if (ng && ref_dot(ng, d) <= 0) return 0;
     (*rays)++;
-    if (ref_occluded(r, org, d, lc_ray_shadow_tfar(dist, r->eps))) return 0;
+    if (lc_embree_occluded(r->scene, org, d, lc_ray_shadow_tfar(dist, r->eps))) return 0;
     *le = r->emission + 3 * (size_t)r->v->triangles[t].material;
     *pdf = r->emit_pdf[t] * d2 / cos_l;
     return 1;
@@ -518,7 +499,7 @@ static void ref_trace(const lc_ref *r, const ref_path_cfg *cfg, const float org_
         for (int k = 0; k < 3; k++) T[k] *= s.albedo[k];
         if (!further) { /* the last pass: only the sky this surface sees */
             (*rays)++;
-            if (ref_occluded(r, x, dir, INFINITY)) return;
+            if (lc_embree_occluded(r->scene, x, dir, INFINITY)) return;
             float sky[3];
             ref_sky(r, dir, sky);
             for (int k = 0; k < 3; k++) L[k] += T[k] * sky[k];
@@ -642,7 +623,7 @@ void lc_ref_b0_power(lc_ref *r, uint32_t samples, uint64_t seed, double power[3]
         if (r->sky_on) { /* one cosine sample of the sky this point sees */
             float d[3], cs, sky[3];
             ref_cosine_dir(sf.ns, &rng, d, &cs);
-            if (ref_dot(d, sf.ng) > 0 && !ref_occluded(r, x, d, INFINITY)) {
+            if (ref_dot(d, sf.ng) > 0 && !lc_embree_occluded(r->scene, x, d, INFINITY)) {
                 ref_sky(r, d, sky);
                 for (int k = 0; k < 3; k++) e[k] += (float)M_PI * sky[k];
             }
