@@ -179,3 +179,21 @@ int lc_fs_write_atomic(const char *path, const void *data, size_t len, char *err
     }
     return lc_fs_writer_commit(w, err, errlen);
 }
+
+void lc_fs_beside_exe(const char *rel, const char *fallback, char *out, size_t outlen) {
+    char exe[4096];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe);
+    char *slash = NULL;
+    if (n > 0 && (size_t)n < sizeof exe) { /* else unreadable or cut */
+        exe[n] = 0;
+        slash = strrchr(exe, '/');
+    }
+    if (slash) {
+        /* the link is canonical (no symlinks, no ..): each leading ../ drops one directory */
+        size_t dir = (size_t)(slash - exe);
+        for (char *up; !strncmp(rel, "../", 3) && (up = memrchr(exe, '/', dir)); rel += 3) dir = (size_t)(up - exe);
+        int len = snprintf(out, outlen, "%.*s/%s", (int)dir, exe, rel);
+        if (len >= 0 && (size_t)len < outlen) return;
+    }
+    snprintf(out, outlen, "%s", fallback);
+}

@@ -24,4 +24,10 @@ void lc_fs_writer_abort(lc_fs_writer *w);
 /* Writes a whole buffer atomically. */
 int lc_fs_write_atomic(const char *path, const void *data, size_t len, char *err, size_t errlen);
 
+/* Resolves rel (e.g. "../share/lucent/cornell.lcb") against the directory of the running
+ * executable (/proc/self/exe), so an installed prefix, a relocated copy of one and the build
+ * tree (which mirrors the install layout) each find their own files. Writes fallback when
+ * the executable's path cannot be read or the result does not fit. */
+void lc_fs_beside_exe(const char *rel, const char *fallback, char *out, size_t outlen);
+
 #endif

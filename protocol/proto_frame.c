@@ -311,8 +311,8 @@ size_t lc_residual_deflate_bound(size_t n) { return (size_t)compressBound((uLong
 
 size_t lc_residual_deflate(const uint8_t *in, size_t n, uint8_t *out, size_t cap) {
     uLongf len = (uLongf)cap;
-    /* Level 1: measured on Cornell small moves, level 6 is ~2 points of a keyframe smaller
-     * at twice the time, and the service thread deflates once per client per frame. */
+    /* The fastest level: the service thread deflates once per client per frame, and higher
+     * levels save little on residuals (docs/ARCHITECTURE.md, Decisions). */
     if (n > UINT32_MAX || compress2(out, &len, in, (uLong)n, Z_BEST_SPEED) != Z_OK) return 0;
     return (size_t)len;
 }

@@ -139,8 +139,7 @@ void main() {
         }
     }
     // Band 0 of a band-1-only texel cache is zero, as the CPU backend's. (Cleared here, not
-    // skipped in the loop: a variable start index keeps the accumulators out of registers,
-    // 3x slower on llvmpipe.)
+    // skipped in the loop: a variable start index keeps the accumulators out of registers.)
     if (u_texel_band1 != 0 && (caches[c].flags & 1u) != 0u) {
         acc0[0] = 0.0;
         acc1[0] = 0.0;

@@ -168,7 +168,8 @@ lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int thread
     e->emission = calloc((size_t)(v->n_materials ? v->n_materials : 1) * 3, sizeof(float));
     if (!e->e_direct || !e->b0 || !e->emission) goto oom;
 
-    /* Backend: AUTO tries EGL on a hardware device only (on llvmpipe plain C is ~6x faster). */
+    /* Backend: AUTO tries EGL on a hardware device only (on llvmpipe the CPU backend is faster;
+     * docs/ARCHITECTURE.md, Performance). */
     char berr[512] = "";
     if (kind == LC_BACKEND_EGL || kind == LC_BACKEND_AUTO) {
         e->ops = &lc_transport_egl;

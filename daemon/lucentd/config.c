@@ -15,12 +15,9 @@
 #include "util/limits.h"
 #include "util/log.h"
 
-/* The default bake is found relative to the running executable: LUCENT_DEFAULT_BAKE_REL
- * from the directory of /proc/self/exe (bin/lucentd -> ../share/lucent/cornell.lcb), so an
- * installed prefix, a copied (relocated) one and the build tree, which mirrors the install
- * layout, each serve their own Cornell box. LUCENT_DEFAULT_BAKE (the configured install
- * path) when /proc/self/exe cannot be read. */
-#include <unistd.h>
+/* The default bake is found relative to the running executable (bin/lucentd ->
+ * ../share/lucent/cornell.lcb, lc_fs_beside_exe); LUCENT_DEFAULT_BAKE, the configured install
+ * path, when the executable's path cannot be read. */
 #ifndef LUCENT_DEFAULT_BAKE_REL
 #define LUCENT_DEFAULT_BAKE_REL "../share/lucent/cornell.lcb"
 #endif
@@ -30,24 +27,8 @@
 static char config_default_bake[LC_CONFIG_PATH_MAX]; /* the "bake" option's default */
 
 static void config_resolve_default_bake(void) {
-    if (config_default_bake[0]) return;
-    char exe[LC_CONFIG_PATH_MAX];
-    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe);
-    char *slash = NULL;
-    if (n > 0 && (size_t)n < sizeof exe) { /* else unreadable or cut */
-        exe[n] = 0;
-        slash = strrchr(exe, '/');
-    }
-    if (slash) {
-        /* the link is canonical (no symlinks, no ..): each leading ../ drops one directory */
-        size_t dir = (size_t)(slash - exe);
-        const char *rel = LUCENT_DEFAULT_BAKE_REL;
-        for (char *up; !strncmp(rel, "../", 3) && (up = memrchr(exe, '/', dir)); rel += 3) dir = (size_t)(up - exe);
-        if (snprintf(config_default_bake, sizeof config_default_bake, "%.*s/%s", (int)dir, exe, rel) <
-            (int)sizeof config_default_bake)
-            return;
-    }
-    snprintf(config_default_bake, sizeof config_default_bake, "%s", LUCENT_DEFAULT_BAKE);
+    if (!config_default_bake[0])
+        lc_fs_beside_exe(LUCENT_DEFAULT_BAKE_REL, LUCENT_DEFAULT_BAKE, config_default_bake, sizeof config_default_bake);
 }
 
 #define OFF(f) offsetof(lc_config, f)

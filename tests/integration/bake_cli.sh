@@ -38,4 +38,14 @@ head -c 1000 /dev/urandom > "$TMP/garbage.lcb"
 expect_exit 1 "garbage.lcb" "$BAKE" verify "$TMP/garbage.lcb"
 expect_exit 1 "" "$BAKE" info "$TMP/missing.lcb"
 expect_exit 2 "" "$BAKE" info
+
+# The front links only the bake file reader: info, verify and --help load none of the bake's
+# dependencies (they live in the worker, libexec/lucent/lucent-bake-run).
+needed="$(readelf -d "$BAKE" | grep NEEDED)"
+echo "$needed" | grep -qiE "embree|assimp|OpenImageIO" && fail "lucent-bake links the bake's dependencies: $needed"
+readelf -d "$(dirname "$BAKE")/../libexec/lucent/lucent-bake-run" | grep -q "embree" ||
+  fail "the bake worker does not link Embree (is it built beside bin/?)"
+# Without its worker the front says which file it looked for.
+mkdir -p "$TMP/lonely/bin" && cp "$BAKE" "$TMP/lonely/bin/"
+expect_exit 1 "cannot run the bake worker .*lucent-bake-run" "$TMP/lonely/bin/lucent-bake" bake "$CORNELL" --quiet
 finish

@@ -58,6 +58,8 @@ with open(out, "w") as f:
     for i, stage in enumerate(stages):
         for from_stage, srcs, dest in stage["copies"]:
             if from_stage:
+                for s in srcs:
+                    f.write("built\t%s\n" % os.path.relpath(s, build["workdir"]))
                 continue
             for s in srcs:
                 f.write("exists\t%s\n" % s)
@@ -100,8 +102,8 @@ $(cat "$TMP/run.sh")") >"$TMP/build.log" 2>&1; then
   finish
 fi
 echo "build stage: $(($(date +%s) - start)) s: $(cat "$TMP/run.sh")"
-for f in bin/lucentd bin/lucentctl share/lucent/cornell.lcb; do
-  [ -e "$CTX/build/$f" ] || fail "the build stage did not produce build/$f (the runtime stage copies it)"
+for f in build/bin/lucentd build/bin/lucentctl build/share/lucent/cornell.lcb $(sed -n 's/^built\t//p' "$TMP/plan"); do
+  [ -e "$CTX/$f" ] || fail "the build stage did not produce $f (the runtime stage copies it)"
 done
 
 # The runtime stage's packages provide every library the copied programs load.
@@ -113,7 +115,7 @@ else
   apt-cache depends --recurse --no-recommends --no-suggests --no-conflicts --no-breaks --no-replaces \
       --no-enhances apt $runtime 2>/dev/null | grep -v '^[ <]' | sort -u >"$TMP/have"
   dpkg-query -W -f '${Package} ${Priority}\n' | awk '$2 == "required" {print $1}' >>"$TMP/have"
-  for exe in "$CTX"/build/bin/*; do
+  for exe in "$CTX"/build/bin/* "$CTX"/build/libexec/lucent/*; do
     [ -x "$exe" ] && [ -f "$exe" ] || continue
     ldd "$exe" | awk '/=> \// {print $3}' | while read -r lib; do
       real="$(readlink -f "$lib")" # through /etc/alternatives (libblas.so.3) to the package's file

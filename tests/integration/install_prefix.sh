@@ -21,7 +21,7 @@ cp -a "$P" "$Q" && rm -rf "$P" || { fail "cannot relocate the prefix"; finish; }
 
 pc="$(find "$Q" -name lucent-client.pc | head -n 1)"
 cfg="$(find "$Q" -name lucent-clientConfig.cmake | head -n 1)"
-for f in bin/lucentd bin/lucentctl bin/lucent-bake bin/lucent-ref bin/lucent-bench \
+for f in bin/lucentd bin/lucentctl bin/lucent-bake bin/lucent-ref bin/lucent-bench libexec/lucent/lucent-bake-run \
          share/lucent/cornell.lcb share/lucent/cornell.glb include/lucent_client.h \
          share/doc/lucent/PROTOCOL.md share/doc/lucent/schema/hello.json; do
   [ -e "$Q/$f" ] || fail "not installed: $f"
@@ -38,6 +38,10 @@ grep -qF -- "(default $Q/share/lucent/cornell.lcb)" "$TMP/help" ||
   fail "installed lucentd --check-config: $(head -c 400 "$TMP/out")"
 "$Q/bin/lucent-bake" verify "$Q/share/lucent/cornell.lcb" >"$TMP/out" 2>&1 ||
   fail "installed lucent-bake verify: $(head -c 400 "$TMP/out")"
+# The installed front finds its installed worker (libexec/lucent, relative to bin/).
+"$Q/bin/lucent-bake" bake "$CORNELL" -o "$TMP/installed.lcb" --no-write-glb --quality draft --quiet \
+  --surfels 1024 --links 16 >"$TMP/out" 2>&1 || fail "installed lucent-bake bake: $(head -c 400 "$TMP/out")"
+"$Q/bin/lucent-bake" verify "$TMP/installed.lcb" >"$TMP/out" 2>&1 || fail "the installed bake's output does not verify"
 
 # The installed lucentd on its default (installed) bake, driven by the installed lucentctl.
 # (lib.sh's start_lucentd with the installed tree for LUCENT_BINARY_DIR: state in $TMP/d)

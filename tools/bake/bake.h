@@ -1,68 +1,12 @@
 /* bake: the lucent-bake pipeline — import → lightmap UVs → texel caches → grid caches →
  * relocation → surfels → hierarchy → links → assets → .lcb (+ scene.glb).
- * Settings come from the option table in bake.c (drives flags, --help and validation). */
+ * Settings come from the option table in bake/options.h. */
 #ifndef LC_BAKE_H
 #define LC_BAKE_H
 #include <stddef.h>
 #include <stdio.h>
 
-#include "util/opt.h"
-
-#define LC_BAKE_MAX_ASSETS 64
-#define LC_BAKE_PATH_MAX 1024
-
-typedef enum { LC_QUALITY_DRAFT = 0, LC_QUALITY_MODERATE, LC_QUALITY_HIGH, LC_QUALITY_ULTRA } lc_bake_quality;
-
-typedef struct lc_bake_asset_arg {
-    char name[64];
-    char path[LC_BAKE_PATH_MAX];
-} lc_bake_asset_arg;
-
-typedef struct lc_bake_settings {
-    char input[LC_BAKE_PATH_MAX];
-    char output[LC_BAKE_PATH_MAX];
-    char glb[LC_BAKE_PATH_MAX];
-    int write_glb;
-    char stats_json[LC_BAKE_PATH_MAX];
-    int quality;
-    double scale;
-    int flip_winding;
-    double texel_density;
-    int atlas_size;
-    int padding;
-    double chart_angle;
-    int dilate;
-    int surfels;
-    int relax;
-    int drop_buried; /* drop surfels inside geometry (changes the surfel count) */
-    int exposure;    /* surfel areas weighted by how many caches see them (bake/exposure.h) */
-    int hierarchy;
-    int links;
-    int node_samples;
-    int final_samples;
-    int probe_rays;
-    int bands;
-    int link_sh;
-    double grid_cell;
-    int grid_max_dim;
-    int grid_max_samples;
-    int reloc_rays;
-    double reloc_offset;
-    int seed;
-    int threads;
-    int quiet;
-    int n_assets;
-    lc_bake_asset_arg assets[LC_BAKE_MAX_ASSETS];
-} lc_bake_settings;
-
-/* The option table (NULL-terminated). */
-const lc_opt *lc_bake_options(void);
-/* Defaults, then the preset named by --quality (found in argv), then the flags.
- * Returns the number of positional arguments or -1 with err set. */
-int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, char **positional, int max_pos, char *err,
-                       size_t errlen);
-/* Applies the preset's values (every field a preset controls). */
-void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q);
+#include "bake/options.h"
 
 /* Per-stage measurements of one bake. */
 #define LC_BAKE_MAX_STAGES 16

@@ -2,15 +2,27 @@
  *   lucent-bake bake SCENE [options]    bake SCENE (glTF/OBJ/PLY) into a .lcb file
  *   lucent-bake info FILE [--json]      validate a .lcb and print its contents
  *   lucent-bake verify FILE             validate only (exit 0 valid, 1 invalid)
- * Exit codes: 0 ok, 1 bad input or bake failure, 2 usage error, 3 cannot write output. */
-#include <libgen.h>
+ * Exit codes: 0 ok, 1 bad input or bake failure, 2 usage error, 3 cannot write output.
+ * This front links only the bake file reader; `bake` runs in lucent-bake-run (bake_run.c). */
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
-#include "bake/bake.h"
+#include "bake/options.h"
 #include "lcb/lcb.h"
+#include "util/fsutil.h"
 #include "util/log.h"
+
+/* The worker, relative to this executable (build tree and install prefix alike); the
+ * configured install path when /proc/self/exe cannot be read. */
+#ifndef LUCENT_BAKE_WORKER_REL
+#define LUCENT_BAKE_WORKER_REL "../libexec/lucent/lucent-bake-run"
+#endif
+#ifndef LUCENT_BAKE_WORKER
+#define LUCENT_BAKE_WORKER "/usr/local/libexec/lucent/lucent-bake-run"
+#endif
 
 enum { EXIT_OK = 0, EXIT_FAIL = 1, EXIT_USAGE = 2, EXIT_OUTPUT = 3 };
 
@@ -25,67 +37,16 @@ static void usage(FILE *out) {
     fprintf(out, "\nexit codes: 0 ok, 1 bad input or bake failure, 2 usage error, 3 cannot write output\n");
 }
 
-static int cmd_bake(int argc, char **argv) {
-    static lc_bake_settings s; /* large (asset paths); static keeps it off the stack */
-    char err[1024] = "";
-    char *pos[2];
-    for (int i = 2; i < argc; i++) {
-        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
-            usage(stdout);
-            return EXIT_OK;
-        }
-        if (!strcmp(argv[i], "-o")) argv[i] = "--output"; /* the one short flag, by habit */
-    }
-    int npos = lc_bake_parse_args(&s, argc, argv, 2, pos, 2, err, sizeof err);
-    if (npos < 0) {
-        fprintf(stderr, "lucent-bake: %s\n", err);
-        return EXIT_USAGE;
-    }
-    if (npos != 1) {
-        fprintf(stderr, "lucent-bake: bake needs exactly one SCENE file (see --help)\n");
-        return EXIT_USAGE;
-    }
-    if (strlen(pos[0]) >= sizeof s.input) {
-        fprintf(stderr, "lucent-bake: SCENE path too long\n");
-        return EXIT_USAGE;
-    }
-    snprintf(s.input, sizeof s.input, "%s", pos[0]);
-    if (!s.output[0]) {
-        /* Default output: the scene's base name with .lcb, in the current directory (the
-         * scene's own folder may be read-only). */
-        char tmp[LC_BAKE_PATH_MAX];
-        snprintf(tmp, sizeof tmp, "%s", s.input);
-        char *base = basename(tmp);
-        char *dot = strrchr(base, '.');
-        if (dot && dot != base) *dot = 0;
-        snprintf(s.output, sizeof s.output, "%.1000s.lcb", base);
-    }
-    if (!s.glb[0] && s.write_glb) {
-        /* The viewers' copy of the scene sits next to the bake: OUT.lcb -> OUT.glb. */
-        snprintf(s.glb, sizeof s.glb, "%s", s.output);
-        char *dot = strrchr(s.glb, '.'), *slash = strrchr(s.glb, '/');
-        if (dot && (!slash || dot > slash)) *dot = 0;
-        if (strlen(s.glb) + 5 > sizeof s.glb) {
-            fprintf(stderr, "lucent-bake: output path too long to derive the .glb name; pass --glb\n");
-            return EXIT_USAGE;
-        }
-        strcat(s.glb, ".glb");
-    }
-    lc_bake_report report;
-    int rc = lc_bake_run(&s, &report, err, sizeof err);
-    if (rc != 0) {
-        fprintf(stderr, "lucent-bake: %s\n", err);
-        return rc == 3 ? EXIT_OUTPUT : EXIT_FAIL;
-    }
-    if (!s.quiet) {
-        lc_bake_report_print(&report, stderr);
-        fprintf(stderr, "wrote %s\n", s.output);
-    }
-    if (s.stats_json[0] && lc_bake_report_write_json(&report, &s, s.stats_json, err, sizeof err) != 0) {
-        fprintf(stderr, "lucent-bake: --stats-json: %s\n", err);
-        return EXIT_OUTPUT;
-    }
-    return EXIT_OK;
+/* Runs the bake itself: the worker binary linking the bake's dependencies (OIIO, Assimp,
+ * Embree, ~260 shared libraries) so info, verify and --help start without loading them. */
+static int cmd_bake(char **argv) {
+    char worker[4096];
+    lc_fs_beside_exe(LUCENT_BAKE_WORKER_REL, LUCENT_BAKE_WORKER, worker, sizeof worker);
+    argv[0] = worker;
+    execv(worker, argv);
+    fprintf(stderr, "lucent-bake: cannot run the bake worker %s: %s (reinstall lucent: it belongs in %s from bin/)\n",
+            worker, strerror(errno), LUCENT_BAKE_WORKER_REL);
+    return EXIT_FAIL;
 }
 
 static int cmd_info(int argc, char **argv, int verify_only) {
@@ -139,7 +100,7 @@ int main(int argc, char **argv) {
         printf("lucent-bake 0.1.0 (bake format %d.%d)\n", LC_LCB_VERSION_MAJOR, LC_LCB_VERSION_MINOR);
         return EXIT_OK;
     }
-    if (!strcmp(cmd, "bake")) return cmd_bake(argc, argv);
+    if (!strcmp(cmd, "bake")) return cmd_bake(argv);
     if (!strcmp(cmd, "info")) return cmd_info(argc, argv, 0);
     if (!strcmp(cmd, "verify")) return cmd_info(argc, argv, 1);
     fprintf(stderr, "lucent-bake: unknown command '%s' (bake, info, verify; see --help)\n", cmd);

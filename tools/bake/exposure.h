@@ -3,15 +3,14 @@
  * A link carries its node's mean radiosity, weighted by the stored surfel areas; a cache
  * sees the node weighted by each surfel's visible solid angle. Surfels the caches rarely
  * see (buried under a column base, in crevices) still pull a node's mean toward their own,
- * usually darker, radiosity: on Sponza under a sun, node averaging biases the first bounce
- * by -7.7% (bench/fidelity.md). With exposure the stored surfel area becomes the effective
+ * usually darker, radiosity, which biases the first bounce low. With exposure the stored surfel area becomes the effective
  * area a_i * u_i / mean(u), u_i the number of caches whose probe rays hit surfel i (floored
  * at LC_EXPOSURE_FLOOR of the mean so every weight stays positive); the total is kept. Node
  * areas are recomputed and every link factor (visible solid angle / (pi * node area)) and
  * LKSH record rescaled, so a link's solid angle is unchanged and its node mean becomes
  * exposure-weighted. Runtimes need no change: they use the area only through
- * flux = B * area and the factor. Measured: Sponza bias -19.0% -> -15.4%, mean 24.0% ->
- * 23.3%, but p95 61% -> 65%; Cornell unchanged — hence opt-in. */
+ * flux = B * area and the factor. Opt-in: it lowers the mean error and bias but raises the
+ * p95 (docs/ARCHITECTURE.md, Decisions: "Exposure weights"). */
 #ifndef LC_EXPOSURE_H
 #define LC_EXPOSURE_H
 #include <stdint.h>

@@ -36,9 +36,8 @@
  * step an emitter joins a non-emitter (or another emitter's material) only after every
  * same-class pair: emitters get their own subtrees and links can point at lamp-only nodes.
  * Without it a lamp flush with a ceiling was clustered with the ceiling and no link ever
- * saw the lamp alone (Cornell box: lightmap mean error 13.3% -> 6.5%, see ARCHITECTURE.md
- * "Decisions"). Material boundaries in general (not only emitters) cost Sponza 1.4-5
- * points of mean error and are not used. */
+ * saw the lamp alone. Material boundaries in general (not only emitters) made Sponza worse
+ * and are not used (docs/ARCHITECTURE.md, Decisions: "Emitters get their own subtrees"). */
 #define HIER_CE 1.0
 #define HIER_MIXED UINT32_MAX /* cluster of several classes */
 #define HIER_NONEMISSIVE (UINT32_MAX - 1)

@@ -23,9 +23,8 @@
  * (occluded, back-facing and below-horizon samples count as w = 0). A link carries the
  * node's area-weighted mean radiosity, the cache sees the w-weighted mean: the two differ
  * by Cov(w, B) / mean(w) <= CV(w) x std(B). A node seen evenly (CV = 0) is exact whatever
- * its radiosity; a partly hidden, horizon-clipped or very oblique one is what to split.
- * Measured (moderate, 128 links): Cornell lightmap mean 6.49% -> 6.28%; Sponza p95 67% ->
- * 61%, grid p95 53% -> 44%. */
+ * its radiosity; a partly hidden, horizon-clipped or very oblique one is what to split
+ * (docs/ARCHITECTURE.md, Decisions: "the cut splits unevenly seen nodes first"). */
 #define LINKS_SPREAD_K 1.0
 
 /* Stream salts: refinement and the final estimate use independent jitter. */
@@ -570,7 +569,7 @@ static void links_one_cache(const links_ctx *ctx, links_scratch *sc, uint32_t ci
         used++;
     }
     /* The probe rays count the cache's visible solid angle without bias; the far-field
-     * surfel estimates run a few percent low (measured: -2.5% mean in a closed box). Scale
+     * surfel estimates run a few percent low (next to walls, at grazing angles). Scale
      * the far links so the total matches the probe count; their relative weights — what
      * makes small emitters precise — stay as estimated. */
     if (prm->probe_rays && omega_far > 0) {

@@ -187,7 +187,7 @@ TCPU_CLONES static void tcpu_gather_blocked(const tcpu *t, const lc_lcb_link *lk
             dy[i] = w * inv;
             dz[i] = z * inv;
         }
-        /* Only the bands in use: at 3 bands the band-3 basis was ~40% of the per-link work. */
+        /* Only the bands in use: the higher bands are most of the per-link work. */
         float y[16][TCPU_BLOCK];
         for (uint32_t i = 0; i < TCPU_BLOCK; i++) {
             float x = dx[i], yy = dy[i], z = dz[i];

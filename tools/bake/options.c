@@ -1,0 +1,164 @@
+/* bake options: the option table, the quality presets and argument parsing (any thread). */
+#include "bake/options.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "util/log.h"
+
+/* --- options ---------------------------------------------------------------------------- */
+
+static int bake_add_asset(void *settings, const char *value, char *err, size_t errlen) {
+    lc_bake_settings *s = settings;
+    const char *eq = strchr(value, '=');
+    if (!eq || eq == value || !eq[1]) {
+        lc_set_err(err, errlen, "--asset: expected NAME=PATH, got '%s'", value);
+        return -1;
+    }
+    size_t nlen = (size_t)(eq - value);
+    if (nlen >= sizeof s->assets[0].name || strlen(eq + 1) >= sizeof s->assets[0].path) {
+        lc_set_err(err, errlen, "--asset: name (max 63) or path (max %d) too long", LC_BAKE_PATH_MAX - 1);
+        return -1;
+    }
+    for (size_t i = 0; i < nlen; i++) {
+        char c = value[i];
+        if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '-' ||
+              c == '.')) {
+            lc_set_err(err, errlen, "--asset: name '%.*s' may only use letters, digits, '_', '-', '.'", (int)nlen,
+                       value);
+            return -1;
+        }
+    }
+    if (s->n_assets >= LC_BAKE_MAX_ASSETS) {
+        lc_set_err(err, errlen, "--asset: at most %d assets", LC_BAKE_MAX_ASSETS);
+        return -1;
+    }
+    for (int i = 0; i < s->n_assets; i++)
+        if (strlen(s->assets[i].name) == nlen && strncmp(s->assets[i].name, value, nlen) == 0) {
+            lc_set_err(err, errlen, "--asset: name '%.*s' given twice", (int)nlen, value);
+            return -1;
+        }
+    lc_bake_asset_arg *a = &s->assets[s->n_assets++];
+    memcpy(a->name, value, nlen);
+    a->name[nlen] = 0;
+    snprintf(a->path, sizeof a->path, "%s", eq + 1);
+    return 0;
+}
+
+#define OFF(f) offsetof(lc_bake_settings, f)
+static const lc_opt bake_options[] = {
+    {"output", LC_OPT_STRING, OFF(output), 1, LC_BAKE_PATH_MAX, NULL, NULL,
+     "output bake file (default: input name with .lcb)", "PATH", NULL},
+    {"glb", LC_OPT_STRING, OFF(glb), 0, LC_BAKE_PATH_MAX, NULL, NULL,
+     "where to write the scene with lightmap UVs (TEXCOORD_1) as binary glTF for viewers (default: OUT.glb)", "PATH",
+     NULL},
+    {"write-glb", LC_OPT_BOOL, OFF(write_glb), 0, 1, "true", NULL, "write the .glb (--no-write-glb to skip)", NULL,
+     NULL},
+    {"quality", LC_OPT_ENUM, OFF(quality), 0, 0, "moderate", "draft|moderate|high|ultra",
+     "preset for every parameter below (flags given explicitly win)", NULL, NULL},
+    {"scale", LC_OPT_FLOAT, OFF(scale), 1e-9, 1e6, "1", NULL, "multiply positions (scene units -> metres)", NULL, NULL},
+    {"flip-winding", LC_OPT_BOOL, OFF(flip_winding), 0, 1, "false", NULL, "treat clockwise faces as front faces", NULL,
+     NULL},
+    {"texel-density", LC_OPT_FLOAT, OFF(texel_density), 0, 10000, "0", NULL,
+     "lightmap texels per metre (0 = fit --atlas-size)", NULL, NULL},
+    {"atlas-size", LC_OPT_INT, OFF(atlas_size), 16, 8192, "128", NULL, "lightmap atlas width and height in texels",
+     NULL, NULL},
+    {"padding", LC_OPT_INT, OFF(padding), 2, 16, "2", NULL, "empty texels between lightmap charts", NULL, NULL},
+    {"chart-angle", LC_OPT_FLOAT, OFF(chart_angle), 1, 89, "45", NULL, "max normal deviation inside a chart (degrees)",
+     NULL, NULL},
+    {"dilate", LC_OPT_INT, OFF(dilate), 0, 16, "2", NULL, "lightmap seam dilation passes", NULL, NULL},
+    {"surfels", LC_OPT_INT, OFF(surfels), 16, 4194304, "32768", NULL, "number of surfels", NULL, NULL},
+    {"relax", LC_OPT_INT, OFF(relax), 0, 64, "4", NULL, "surfel relaxation iterations", NULL, NULL},
+    {"drop-buried", LC_OPT_BOOL, OFF(drop_buried), 0, 1, "false", NULL,
+     "drop surfels inside geometry (fewer than --surfels remain)", NULL, NULL},
+    {"exposure", LC_OPT_BOOL, OFF(exposure), 0, 1, "false", NULL,
+     "weigh surfels by how many caches see them (see bake/exposure.h)", NULL, NULL},
+    {"hierarchy", LC_OPT_ENUM, OFF(hierarchy), 0, 0, "aac", "aac|kdtree",
+     "surfel hierarchy: agglomerative clustering (PIC metric) or kd-tree", NULL, NULL},
+    {"links", LC_OPT_INT, OFF(links), 1, 1024, "128", NULL, "links per cache (n_L)", NULL, NULL},
+    {"node-samples", LC_OPT_INT, OFF(node_samples), 1, 256, "16", NULL,
+     "visibility rays per node while refining the cut", NULL, NULL},
+    {"final-samples", LC_OPT_INT, OFF(final_samples), 1, 1024, "32", NULL,
+     "visibility rays per linked node for its final factor", NULL, NULL},
+    {"probe-rays", LC_OPT_INT, OFF(probe_rays), 0, 65536, "1024", NULL,
+     "near-field probe rays per cache for link solid angles (0 = surfel sampling only)", NULL, NULL},
+    {"bands", LC_OPT_INT, OFF(bands), 1, 8, "3", NULL, "SH bands of the output caches", NULL, NULL},
+    {"link-sh", LC_OPT_BOOL, OFF(link_sh), 0, 1, "false", NULL,
+     "also store each link's transport projected into --bands SH (LKSH)", NULL, NULL},
+    {"grid-cell", LC_OPT_FLOAT, OFF(grid_cell), 0, 1e4, "0", NULL,
+     "SH grid spacing in metres (0 = from --grid-max-dim)", NULL, NULL},
+    {"grid-max-dim", LC_OPT_INT, OFF(grid_max_dim), 3, 512, "24", NULL, "SH grid samples along the longest axis", NULL,
+     NULL},
+    {"grid-max-samples", LC_OPT_INT, OFF(grid_max_samples), 8, 4194304, "4096", NULL, "cap on SH grid samples", NULL,
+     NULL},
+    {"reloc-rays", LC_OPT_INT, OFF(reloc_rays), 4, 1024, "32", NULL,
+     "test rays per cache for moving caches out of geometry", NULL, NULL},
+    {"reloc-offset", LC_OPT_FLOAT, OFF(reloc_offset), 0, 1, "0.005", NULL,
+     "metres past the back face a moved cache ends", NULL, NULL},
+    {"asset", LC_OPT_CALLBACK, 0, 0, 0, NULL, NULL, "bake a dynamic-object asset (repeatable)", "NAME=PATH",
+     bake_add_asset},
+    {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "random seed (same seed, same bytes)", NULL, NULL},
+    {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", NULL, NULL},
+    {"stats-json", LC_OPT_STRING, OFF(stats_json), 0, LC_BAKE_PATH_MAX, NULL, NULL,
+     "write per-stage timings, peak memory and sizes as JSON", "PATH", NULL},
+    {"quiet", LC_OPT_BOOL, OFF(quiet), 0, 1, "false", NULL, "no progress output", NULL, NULL},
+    {NULL, 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL},
+};
+#undef OFF
+
+const lc_opt *lc_bake_options(void) { return bake_options; }
+
+void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
+    /* moderate and high follow the paper's settings; caches stay the same, as in the paper,
+     * so the two differ in transport detail, not lightmap resolution. ultra (not in the
+     * paper) is the cheapest setting found that meets the 15% target on sunlit Sponza
+     * (docs/ARCHITECTURE.md, Decisions: "Quality presets"). */
+    typedef struct {
+        int atlas, surfels, links, bands, node_samples, final_samples, probe_rays, grid_max_dim, grid_max_samples,
+            relax, reloc_rays, exposure;
+    } bake_preset;
+    /* Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
+     * so a cube-shaped room does not get 24^3 grid caches (more than its texel caches). */
+    static const bake_preset presets[] = {
+        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0},
+        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 0},
+        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 0},
+        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1},
+    };
+    const bake_preset *p = &presets[q];
+    s->quality = (int)q;
+    s->atlas_size = p->atlas;
+    s->surfels = p->surfels;
+    s->links = p->links;
+    s->bands = p->bands;
+    s->node_samples = p->node_samples;
+    s->final_samples = p->final_samples;
+    s->probe_rays = p->probe_rays;
+    s->grid_max_dim = p->grid_max_dim;
+    s->grid_max_samples = p->grid_max_samples;
+    s->relax = p->relax;
+    s->reloc_rays = p->reloc_rays;
+    s->exposure = p->exposure;
+}
+
+int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, char **positional, int max_pos, char *err,
+                       size_t errlen) {
+    memset(s, 0, sizeof *s);
+    if (lc_opt_defaults(bake_options, s, err, errlen) != 0) return -1;
+    /* First pass: only --quality, so the preset sits under every explicit flag. */
+    lc_bake_settings probe;
+    memset(&probe, 0, sizeof probe);
+    if (lc_opt_defaults(bake_options, &probe, err, errlen) != 0) return -1;
+    char *scratch[256];
+    int n = lc_opt_parse(bake_options, &probe, argc, argv, start, scratch, 256, err, errlen);
+    if (n < 0) return -1;
+    lc_bake_apply_preset(s, (lc_bake_quality)probe.quality);
+    int npos = lc_opt_parse(bake_options, s, argc, argv, start, positional, max_pos, err, errlen);
+    if (npos < 0) return -1;
+    if ((double)s->links > 2.0 * s->surfels - 1) {
+        lc_set_err(err, errlen, "--links %d exceeds the hierarchy's %d nodes (raise --surfels)", s->links,
+                   2 * s->surfels - 1);
+        return -1;
+    }
+    return npos;
+}
