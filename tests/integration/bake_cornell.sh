@@ -4,6 +4,30 @@
 expect_exit 0 "" "$BAKE" bake "$CORNELL" -o "$TMP/cornell.lcb" --glb "$TMP/cornell.glb" --quality draft \
   --asset cube="$SRC/scenes/cornell-box/cube.obj" --stats-json "$TMP/stats.json"
 [ -s "$TMP/cornell.glb" ] || fail "no glb written"
+# The .glb is generated from the .lcb just written (lc_lcb_scene_glb, as lucentd serves it):
+# its bake id is the file's table CRC and size, its triangles the bake's.
+$PY - "$TMP/cornell.glb" "$TMP/cornell.lcb" <<'PY' || fail "glb content"
+import json, struct, sys
+b = open(sys.argv[1], "rb").read(); h = open(sys.argv[2], "rb").read(64)
+def check(cond, msg):
+    if not cond:
+        print("check failed:", msg); sys.exit(1)
+magic, version, length = struct.unpack_from("<4sII", b, 0)
+check(magic == b"glTF" and version == 2 and length == len(b), "GLB header")
+jlen, jtype = struct.unpack_from("<II", b, 12)
+check(jtype == 0x4E4F534A, "JSON chunk")
+j = json.loads(b[20:20 + jlen])
+check(j["asset"]["generator"] == "lucent", "generator %s" % j["asset"]["generator"])
+file_size, = struct.unpack_from("<Q", h, 16); table_crc, = struct.unpack_from("<I", h, 32)
+check(j["asset"]["extras"]["lucent"]["bake_id"] == "%08x%016x" % (table_crc, file_size), "bake id")
+prims = j["meshes"][0]["primitives"]
+check(sum(j["accessors"][p["indices"]]["count"] for p in prims) == 3 * 38, "38 triangles")
+check(all("TEXCOORD_1" in p["attributes"] and "TEXCOORD_0" in p["attributes"] for p in prims), "lightmap UVs")
+light = [m for m in j["materials"] if m["name"] == "light"][0]
+s = light["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"]
+check([round(f * s, 4) for f in light["emissiveFactor"]] == [17, 12, 4], "lamp emission")
+check(j["extensionsUsed"] == ["KHR_materials_emissive_strength"], "extensionsUsed")
+PY
 expect_exit 0 "" "$BAKE" verify "$TMP/cornell.lcb"
 "$BAKE" info "$TMP/cornell.lcb" --json > "$TMP/info.json" || fail "info --json failed"
 "$BAKE" info "$TMP/cornell.lcb" > "$TMP/info.txt" || fail "info failed"
@@ -42,6 +66,7 @@ PY
 # the total (hence the nominal area in META) is kept.
 expect_exit 0 "" "$BAKE" bake "$CORNELL" -o "$TMP/exposure.lcb" --quality draft --no-write-glb --exposure --quiet
 expect_exit 0 "" "$BAKE" verify "$TMP/exposure.lcb"
+[ ! -e "$TMP/exposure.glb" ] || fail "--no-write-glb wrote $TMP/exposure.glb"
 "$BAKE" info "$TMP/exposure.lcb" --json > "$TMP/exposure.json" || fail "info --json failed"
 $PY - "$TMP/exposure.json" <<'PY' || fail "exposure bake content"
 import json, sys

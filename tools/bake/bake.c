@@ -22,6 +22,7 @@
 #include "bake/texels.h"
 #include "bake/uvgen.h"
 #include "lcb/lcb.h"
+#include "lcb/lcb_glb.h"
 #include "util/clock.h"
 #include "util/fsutil.h"
 #include "util/log.h"
@@ -719,6 +720,29 @@ static int bake_add_sections(bake_job *b, char *err, size_t errlen) {
     return 0;
 }
 
+/* The viewers' .glb, generated from the .lcb just written (not from the scene in memory), so
+ * it is byte for byte what lucentd serves as /scene.glb for this bake. */
+static int bake_write_glb(const char *lcb_path, const char *glb_path, char *err, size_t errlen) {
+    lc_lcb *f = NULL;
+    unsigned char *glb = NULL;
+    size_t len = 0;
+    char e[512];
+    int rc = -1;
+    if (lc_lcb_open(lcb_path, &f, e, sizeof e) != 0) {
+        lc_set_err(err, errlen, "--glb %s: cannot reopen %s: %s", glb_path, lcb_path, e);
+        goto out;
+    }
+    if (lc_lcb_scene_glb(f, &glb, &len, e, sizeof e) != 0) {
+        lc_set_err(err, errlen, "--glb %s: %s", glb_path, e);
+        goto out;
+    }
+    rc = lc_fs_write_atomic(glb_path, glb, len, err, errlen);
+out:
+    free(glb);
+    lc_lcb_close(f);
+    return rc;
+}
+
 /* The .lcb (atomic) and, unless turned off, the .glb. */
 static int bake_write(bake_job *b, char *err, size_t errlen) {
     int rc;
@@ -726,7 +750,7 @@ static int bake_write(bake_job *b, char *err, size_t errlen) {
         (rc = bake_add_sections(b, err, errlen)) != 0)
         return rc;
     if (lc_lcb_writer_write(b->w, b->s->output, err, errlen) != 0) return 3;
-    if (b->s->glb[0] && lc_glb_write(b->s->glb, &b->scene, err, errlen) != 0) return 3;
+    if (b->s->glb[0] && bake_write_glb(b->s->output, b->s->glb, err, errlen) != 0) return 3;
     return 0;
 }
 

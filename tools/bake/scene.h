@@ -100,8 +100,4 @@ void lc_mesh_triangle_normal(const lc_mesh *mesh, uint32_t tri, float out[3]);
 void lc_mesh_interpolate(const lc_mesh *mesh, uint32_t tri, float b1, float b2, float pos[3], float nrm[3]);
 double lc_mesh_total_area(const lc_mesh *mesh);
 
-/* Writes the scene (with lightmap UVs as TEXCOORD_1, materials as base colour / emissive
- * factors) as a binary glTF 2.0 file for viewers. Atomic write. */
-int lc_glb_write(const char *path, const lc_scene *scene, char *err, size_t errlen);
-
 #endif
