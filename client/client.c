@@ -35,6 +35,7 @@
 struct lc_client_view {
     int have_key;   /* a keyframe was applied since create/reset */
     uint16_t flags; /* of the last applied frame */
+    int pass, converged;
     int stream, encoding;
     uint64_t revision, sequence, server_time_us, client_time_us;
     uint32_t width, height, depth, tile_size;
@@ -142,6 +143,8 @@ static void view_fill_out(const lc_client_view *v, lc_client_frame *out) {
     out->encoding = v->encoding;
     out->keyframe = v->flags == LC_FRAME_KEYFRAME;
     out->residual = (v->flags & LC_FRAME_RESIDUAL) != 0;
+    out->pass = v->pass;
+    out->converged = v->converged;
     out->revision = v->revision;
     out->sequence = v->sequence;
     out->server_time_us = v->server_time_us;
@@ -323,6 +326,8 @@ int lc_client_view_apply(lc_client_view *v, const uint8_t *frame, size_t len, lc
     }
     v->have_key = 1;
     v->flags = h.flags;
+    v->pass = h.pass;
+    v->converged = h.converged;
     v->stream = h.stream;
     v->encoding = h.encoding;
     v->revision = h.revision;

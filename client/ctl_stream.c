@@ -278,10 +278,11 @@ static void watch_on_frame(lc_client *c, const lc_client_frame *f, void *user) {
         w->index,
         "{\"file\":\"%s\",\"stream\":\"%s\",\"encoding\":\"%s\",\"revision\":%llu,\"sequence\":%llu,"
         "\"keyframe\":%s,\"residual\":%s,\"tiles\":%u,\"bytes\":%zu,\"server_time_us\":%llu,\"client_time_us\":%llu,"
-        "\"age_ms\":%.3f}\n",
+        "\"age_ms\":%.3f,\"pass\":%d,\"converged\":%s}\n",
         prefix, stream_name(f->stream), encoding_name(f->encoding), (unsigned long long)f->revision,
         (unsigned long long)f->sequence, f->keyframe ? "true" : "false", f->residual ? "true" : "false", f->tile_count,
-        f->raw_len, (unsigned long long)f->server_time_us, (unsigned long long)f->client_time_us, age);
+        f->raw_len, (unsigned long long)f->server_time_us, (unsigned long long)f->client_time_us, age, f->pass,
+        f->converged ? "true" : "false");
     fflush(w->index);
     if (ctl_json)
         printf(

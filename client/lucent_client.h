@@ -69,7 +69,9 @@ void lc_client_options_init(lc_client_options *o);
  * lists the tiles it replaced (tile_count of them); for keyframes tile_count is 0. */
 typedef struct lc_client_frame {
     int stream, encoding, keyframe;
-    int residual; /* a residual delta (PROTOCOL.md §6.2.1) */
+    int residual;  /* a residual delta (PROTOCOL.md §6.2.1) */
+    int pass;      /* refinement pass of the revision (0 = its first solution; §6.1) */
+    int converged; /* 1: the server plans no further pass of this revision */
     uint64_t revision, sequence;
     uint64_t server_time_us; /* server clock when the frame was built, µs since the epoch */
     uint64_t client_time_us; /* local clock (CLOCK_REALTIME) when the frame was complete */

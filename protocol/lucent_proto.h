@@ -180,6 +180,9 @@ typedef struct lc_proto_welcome {
     uint32_t bands;
     const char *const *assets;
     uint32_t n_assets;
+    const char *bake_id;               /* NULL: not sent */
+    const char *geometry;              /* path of the scene's glTF, e.g. "/scene.glb"; NULL: not sent */
+    const char *const *asset_geometry; /* per asset its glTF's path; NULL: not sent */
     const char *const *materials;
     uint32_t n_materials;
     lc_proto_limits limits;
@@ -233,11 +236,18 @@ void lc_proto_parsed_state_free(lc_proto_parsed_state *s);
 /* --- binary frames (PROTOCOL.md §6) ------------------------------------------------------- */
 
 enum { LC_FRAME_KEYFRAME = 1u << 0, LC_FRAME_DELTA = 1u << 1, LC_FRAME_RESIDUAL = 1u << 2 };
+/* The header's flags word also carries bit 3 "converged" and bits 8-15 the refinement pass;
+ * lc_frame_header keeps them apart from the frame kind, so `flags` is only bits 0-2. */
+#define LC_FRAME_CONVERGED_BIT (1u << 3)
+#define LC_FRAME_PASS_SHIFT 8
+#define LC_FRAME_PASS_MAX 255u
 
 typedef struct lc_frame_header {
     uint16_t version; /* 1 */
     uint8_t stream, encoding;
-    uint16_t flags;
+    uint16_t flags;    /* frame kind: LC_FRAME_KEYFRAME, LC_FRAME_DELTA (+ LC_FRAME_RESIDUAL) */
+    uint8_t pass;      /* refinement pass of the revision (0 = its first solution), saturating */
+    uint8_t converged; /* 1: no further pass of this revision will come */
     uint32_t tile_count;
     uint64_t revision, sequence, timestamp_us;
     uint32_t width, height, depth, tile_size;

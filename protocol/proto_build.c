@@ -271,6 +271,13 @@ char *lc_proto_build_welcome(const lc_proto_id *id, const lc_proto_welcome *w) {
     proto_add(&b, scene, "grid", grid);
     proto_add_u64(&b, scene, "bands", w->bands);
     proto_add_strs(&b, scene, "assets", w->assets, w->n_assets);
+    if (w->bake_id) proto_add_str(&b, scene, "bake_id", w->bake_id);
+    if (w->geometry) proto_add_str(&b, scene, "geometry", w->geometry);
+    if (w->asset_geometry) {
+        cJSON *ag = proto_chk(&b, cJSON_CreateObject());
+        for (uint32_t i = 0; i < w->n_assets; i++) proto_add_str(&b, ag, w->assets[i], w->asset_geometry[i]);
+        proto_add(&b, scene, "asset_geometry", ag);
+    }
     proto_add_strs(&b, scene, "materials", w->materials, w->n_materials);
     proto_add(&b, m, "scene", scene);
     cJSON *lim = proto_chk(&b, cJSON_CreateObject());

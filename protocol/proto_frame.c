@@ -82,7 +82,9 @@ size_t lc_frame_write(const lc_frame_header *h, const uint32_t *tiles, const voi
     proto_put16(p + 4, h->version ? h->version : 1);
     p[6] = h->stream;
     p[7] = h->encoding;
-    proto_put16(p + 8, h->flags);
+    proto_put16(p + 8,
+                (uint16_t)((h->flags & 7u) | (h->converged ? LC_FRAME_CONVERGED_BIT : 0) |
+                           ((unsigned)h->pass << LC_FRAME_PASS_SHIFT)));
     proto_put16(p + 10, LC_FRAME_HEADER_SIZE);
     proto_put32(p + 12, h->tile_count);
     proto_put64(p + 16, h->revision);
@@ -130,7 +132,10 @@ int lc_frame_parse(const uint8_t *data, size_t len, lc_frame_header *h, const ui
     h->version = proto_get16(data + 4);
     h->stream = data[6];
     h->encoding = data[7];
-    h->flags = proto_get16(data + 8);
+    uint16_t flags = proto_get16(data + 8);
+    h->flags = flags & 7u; /* bits 4-7 are reserved: ignored, for forward compatibility */
+    h->converged = (flags & LC_FRAME_CONVERGED_BIT) != 0;
+    h->pass = (uint8_t)(flags >> LC_FRAME_PASS_SHIFT);
     uint16_t hsize = proto_get16(data + 10);
     h->tile_count = proto_get32(data + 12);
     h->revision = proto_get64(data + 16);

@@ -2,7 +2,10 @@
 # The main job on the embedded default scene: build (which bakes the Cornell box), start
 # lucentd on it, drive it with a scripted light animation and a walking object through
 # lucentctl while another lucentctl saves the lightmap frames it streams, then print the
-# update->frame latencies. Everything lands in build/demo/ (override: LUCENT_DEMO_DIR).
+# update->frame latencies, and the viewer's URL. On a terminal it then keeps lucentd and the
+# light animation running until Ctrl-C, so the printed link shows the light moving
+# (LUCENT_DEMO_ONCE=1: stop after the latencies). Everything lands in build/demo/ (override:
+# LUCENT_DEMO_DIR).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 bash "$root/scripts/build.sh"
@@ -58,3 +61,18 @@ watcher=""
 frames=$(find "$out/frames" -name 'lightmap-*.png' | wc -l)
 echo "== done: $frames lightmap frames in $out/frames (frames.jsonl indexes them),"
 echo "   final snapshot in $out/snapshot, daemon log $out/lucentd.log"
+
+viewer="http://127.0.0.1:$port/"
+if [ ! -f "$build/share/lucent/www/index.html" ]; then
+  echo "== no viewer in this build (node and npm were missing when it was configured)"
+  viewer=""
+fi
+if [ -t 1 ] && [ -z "${LUCENT_DEMO_ONCE:-}" ]; then
+  [ -n "$viewer" ] && echo "== open $viewer in a browser to watch the light move"
+  echo "== lucentd keeps running on $LUCENT_URL with the orbit animation; Ctrl-C stops both"
+  while kill -0 "$daemon" 2>/dev/null; do
+    "$bin/lucentctl" script "$root/examples/orbit.jsonl" >/dev/null || break
+  done
+elif [ -n "$viewer" ]; then
+  echo "== viewer: $viewer (lucentd stops with this script: run it on a terminal to keep it)"
+fi

@@ -11,6 +11,10 @@ packages=(
   libepoxy-dev libegl-dev libegl1-mesa-dev libgl1-mesa-dri libgl-dev
   liblapacke-dev libblas-dev
 )
+# The browser viewer's bundle (npm: three.js, esbuild): Debian's node and npm, unless a node
+# is already installed (another distribution of it brings its own npm).
+command -v node >/dev/null || packages+=(nodejs)
+command -v npm >/dev/null || packages+=(npm)
 if [ "${1:-}" != "--build" ]; then
   packages+=(
     python3-websockets python3-pytest python3-jsonschema jq
@@ -20,6 +24,8 @@ if [ "${1:-}" != "--build" ]; then
     prometheus
     # the style check (.clang-format), the shutdown test under valgrind, TLS test certificates
     clang-format valgrind openssl
+    # the viewer's browser tests (playwright-core drives it headless)
+    chromium
   )
 fi
 

@@ -125,7 +125,7 @@ static void *compute_main(void *arg) {
     /* The last state relit, kept for progressive refinement while no update is waiting:
      * each extra pass adds a bounce (same revision, a newer frame). */
     compute_job *last = NULL;
-    int refine_left = 0;
+    int refine_left = 0, pass = 0;
     struct timespec refine_due = {0, 0}; /* CLOCK_MONOTONIC: no refinement pass before this */
     for (;;) {
         pthread_mutex_lock(&c->lock);
@@ -155,8 +155,10 @@ static void *compute_main(void *arg) {
             compute_job_free(last);
             last = job;
             refine_left = job->st.settings.progressive ? c->refine_passes : 0;
+            pass = 0;
         } else {
             refine_left--;
+            pass++;
         }
 
         const lc_engine_frame *fr;
@@ -166,7 +168,12 @@ static void *compute_main(void *arg) {
             refine_left = 0;
         } else {
             p = compute_publish(fr, last);
-            if (!p) snprintf(err, sizeof err, "out of memory publishing the frame");
+            if (!p) {
+                snprintf(err, sizeof err, "out of memory publishing the frame");
+            } else {
+                p->pass = (uint8_t)(pass < 255 ? pass : 255);
+                p->converged = refine_left == 0;
+            }
         }
         if (!p) {
             /* Clients were told `ok` for this revision: the service thread reports it

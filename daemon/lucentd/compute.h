@@ -21,6 +21,8 @@ typedef struct lc_published {
     uint64_t revision;
     uint64_t timestamp_us; /* when the relight finished (µs since the epoch) */
     double relight_ms;
+    uint8_t pass;  /* refinement passes of this revision before it (0 = its first solution), saturating */
+    int converged; /* 1: the last frame of this revision unless an update interrupts (no pass is planned) */
     uint32_t lm_w, lm_h;
     float *lightmap; /* W*H*3 irradiance */
     uint32_t grid_dims[3];

@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "util/fsutil.h"
 #include "util/limits.h"
@@ -24,11 +25,21 @@
 #ifndef LUCENT_DEFAULT_BAKE
 #define LUCENT_DEFAULT_BAKE "/usr/local/share/lucent/cornell.lcb"
 #endif
+/* The viewer's bundle, found the same way; served at / unless --www names another folder. */
+#ifndef LUCENT_DEFAULT_WWW_REL
+#define LUCENT_DEFAULT_WWW_REL "../share/lucent/www"
+#endif
+#ifndef LUCENT_DEFAULT_WWW
+#define LUCENT_DEFAULT_WWW "/usr/local/share/lucent/www"
+#endif
 static char config_default_bake[LC_CONFIG_PATH_MAX]; /* the "bake" option's default */
+static char config_default_www[LC_CONFIG_PATH_MAX];  /* the "www" option's default */
 
 static void config_resolve_default_bake(void) {
     if (!config_default_bake[0])
         lc_fs_beside_exe(LUCENT_DEFAULT_BAKE_REL, LUCENT_DEFAULT_BAKE, config_default_bake, sizeof config_default_bake);
+    if (!config_default_www[0])
+        lc_fs_beside_exe(LUCENT_DEFAULT_WWW_REL, LUCENT_DEFAULT_WWW, config_default_www, sizeof config_default_www);
 }
 
 #define OFF(f) offsetof(lc_config, f)
@@ -53,7 +64,9 @@ static const lc_opt config_options[] = {
      "always may. None = only pages served from localhost/127.0.0.1/[::1]; others get HTTP 403. Clients "
      "without an Origin header (native, lucentctl) always pass",
      "LIST", NULL},
-    {"www", LC_OPT_STRING, OFF(www), 0, LC_CONFIG_PATH_MAX, NULL, NULL, "directory of static files served over HTTP",
+    {"www", LC_OPT_STRING, OFF(www), 0, LC_CONFIG_PATH_MAX, config_default_www, NULL,
+     "directory of static files served at / (by default the viewer in ../share/lucent/www from lucentd's directory, "
+     "when built; \"\" serves none)",
      "DIR", NULL},
     {"tls-cert", LC_OPT_STRING, OFF(tls_cert), 0, LC_CONFIG_PATH_MAX, NULL, NULL,
      "TLS certificate (PEM); with --tls-key the port serves wss:// and https://", "FILE", NULL},
@@ -177,6 +190,9 @@ int lc_config_load(lc_config *c, int argc, char **argv, char *err, size_t errlen
     if (lc_opt_parse(config_options, &probe, argc, argv, 1, pos, 0, err, errlen) < 0) return -1;
     if (probe.config_file[0] && config_apply_json(c, probe.config_file, err, errlen) != 0) return -1;
     if (lc_opt_parse(config_options, c, argc, argv, 1, pos, 0, err, errlen) < 0) return -1;
+    struct stat st;
+    /* A build without node has no viewer: the default folder is then simply absent. */
+    if (!strcmp(c->www, config_default_www) && (stat(c->www, &st) != 0 || !S_ISDIR(st.st_mode))) c->www[0] = 0;
     return lc_config_validate(c, err, errlen);
 }
 
@@ -327,6 +343,12 @@ int lc_config_validate(const lc_config *c, char *err, size_t errlen) {
         return -1;
     }
     if (c->tls_cert[0] && config_check_tls(c, err, errlen) != 0) return -1;
+    struct stat st;
+    if (c->www[0] && (stat(c->www, &st) != 0 || !S_ISDIR(st.st_mode))) {
+        lc_set_err(err, errlen, "--www %s: not a directory (give the folder of the pages to serve, or \"\" for none)",
+                   c->www);
+        return -1;
+    }
     if (c->tile > 0 && c->tile < 8) {
         lc_set_err(err, errlen, "--tile %d: give 0 (automatic) or at least 8 texels", c->tile);
         return -1;

@@ -372,7 +372,7 @@ static void server_tick(lws_sorted_usec_list_t *sul) {
 }
 
 static const struct lws_protocols server_protocols[] = {
-    {"http", server_http_callback, 0, 0, 0, NULL, 0},
+    {"http", server_http_callback, sizeof(server_http_tx), 0, 0, NULL, 0},
     {LC_PROTO_SUBPROTOCOL, server_ws_callback, sizeof(lc_session), 16384, 0, NULL, 0},
     {NULL, NULL, 0, 0, 0, NULL, 0},
 };
@@ -515,18 +515,32 @@ static int server_listen(lc_server *s) {
     if (s->max_clients < (uint32_t)cfg->max_clients)
         lc_warn("server", "--max-clients %d lowered to %u: the open-files limit leaves %u descriptors (ulimit -n)",
                 cfg->max_clients, s->max_clients, s->fd_budget);
+    /* Mounts: the bake's geometry (answered by the http protocol's callback, so a file of
+     * the same name under --www cannot shadow it), then the --www folder at /. */
+    static const struct lws_protocol_vhost_options glb_mime = {NULL, NULL, ".glb", "model/gltf-binary"};
     memset(&s->mount, 0, sizeof s->mount);
     s->mount.mountpoint = "/";
     s->mount.mountpoint_len = 1;
     s->mount.origin = cfg->www;
     s->mount.def = "index.html";
     s->mount.origin_protocol = LWSMPRO_FILE;
+    s->mount.extra_mimetypes = &glb_mime;
+    memset(&s->mount_scene, 0, sizeof s->mount_scene);
+    s->mount_scene.mountpoint = "/scene.glb";
+    s->mount_scene.mountpoint_len = (unsigned char)strlen(s->mount_scene.mountpoint);
+    s->mount_scene.origin = "http";
+    s->mount_scene.origin_protocol = LWSMPRO_CALLBACK;
+    s->mount_assets = s->mount_scene;
+    s->mount_assets.mountpoint = "/assets";
+    s->mount_assets.mountpoint_len = (unsigned char)strlen(s->mount_assets.mountpoint);
+    s->mount_scene.mount_next = &s->mount_assets;
+    s->mount_assets.mount_next = cfg->www[0] ? &s->mount : NULL;
     struct lws_context_creation_info info;
     memset(&info, 0, sizeof info);
     info.port = cfg->port;
     info.iface = cfg->listen;
     info.protocols = server_protocols;
-    info.mounts = cfg->www[0] ? &s->mount : NULL;
+    info.mounts = &s->mount_scene;
     info.user = s;
     /* UTF-8 is checked per message (the receive path), so the client hears `bad_utf8` before
      * the 1007 close instead of lws closing silently. */
@@ -593,6 +607,7 @@ static void server_release(lc_server *s, int clean) {
     lc_frames_release(s->frames);
     free(s->asset_names);
     free(s->material_names);
+    server_geometry_release(s);
     free(s);
 }
 
@@ -631,7 +646,7 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     }
     for (uint32_t i = 0; i < s->v->n_assets; i++) s->asset_names[i] = s->v->assets[i].name;
     for (uint32_t i = 0; i < s->v->n_materials; i++) s->material_names[i] = s->v->materials[i].name;
-    if (server_open_state(s) != 0 || server_listen(s) != 0) goto done;
+    if (server_geometry_build(s) != 0 || server_open_state(s) != 0 || server_listen(s) != 0) goto done;
     const lc_config *cfg = s->cfg;
     s->compute = lc_compute_start(bake, cfg->backend, cfg->threads, cfg->refine_passes, cfg->refine_delay, server_wake,
                                   s->ctx, err, sizeof err);

@@ -205,7 +205,7 @@ static void frames_commit_residual(lc_frames_copy *cp, const lc_residual_memo *m
  * than delta_threshold (relative) from what this client last received: whole tiles, or
  * residuals when the client subscribed to them. Sessions holding the same copy (same state
  * id) share one residual computation per publication: subscribers in step cost one
- * compression per frame, not one each (100 clients: p50 228 -> 16 ms). */
+ * compression per frame, not one each. */
 static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j, lc_frame_header *h,
                                      int force_key) {
     const lc_published *p = j->frame;
@@ -309,6 +309,8 @@ size_t lc_frames_encode(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j
     h.revision = p->revision;
     h.sequence = j->sequence;
     h.timestamp_us = p->timestamp_us;
+    h.pass = p->pass;
+    h.converged = (uint8_t)p->converged;
     if (stream == LC_STREAM_LIGHTMAP) {
         h.width = p->lm_w;
         h.height = p->lm_h;

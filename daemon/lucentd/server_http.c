@@ -187,7 +187,24 @@ static int server_www_path_allowed(const lc_server *s, const char *uri) {
     return !strcmp(real, root) || (!strncmp(real, root, rl) && real[rl] == '/');
 }
 
-/* HTTP on the same port: /healthz, /metrics; everything else goes to the static mount. */
+/* The bake's geometry (the /scene.glb and /assets mounts hand their requests here). The
+ * whole path comes from the request line: lws passes callback mounts only what follows the
+ * mount point. Returns the callback's result, or 2 when the path is not a geometry mount's. */
+static int server_http_geometry(lc_server *s, struct lws *wsi, server_http_tx *tx) {
+    char uri[512];
+    if (lws_hdr_copy(wsi, uri, sizeof uri, WSI_TOKEN_GET_URI) <= 0) return 2;
+    if (strcmp(uri, "/scene.glb") && strncmp(uri, "/assets/", 8) && strcmp(uri, "/assets")) return 2;
+    const server_glb *g = server_geometry_find(s, uri);
+    if (!g) {
+        lws_return_http_status(wsi, HTTP_STATUS_NOT_FOUND,
+                               "no such asset in the bake (see welcome.scene.asset_geometry)");
+        return lws_http_transaction_completed(wsi) ? -1 : 0;
+    }
+    return server_geometry_start(s, wsi, tx, g) ? -1 : 0;
+}
+
+/* HTTP on the same port: /healthz, /metrics, the bake's geometry; everything else goes to
+ * the static mount. */
 int server_http_callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len) {
     struct lws_vhost *vh = lws_get_vhost(wsi);
     lc_server *s = vh ? lws_get_vhost_user(vh) : NULL;
@@ -213,6 +230,8 @@ int server_http_callback(struct lws *wsi, enum lws_callback_reasons reason, void
         const size_t cap = sizeof out - LWS_PRE;
         int n = -1;
         unsigned status = HTTP_STATUS_OK;
+        int g = server_http_geometry(s, wsi, user);
+        if (g != 2) return g;
         if (!strcmp(uri, "/healthz")) n = server_health(s, body, cap, &status);
         else if (!strcmp(uri, "/metrics")) n = server_metrics(s, body, cap);
         if (n >= 0) {
@@ -224,5 +243,7 @@ int server_http_callback(struct lws *wsi, enum lws_callback_reasons reason, void
             return lws_http_transaction_completed(wsi) ? -1 : 0;
         }
     }
+    if (reason == LWS_CALLBACK_HTTP_WRITEABLE && s && user && ((server_http_tx *)user)->data)
+        return server_geometry_write(wsi, user);
     return lws_callback_http_dummy(wsi, reason, user, in, len);
 }

@@ -66,11 +66,25 @@ typedef struct server_auth_peer {
     double tokens, last_ms;
 } server_auth_peer;
 
+/* One glTF document served over HTTP (server_geometry.c). */
+typedef struct server_glb {
+    char path[8 + 3 * 64 + 8]; /* "/scene.glb" or "/assets/NAME.glb" (NAME percent-encoded) */
+    unsigned char *data;
+    size_t len;
+} server_glb;
+
+/* Per HTTP connection ("http" protocol user data): a body being written from memory. */
+typedef struct server_http_tx {
+    const unsigned char *data; /* NULL when nothing is being written; points into a server_glb */
+    size_t len, sent;
+} server_http_tx;
+
 struct lc_server {
     lc_config cfg_live;          /* the configuration in force: SIGHUP reloads its reloadable fields */
     lc_config cfg_reload;        /* SIGHUP parses into this, then copies what may change */
     lc_config *cfg;              /* = &cfg_live */
     struct lws_http_mount mount; /* --www (lws keeps a pointer to it) */
+    struct lws_http_mount mount_scene, mount_assets; /* /scene.glb, /assets: answered by server_http_callback */
     int argc;
     char **argv;
     const lc_lcb *bake;
@@ -85,6 +99,10 @@ struct lc_server {
     uint32_t tile;     /* lightmap delta tile side: --tile, or chosen from the lightmap size */
     lc_frames *frames; /* what sessions' frames share (each lightmap encoded once per encoding) */
     const char **asset_names, **material_names;
+    server_glb *glbs; /* [0] /scene.glb, then one per asset; built before the loop, then immutable */
+    uint32_t n_glbs;
+    const char **asset_paths; /* per asset: its glbs[] path (for welcome) */
+    char bake_id[32];         /* lc_lcb_bake_id: names the geometry the lightmap belongs to */
     lc_proto_limits limits;
     lws_sorted_usec_list_t tick;
     int port;
@@ -116,6 +134,17 @@ uint64_t server_accept_errors_total(void);
 
 /* server_requests.c: one complete text message from the session. */
 void server_request(lc_server *s, lc_session *ss, const char *text, size_t len);
+
+/* server_geometry.c */
+/* Main thread, before the loop: builds the scene's and the assets' glTF. 0 or -1 (logged). */
+int server_geometry_build(lc_server *s);
+void server_geometry_release(lc_server *s);
+/* The document a request path names, or NULL. */
+const server_glb *server_geometry_find(const lc_server *s, const char *uri);
+/* Service thread: sends g's headers and starts the body (1 on failure: close). */
+int server_geometry_start(lc_server *s, struct lws *wsi, server_http_tx *tx, const server_glb *g);
+/* Service thread, on HTTP_WRITEABLE: the next chunk (-1: close). */
+int server_geometry_write(struct lws *wsi, server_http_tx *tx);
 
 /* server_http.c */
 /* Answers a WebSocket handshake with an HTTP status and body instead of a silent close.

@@ -60,6 +60,9 @@ static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) 
     w.bands = s->state.settings.bands;
     w.assets = s->asset_names;
     w.n_assets = s->v->n_assets;
+    w.bake_id = s->bake_id;
+    w.geometry = s->n_glbs ? s->glbs[0].path : NULL;
+    w.asset_geometry = s->n_glbs ? s->asset_paths : NULL;
     w.materials = s->material_names;
     w.n_materials = s->v->n_materials;
     w.limits = s->limits;

@@ -146,9 +146,13 @@ class Frame:
         self.raw = data
         if len(data) < 64:
             raise AssertionError("§6.1: binary frame of %d bytes is shorter than the 64-byte header" % len(data))
-        (self.magic, self.version, self.stream, self.encoding, self.flags, self.header_size, self.tiles,
+        (self.magic, self.version, self.stream, self.encoding, self.flags_raw, self.header_size, self.tiles,
          self.revision, self.sequence, self.timestamp, self.width, self.height, self.depth, self.tile,
          self.payload_len, self.crc) = HEADER.unpack_from(data, 0)
+        # §6.1: bits 0-2 the frame kind, bit 3 converged, bits 4-7 reserved, bits 8-15 the pass
+        self.flags = self.flags_raw & 7
+        self.converged = bool(self.flags_raw & 8)
+        self.refine_pass = self.flags_raw >> 8
 
     @property
     def keyframe(self):
@@ -217,6 +221,8 @@ def frame_problems(f):
         p.append("version %d != 1" % f.version)
     if f.header_size != 64:
         p.append("header size %d != 64" % f.header_size)
+    if f.flags_raw & 0xF0:
+        p.append("flags 0x%x: bits 4-7 are reserved and must be 0 (§6.1)" % f.flags_raw)
     if f.flags == 6:
         if f.stream != 1:
             p.append("flags 0x6 (residual delta) on a %s frame: residual deltas are lightmap only (§6.2.1)" %

@@ -488,3 +488,38 @@ async def test_subscribe_delta_invalid(cfg, msg):
         assert not got, "%s frames after a refused subscribe: %r" % (msg["stream"], got[:3])
     finally:
         await c.close()
+
+
+@section("6.1")
+@aio
+async def test_refinement_pass_and_converged(cfg):
+    """After a change, the lightmap frames of its revision carry the refinement pass (flags bits
+    8-15) counting up from 0, and the last of them sets converged (bit 3); no frame of that
+    revision follows a converged one unasked."""
+    c = await controller(cfg)
+    try:
+        await subscribe_keyframe(c, "lightmap", "rgb9e5")
+        await _drain_lightmap(c, lambda fr: None, quiet=1.0)
+        ok = await add_light(c, "conf-%s-pass" % cfg.run_id, [0.2, 0.3, 0.25], 0.3)
+        rev = ok["revision"]
+        frames = []
+        first = await _lightmap_until(c, rev, frames.append, "the change")
+        assert first.revision == rev, "a newer revision than the change's came first: %r" % first
+        mine = [first]
+        while not mine[-1].converged:
+            try:
+                fr = await c.recv_frame("lightmap", timeout=max(cfg.timeout, 30.0))
+            except RecvTimeout:
+                raise AssertionError("§6.1 no converged frame of revision %d; passes seen %r" %
+                                     (rev, [f.refine_pass for f in mine]))
+            assert fr.revision == rev, "a change by another client interrupted the test: %r" % fr
+            mine.append(fr)
+        passes = [f.refine_pass for f in mine]
+        assert passes[0] == 0, "§6.1 the first frame of a revision is pass 0: %r" % passes
+        assert all(b == a + 1 for a, b in zip(passes, passes[1:])), "§6.1 passes count up by one: %r" % passes
+        assert not any(f.converged for f in mine[:-1]), "§6.1 converged before the last pass: %r" % mine
+        more = await _drain_lightmap(c, lambda fr: None, quiet=1.0)
+        assert more is None, "§6.1 a frame of revision %d after the converged one: %r" % (rev, more)
+    finally:
+        await remove_lights(c, "conf-%s-pass" % cfg.run_id)
+        await c.close()

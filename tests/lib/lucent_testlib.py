@@ -61,13 +61,15 @@ def frame_crc(data):
 
 def parse_frame(data):
     """The 64-byte header of a binary frame as a dict (PROTOCOL.md §6.1 names), plus crc_ok and
-    length_ok (the message is exactly header + tile table + payload). Raises ValueError when
-    the message is shorter than a header."""
+    length_ok (the message is exactly header + tile table + payload). `flags` is the frame
+    kind (bits 0-2); `converged` (bit 3) and `pass` (bits 8-15) come apart, `flags_raw` whole.
+    Raises ValueError when the message is shorter than a header."""
     if len(data) < HEADER_SIZE:
         raise ValueError("binary message of %d bytes is shorter than a frame header" % len(data))
     (magic, ver, stream, enc, flags, hsize, tiles, rev, seq, ts, w, h, d, tile, plen,
      crc) = HEADER.unpack_from(data, 0)
-    return dict(magic=magic, version=ver, stream=stream, encoding=enc, flags=flags, header_size=hsize, tiles=tiles,
+    return dict(magic=magic, version=ver, stream=stream, encoding=enc, flags=flags & 7, flags_raw=flags,
+                converged=bool(flags & 8), refine_pass=flags >> 8, header_size=hsize, tiles=tiles,
                 revision=rev, sequence=seq, timestamp_us=ts, width=w, height=h, depth=d, tile=tile, payload=plen,
                 crc=crc, crc_ok=frame_crc(data) == crc, length_ok=len(data) == HEADER_SIZE + 4 * tiles + plen)
 

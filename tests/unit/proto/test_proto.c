@@ -942,6 +942,37 @@ static void test_frames(void) {
     n = make_frame(&h, 3, 2, LC_FRAME_KEYFRAME, 0, 1, 1, 0, NULL, 0, 0);
     CHECK(frame_ok(n, &h), "zero objects parse");
 
+    /* §6.1.1: the pass (bits 8-15) and converged (bit 3) travel beside the kind bits */
+    {
+        lc_frame_header in, out;
+        memset(&in, 0, sizeof in);
+        in.version = 1;
+        in.stream = LC_STREAM_OBJECTS;
+        in.encoding = LC_ENC_F32;
+        in.flags = LC_FRAME_KEYFRAME;
+        in.pass = 7;
+        in.converged = 1;
+        in.height = in.depth = 1; /* no objects: a header-only frame */
+        size_t len = lc_frame_write(&in, NULL, NULL, frame_buf, sizeof frame_buf);
+        CHECK(len == LC_FRAME_HEADER_SIZE && frame_buf[8] == (LC_FRAME_KEYFRAME | LC_FRAME_CONVERGED_BIT) &&
+                  frame_buf[9] == 7,
+              "pass/converged bytes %02x %02x", frame_buf[8], frame_buf[9]);
+        const uint8_t *tt, *pl;
+        lc_proto_error e;
+        CHECK(lc_frame_parse(frame_buf, len, &out, &tt, &pl, &e) == 0 && out.flags == LC_FRAME_KEYFRAME &&
+                  out.pass == 7 && out.converged == 1,
+              "pass/converged parse: %s flags %u pass %u conv %u", e.message, out.flags, out.pass, out.converged);
+        in.pass = 0;
+        in.converged = 0;
+        lc_frame_write(&in, NULL, NULL, frame_buf, sizeof frame_buf);
+        frame_buf[8] |= 0x10; /* a reserved bit (bits 4-7): ignored, for forward compatibility */
+        uint32_t crc = lc_crc32(0, frame_buf, 60);
+        memcpy(frame_buf + 60, &crc, 4);
+        CHECK(lc_frame_parse(frame_buf, len, &out, &tt, &pl, &e) == 0 && out.flags == LC_FRAME_KEYFRAME &&
+                  out.pass == 0 && !out.converged,
+              "reserved flag bits ignored: %s", e.message);
+    }
+
     /* semantic rejections (CRC valid) */
     n = make_frame(&h, 2, 1, LC_FRAME_KEYFRAME, 2, 2, 2, 0, NULL, 0, 8 * 27 * 4);
     CHECK(frame_bad(n, "encoding"), "rgb9e5 shgrid");
