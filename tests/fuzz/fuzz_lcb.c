@@ -1,14 +1,16 @@
 /* Fuzz target for the .lcb reader. Each input is opened twice: as is, and with every CRC
  * (and file_size) recomputed, because random mutations almost never survive the CRCs and
  * the semantic validation behind them would otherwise go unexplored. On success every
- * array of the view is walked, following each index the reader promises is valid, and
- * info is printed in both modes. */
+ * array of the view is walked, following each index the reader promises is valid, info is
+ * printed in both modes, and the glTF of the scene and of every asset is generated (what
+ * lucentd serves from a bake it opened). */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "lcb/lcb.h"
+#include "lcb/lcb_glb.h"
 #include "util/crc32.h"
 
 static volatile uint64_t sink;
@@ -71,6 +73,16 @@ static void fuzz_touch(const lc_lcb *f) {
     if (null) {
         lc_lcb_print_info(f, "fuzz", 0, null);
         lc_lcb_print_info(f, "fuzz", 1, null);
+    }
+    unsigned char *glb = NULL;
+    size_t len = 0;
+    char err[256];
+    if (lc_lcb_scene_glb(f, &glb, &len, err, sizeof err) == 0) sink += fuzz_bytes(glb, len < 64 ? len : 64);
+    free(glb);
+    for (uint32_t a = 0; a < v->n_assets; a++) {
+        glb = NULL;
+        if (lc_lcb_asset_glb(f, a, &glb, &len, err, sizeof err) == 0) sink += len;
+        free(glb);
     }
 }
 
