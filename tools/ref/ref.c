@@ -556,6 +556,68 @@ static void ref_sample_grid(const lc_ref *r, const ref_path_cfg *cfg, const floa
         for (int k = 0; k < 3; k++) sh[3 * j + k] += (float)(4.0 * M_PI) * y[j] * L[k];
 }
 
+/* The camera's path: full illumination along a ray from the eye. Unlike ref_trace (the engine's
+ * indirect quantity) the environment is seen by every escaping ray, the first included, an
+ * emitter seen directly counts in full, and every path is cut at max_depth reflections for
+ * every kind of light alike (emitters, lights, sky). */
+void lc_ref_radiance(const lc_ref *r, const float org_in[3], const float dir_in[3], uint32_t max_depth,
+                     uint32_t rr_depth, lc_rng *rng, float L[3], uint64_t *rays) {
+    float org[3] = {org_in[0], org_in[1], org_in[2]}, dir[3] = {dir_in[0], dir_in[1], dir_in[2]};
+    float T[3] = {1, 1, 1};
+    float pdf_prev = 0; /* 0: the eye's ray, which light sampling cannot produce */
+    L[0] = L[1] = L[2] = 0;
+    for (uint32_t depth = 0;; depth++) { /* depth = reflections before the surface about to be hit */
+        ref_hit h;
+        (*rays)++;
+        if (!ref_intersect(r, org, dir, &h)) {
+            if (r->sky_on) {
+                float s[3];
+                ref_sky(r, dir, s);
+                for (int k = 0; k < 3; k++) L[k] += T[k] * s[k];
+            }
+            return;
+        }
+        ref_surface s;
+        ref_surface_at(r, &h, dir, &s);
+        if (s.backface) return; /* one-sided surfaces, as the reference's: the back is black */
+        if (s.emission) {
+            float w = 1.0f;
+            if (s.emit_pdf > 0 && pdf_prev > 0) {
+                float cos_l = -ref_dot(s.ng, dir);
+                float pl = cos_l > 1e-6f ? s.emit_pdf * h.t * h.t / cos_l : INFINITY;
+                w = pdf_prev / (pdf_prev + pl);
+            }
+            for (int k = 0; k < 3; k++) L[k] += T[k] * s.emission[k] * w;
+        }
+        float rho_max = fmaxf(s.albedo[0], fmaxf(s.albedo[1], s.albedo[2]));
+        if (depth >= max_depth || !(rho_max > 0)) return;
+        float x[3];
+        for (int k = 0; k < 3; k++) x[k] = s.p[k] + s.ng[k] * r->eps;
+        /* Next events: the analytic lights and one emitter sample (MIS), reflected with albedo / pi. */
+        float e[3], ld[3], pl;
+        const float *le;
+        ref_direct(r, x, s.ns, s.ng, rng, e, rays);
+        if (ref_emit_sample(r, x, s.ns, s.ng, rng, ld, &le, &pl, rays)) {
+            float cs = ref_dot(s.ns, ld), pb = cs / (float)M_PI;
+            float g = cs / (pl + pb);
+            for (int k = 0; k < 3; k++) e[k] += le[k] * g;
+        }
+        for (int k = 0; k < 3; k++) L[k] += T[k] * s.albedo[k] / (float)M_PI * e[k];
+        /* Continue: cosine sampling about the shading normal; below the geometric plane = 0. */
+        float cs;
+        ref_cosine_dir(s.ns, rng, dir, &cs);
+        if (ref_dot(dir, s.ng) <= 0 || !(cs > 0)) return;
+        for (int k = 0; k < 3; k++) T[k] *= s.albedo[k];
+        if (depth + 1 >= rr_depth) {
+            float q = fminf(0.95f, rho_max);
+            if (lc_rng_float(rng) >= q) return;
+            for (int k = 0; k < 3; k++) T[k] /= q;
+        }
+        pdf_prev = cs / (float)M_PI;
+        memcpy(org, x, sizeof org);
+    }
+}
+
 void lc_ref_irradiance(lc_ref *r, const float p[3], const float n[3], uint32_t spp, uint64_t seed, double mean[3],
                        double stderr_out[3]) {
     ref_path_cfg cfg = {32, 3};
@@ -667,6 +729,8 @@ void lc_ref_release(lc_ref *r) {
     free(r->tri_albedo);
     free(r);
 }
+
+int lc_ref_threads(const lc_ref *r) { return r->threads; }
 
 static int ref_build_objects(lc_ref *r, const lc_engine_state *st) {
     const lc_lcb_view *v = r->v;

@@ -40,6 +40,10 @@
  * draws from its own random stream (seed, cache, pass): results are identical for any thread
  * count.
  *
+ * THE CAMERA VIEW (camera.c, lc_ref_radiance) is another quantity over the same scene: the
+ * full illumination a pinhole camera sees (emitters and the environment seen directly, direct
+ * light from every light, indirect light), for comparing a viewer's screenshot.
+ *
  * Ownership: lc_ref borrows the bake (it must outlive the handle) and copies the state.
  * Results (lc_ref_result) own their arrays; free with lc_ref_result_free. */
 #ifndef LC_REF_H
@@ -49,6 +53,7 @@
 
 #include "engine/engine.h"
 #include "lcb/lcb.h"
+#include "util/rng.h"
 
 /* --- state ----------------------------------------------------------------------------------- */
 
@@ -61,9 +66,12 @@ typedef struct lc_ref_state {
     float *emission;
 } lc_ref_state;
 
-/* path NULL: the daemon's initial state for this bake. Returns 0 or -1 with err set (the
- * JSON pointer of a bad field, an unknown asset...). */
-int lc_ref_state_load(const lc_lcb *bake, const char *path, lc_ref_state *out, char *err, size_t errlen);
+/* path NULL: the daemon's initial state for this bake; bake_lights adds the bake's own lights
+ * (its META lights, as a fresh lucentd starts with; `render` and `fidelity` leave them out, so
+ * their references stay the indirect light of the bake's emission). Returns 0 or -1 with err
+ * set (the JSON pointer of a bad field, an unknown asset...). */
+int lc_ref_state_load(const lc_lcb *bake, const char *path, int bake_lights, lc_ref_state *out, char *err,
+                      size_t errlen);
 void lc_ref_state_free(lc_ref_state *s);
 
 /* --- the reference renderer -------------------------------------------------------------------- */
@@ -119,6 +127,8 @@ typedef struct lc_ref lc_ref;
  * textured-albedo lookup. Returns NULL with err set. */
 lc_ref *lc_ref_create(const lc_lcb *bake, const lc_engine_state *state, int threads, char *err, size_t errlen);
 void lc_ref_release(lc_ref *r);
+/* The worker threads it was created with (0 = all cores). */
+int lc_ref_threads(const lc_ref *r);
 
 /* Renders the reference for every texel cache and grid cell. Returns 0 or -1 with err set;
  * on success *out owns its arrays. */
@@ -129,6 +139,13 @@ void lc_ref_result_free(lc_ref_result *res);
  * RGB), with spp samples. */
 void lc_ref_irradiance(lc_ref *r, const float p[3], const float n[3], uint32_t spp, uint64_t seed, double mean[3],
                        double stderr_out[3]);
+
+/* The radiance a camera sees along a ray (unit dir) from org: full illumination, emission and
+ * the environment seen directly, everything after at most max_depth reflections (0: emitters
+ * and the environment only; 1: direct light), Russian roulette from rr_depth reflections on.
+ * One sample; *rays counts the rays cast. */
+void lc_ref_radiance(const lc_ref *r, const float org[3], const float dir[3], uint32_t max_depth, uint32_t rr_depth,
+                     lc_rng *rng, float L[3], uint64_t *rays);
 
 /* Total power leaving the static surfaces before any transport (W, RGB): the integral over
  * every triangle's front of pi L_e + albedo (direct + sky) irradiance — the engine's
@@ -144,6 +161,75 @@ uint32_t lc_ref_cache_crc(const lc_lcb_view *v);
 int lc_ref_write(const char *dir, const lc_ref_result *res, const char *extra_json, char *err, size_t errlen);
 /* Reads what lc_ref_write wrote. */
 int lc_ref_read(const char *dir, lc_ref_result *res, char *err, size_t errlen);
+
+/* --- the camera view (camera.c, `lucent-ref camera`) ------------------------------------------ */
+
+/* A pinhole camera exactly as three.js's PerspectiveCamera + lookAt: fov_deg the vertical field
+ * of view, aspect width / height, forward = normalize(target - eye), right = normalize(forward x
+ * up), true up = right x forward. */
+typedef struct lc_ref_camera {
+    float eye[3], target[3], up[3];
+    double fov_deg;
+    uint32_t width, height;
+} lc_ref_camera;
+
+/* Largest image side (a cap on the image buffers). */
+#define LC_REF_CAMERA_MAX_SIDE 8192u
+
+typedef struct lc_ref_camera_basis {
+    double forward[3], right[3], up[3];
+    double tan_y, tan_x; /* tan(fov / 2), times the aspect */
+} lc_ref_camera_basis;
+
+/* Checks the camera and computes its basis. Returns 0 or -1 with err naming the CLI flag
+ * (--fov outside (0, 180), --width/--height outside 1..LC_REF_CAMERA_MAX_SIDE, --target equal
+ * to --eye, --up parallel to the view direction, non-finite --eye/--target/--up). */
+int lc_ref_camera_setup(const lc_ref_camera *cam, lc_ref_camera_basis *b, char *err, size_t errlen);
+
+/* The unit ray direction through image point (px, py), in pixels from the top-left corner
+ * (pixel (i, j)'s centre is (i + 0.5, j + 0.5)): NDC x = 2 px / W - 1, y = 1 - 2 py / H,
+ * dir = normalize(forward + x tan_x right + y tan_y up). */
+void lc_ref_camera_ray(const lc_ref_camera_basis *b, uint32_t width, uint32_t height, double px, double py,
+                       float dir[3]);
+
+typedef struct lc_ref_camera_settings {
+    uint32_t spp;       /* samples per pixel: stratified over the pixel; 1 = its centre */
+    uint32_t max_depth; /* reflections per path (lc_ref_radiance) */
+    uint32_t rr_depth;
+    uint64_t seed;
+    int quiet; /* no progress bar */
+} lc_ref_camera_settings;
+
+typedef struct lc_ref_image {
+    uint32_t width, height;
+    float *rgb;             /* W*H*3 linear radiance (nits), row 0 = top */
+    float *stderr_y;        /* W*H standard error of each pixel's luminance */
+    double mean_rel_stderr; /* stderr(Y) / Y over the pixels above 5% of the mean luminance */
+    uint32_t n_bright;
+    double seconds;
+    uint64_t rays;
+} lc_ref_image;
+
+/* Path-traces the camera's view. Every pixel draws from its own random stream (seed, pixel):
+ * the same seed gives the same image on any thread count. Returns 0 or -1 with err set; on
+ * success *out owns its arrays (lc_ref_image_free). */
+int lc_ref_camera_render(lc_ref *r, const lc_ref_camera *cam, const lc_ref_camera_settings *s, lc_ref_image *out,
+                         char *err, size_t errlen);
+void lc_ref_image_free(lc_ref_image *img);
+
+/* The viewer's tone maps (three.js): NONE = LinearToneMapping, clamp(exposure L, 0, 1);
+ * NEUTRAL = NeutralToneMapping (Khronos PBR Neutral) of exposure L. */
+typedef enum { LC_REF_TONEMAP_NONE = 0, LC_REF_TONEMAP_NEUTRAL = 1 } lc_ref_tonemap_kind;
+
+/* Linear radiance -> display-linear colour in [0, 1] (before the sRGB transfer). */
+void lc_ref_tonemap(lc_ref_tonemap_kind kind, double exposure, const float in[3], double out[3]);
+/* The sRGB OETF of v in [0, 1] (clamped), rounded to 8 bits: round(255 sRGB(v)). */
+uint8_t lc_ref_srgb8(double v);
+
+/* Writes the image as an 8-bit sRGB PNG after the tone map (the EXR of the linear radiance is
+ * lc_image_write_float of img->rgb). Returns 0 or -1 with err set. */
+int lc_ref_image_write_png(const char *path, const lc_ref_image *img, lc_ref_tonemap_kind kind, double exposure,
+                           char *err, size_t errlen);
 
 /* --- comparison ------------------------------------------------------------------------------ */
 

@@ -26,7 +26,8 @@ void lc_ref_state_free(lc_ref_state *s) {
     memset(s, 0, sizeof *s);
 }
 
-int lc_ref_state_load(const lc_lcb *bake, const char *path, lc_ref_state *out, char *err, size_t errlen) {
+int lc_ref_state_load(const lc_lcb *bake, const char *path, int bake_lights, lc_ref_state *out, char *err,
+                      size_t errlen) {
     memset(out, 0, sizeof *out);
     lc_state state;
     lc_state_limits limits = {LC_ENGINE_MAX_LIGHTS, LC_ENGINE_MAX_OBJECTS};
@@ -37,6 +38,7 @@ int lc_ref_state_load(const lc_lcb *bake, const char *path, lc_ref_state *out, c
         lc_set_err(err, errlen, "out of memory");
         return -1;
     }
+    if (bake_lights && !path && lc_state_seed(&state, err, errlen) != 0) goto err;
     if (path) {
         size_t len = 0;
         text = lc_fs_read(path, 64u << 20, &len, err, errlen);

@@ -2,6 +2,7 @@
  *   lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N] [--target-stderr F] ...
  *   lucent-ref compare --reference DIR --lightmap EXR_OR_F32 [--grid F32] [--out DIR]
  *   lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--backend cpu] [--out DIR]
+ *   lucent-ref camera BAKE.lcb [--state STATE.json] --eye X,Y,Z --target X,Y,Z [--exr F] [--png F] ...
  * Exit codes: 0 ok, 1 failure, 2 usage error. */
 #include <cjson/cJSON.h>
 #include <math.h>
@@ -9,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 
 #include "bake/image.h"
@@ -26,18 +28,54 @@ typedef struct ref_opts {
     int spp, batch, max_bounces, rr_depth, seed, threads, texels, grid_on, quiet;
     double target_stderr, floor_frac, threshold, max_err, tol;
     int zoom, max_relights, backend, bounce_limit, bound_rays;
+    /* camera */
+    char exr[REF_PATH_MAX], png[REF_PATH_MAX];
+    int width, height, max_depth, tonemap;
+    double fov, exposure;
+    float eye[3], target[3], up[3];
+    int have_eye, have_target, have_up;
 } ref_opts;
+
+/* X,Y,Z: three finite numbers, the flag named in the error. */
+static int ref_opt_vec3(const char *flag, const char *value, float out[3], char *err, size_t errlen) {
+    const char *p = value;
+    for (int k = 0; k < 3; k++) {
+        char *end = NULL;
+        double v = strtod(p, &end);
+        if (end == p || !isfinite(v) || fabs(v) > 1e9 || *end != (k < 2 ? ',' : '\0')) {
+            lc_set_err(err, errlen, "--%s: '%s' is not three finite numbers X,Y,Z", flag, value);
+            return -1;
+        }
+        out[k] = (float)v;
+        p = end + 1;
+    }
+    return 0;
+}
+static int ref_opt_eye(void *o, const char *v, char *err, size_t errlen) {
+    ((ref_opts *)o)->have_eye = 1;
+    return ref_opt_vec3("eye", v, ((ref_opts *)o)->eye, err, errlen);
+}
+static int ref_opt_target(void *o, const char *v, char *err, size_t errlen) {
+    ((ref_opts *)o)->have_target = 1;
+    return ref_opt_vec3("target", v, ((ref_opts *)o)->target, err, errlen);
+}
+static int ref_opt_up(void *o, const char *v, char *err, size_t errlen) {
+    ((ref_opts *)o)->have_up = 1;
+    return ref_opt_vec3("up", v, ((ref_opts *)o)->up, err, errlen);
+}
 
 #define OFF(f) offsetof(ref_opts, f)
 static const lc_opt ref_options[] = {
     {"state", LC_OPT_STRING, OFF(state), 0, REF_PATH_MAX, NULL, NULL,
-     "[render, fidelity] daemon state JSON (`lucentctl state --json`, a snapshot); default: the daemon's initial "
-     "state (the bake's emission, no lights)",
+     "[render, fidelity, camera] daemon state JSON (`lucentctl state --json`, a snapshot); default: the daemon's "
+     "initial state (render, fidelity: the bake's emission, no lights; camera: with the bake's own lights, as a "
+     "fresh lucentd starts)",
      "PATH", NULL},
     {"out", LC_OPT_STRING, OFF(out), 0, REF_PATH_MAX, NULL, NULL,
      "output directory (render: required; compare/fidelity: default none / fidelity-out)", "DIR", NULL},
-    {"spp", LC_OPT_INT, OFF(spp), 1, 1 << 24, "4096", NULL, "[render] paths per cache (the cap with --target-stderr)",
-     "N", NULL},
+    {"spp", LC_OPT_INT, OFF(spp), 1, 1 << 24, NULL, NULL,
+     "[render] paths per cache, default 4096 (the cap with --target-stderr); [camera] paths per pixel, default 64", "N",
+     NULL},
     {"batch", LC_OPT_INT, OFF(batch), 1, 1 << 20, "256", NULL, "[render] paths per cache per pass", "N", NULL},
     {"target-stderr", LC_OPT_FLOAT, OFF(target_stderr), 0, 1, "0", NULL,
      "[render] stop a cache when its relative standard error is below F (0 = fixed --spp)", "F", NULL},
@@ -46,10 +84,10 @@ static const lc_opt ref_options[] = {
      NULL},
     {"max-bounces", LC_OPT_INT, OFF(max_bounces), 8, 1024, "32", NULL,
      "[render] surface reflections per path (Russian roulette cuts most paths earlier)", "N", NULL},
-    {"rr-depth", LC_OPT_INT, OFF(rr_depth), 1, 1024, "3", NULL, "[render] Russian roulette from this bounce on", "N",
-     NULL},
-    {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "[render] random seed (same seed, same result)", "S",
-     NULL},
+    {"rr-depth", LC_OPT_INT, OFF(rr_depth), 1, 1024, "3", NULL, "[render, camera] Russian roulette from this bounce on",
+     "N", NULL},
+    {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "[render, camera] random seed (same seed, same result)",
+     "S", NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", "N", NULL},
     {"texels", LC_OPT_BOOL, OFF(texels), 0, 1, "true", NULL, "[render] compute the lightmap texels (--no-texels)", NULL,
      NULL},
@@ -79,19 +117,45 @@ static const lc_opt ref_options[] = {
      "[fidelity] also report the lossless-transport bound: each texel gathered from the surfels its N probe rays "
      "hit (the engine's B, no links); 0 = off",
      "N", NULL},
+    {"eye", LC_OPT_CALLBACK, 0, 0, 0, NULL, NULL, "[camera] camera position (required)", "X,Y,Z", ref_opt_eye},
+    {"target", LC_OPT_CALLBACK, 0, 0, 0, NULL, NULL, "[camera] the point looked at (required)", "X,Y,Z",
+     ref_opt_target},
+    {"up", LC_OPT_CALLBACK, 0, 0, 0, NULL, NULL, "[camera] up vector, as three.js's camera.up (default 0,1,0)", "X,Y,Z",
+     ref_opt_up},
+    {"fov", LC_OPT_FLOAT, OFF(fov), 0, 180, "50", NULL,
+     "[camera] vertical field of view in degrees, as three.js's PerspectiveCamera (0 and 180 excluded)", "DEG", NULL},
+    {"width", LC_OPT_INT, OFF(width), 1, LC_REF_CAMERA_MAX_SIDE, "640", NULL, "[camera] image width", "N", NULL},
+    {"height", LC_OPT_INT, OFF(height), 1, LC_REF_CAMERA_MAX_SIDE, "480", NULL, "[camera] image height", "N", NULL},
+    {"max-depth", LC_OPT_INT, OFF(max_depth), 0, 1024, "8", NULL,
+     "[camera] reflections per path (0 = emitters and the environment seen directly, 1 = direct light)", "N", NULL},
+    {"exposure", LC_OPT_FLOAT, OFF(exposure), 0, 1e6, "1", NULL,
+     "[camera] PNG: radiance scale before the tone map (three.js toneMappingExposure)", "X", NULL},
+    {"tonemap", LC_OPT_ENUM, OFF(tonemap), 0, 0, "none", "none|neutral",
+     "[camera] PNG tone map: none = three.js LinearToneMapping, neutral = NeutralToneMapping (Khronos PBR "
+     "Neutral); then the sRGB transfer",
+     NULL, NULL},
+    {"exr", LC_OPT_STRING, OFF(exr), 1, REF_PATH_MAX, NULL, NULL, "[camera] write float32 RGB linear radiance (nits)",
+     "OUT.exr", NULL},
+    {"png", LC_OPT_STRING, OFF(png), 1, REF_PATH_MAX, NULL, NULL,
+     "[camera] write 8-bit sRGB after --exposure and --tonemap", "OUT.png", NULL},
     {"quiet", LC_OPT_BOOL, OFF(quiet), 0, 1, "false", NULL, "no progress output", NULL, NULL},
     {NULL, 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL},
 };
 
 static void usage(FILE *out) {
-    fprintf(out,
-            "usage: lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N | --target-stderr F] ...\n"
-            "         path-trace the engine's indirect irradiance at every texel cache and SH grid cell\n"
-            "       lucent-ref compare --reference DIR --lightmap EXR_OR_F32 [--grid F32] [--out DIR]\n"
-            "         relative error of a lightmap / SH grid against a reference\n"
-            "       lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--out DIR]\n"
-            "         relight with the engine to convergence and compare (renders the reference if absent)\n\n"
-            "options:\n");
+    fprintf(
+        out,
+        "usage: lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N | --target-stderr F] ...\n"
+        "         path-trace the engine's indirect irradiance at every texel cache and SH grid cell\n"
+        "       lucent-ref compare --reference DIR --lightmap EXR_OR_F32 [--grid F32] [--out DIR]\n"
+        "         relative error of a lightmap / SH grid against a reference\n"
+        "       lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--out DIR]\n"
+        "         relight with the engine to convergence and compare (renders the reference if absent)\n"
+        "       lucent-ref camera BAKE.lcb [--state STATE.json] --eye X,Y,Z --target X,Y,Z [--up 0,1,0] [--fov 50]\n"
+        "                         [--width 640] [--height 480] [--spp 64] [--max-depth 8] [--exposure 1]\n"
+        "                         [--tonemap none|neutral] [--exr OUT.exr] [--png OUT.png] [--seed 1] [--threads 0]\n"
+        "         path-trace the full illumination (direct + indirect) seen by a pinhole camera\n\n"
+        "options:\n");
     lc_opt_help(ref_options, out);
     fprintf(out,
             "\nerrors are |Y_a - Y_r| / Y_r on luminance per texel that owns its cache, over texels above\n"
@@ -118,7 +182,7 @@ static int parse(ref_opts *o, int argc, char **argv, char **pos, int max_pos) {
 
 static lc_ref_settings settings_from(const ref_opts *o) {
     lc_ref_settings s = lc_ref_default_settings();
-    s.spp = (uint32_t)o->spp;
+    s.spp = (uint32_t)(o->spp ? o->spp : 4096);
     s.batch_spp = (uint32_t)o->batch;
     s.target_stderr = o->target_stderr;
     s.floor_frac = o->floor_frac;
@@ -185,7 +249,7 @@ static int cmd_render(int argc, char **argv) {
     memset(&res, 0, sizeof res);
     int rc = EXIT_FAIL;
     if (lc_lcb_open(pos[0], &bake, err, sizeof err) != 0) goto done;
-    if (lc_ref_state_load(bake, o.state[0] ? o.state : NULL, &st, err, sizeof err) != 0) goto done;
+    if (lc_ref_state_load(bake, o.state[0] ? o.state : NULL, 0, &st, err, sizeof err) != 0) goto done;
     if (do_render(pos[0], bake, &st, &o, o.out, &res, err, sizeof err) != 0) goto done;
     rc = EXIT_OK;
 done:
@@ -393,7 +457,7 @@ static int cmd_fidelity(int argc, char **argv) {
     char path[REF_PATH_MAX + 64];
     if (lc_lcb_open(pos[0], &bake, err, sizeof err) != 0) goto done;
     const lc_lcb_view *v = lc_lcb_get(bake);
-    if (lc_ref_state_load(bake, o.state[0] ? o.state : NULL, &st, err, sizeof err) != 0) goto done;
+    if (lc_ref_state_load(bake, o.state[0] ? o.state : NULL, 0, &st, err, sizeof err) != 0) goto done;
     mkdir(dir, 0755);
     if (o.reference[0]) {
         if (lc_ref_read(o.reference, &ref, err, sizeof err) != 0) goto done;
@@ -509,6 +573,90 @@ done:
     return rc;
 }
 
+/* A file name ending in ext (case-insensitive), for the flag's error. */
+static int ends_with(const char *path, const char *ext) {
+    size_t n = strlen(path), e = strlen(ext);
+    return n > e && !strcasecmp(path + n - e, ext);
+}
+
+/* The camera's flags beyond what the option table checks. Returns 0, or -1 with err naming
+ * the flag. */
+static int camera_check(const ref_opts *o, int n_pos, lc_ref_camera *cam, char *err, size_t errlen) {
+    if (n_pos != 1) {
+        lc_set_err(err, errlen, "camera needs one BAKE.lcb (see --help)");
+        return -1;
+    }
+    if (!o->have_eye || !o->have_target) {
+        lc_set_err(err, errlen, "%s: required (camera position and the point it looks at)",
+                   !o->have_eye ? "--eye" : "--target");
+        return -1;
+    }
+    if (!o->exr[0] && !o->png[0]) {
+        lc_set_err(err, errlen, "--exr/--png: camera needs at least one output file");
+        return -1;
+    }
+    const char *bad_name = o->exr[0] && !ends_with(o->exr, ".exr") ? "--exr: the file name must end in .exr"
+        : o->png[0] && !ends_with(o->png, ".png")                  ? "--png: the file name must end in .png"
+                                                                   : NULL;
+    if (bad_name) {
+        lc_set_err(err, errlen, "%s", bad_name);
+        return -1;
+    }
+    memset(cam, 0, sizeof *cam);
+    memcpy(cam->eye, o->eye, sizeof cam->eye);
+    memcpy(cam->target, o->target, sizeof cam->target);
+    if (o->have_up) memcpy(cam->up, o->up, sizeof cam->up);
+    else cam->up[1] = 1;
+    cam->fov_deg = o->fov;
+    cam->width = (uint32_t)o->width;
+    cam->height = (uint32_t)o->height;
+    lc_ref_camera_basis b;
+    return lc_ref_camera_setup(cam, &b, err, errlen);
+}
+
+static int cmd_camera(int argc, char **argv) {
+    static ref_opts o;
+    char *pos[2];
+    char err[1024] = "";
+    int n = parse(&o, argc, argv, pos, 2);
+    if (n < 0) return EXIT_USAGE;
+    lc_ref_camera cam;
+    if (camera_check(&o, n, &cam, err, sizeof err) != 0) {
+        fprintf(stderr, "lucent-ref: %s\n", err);
+        return EXIT_USAGE;
+    }
+    lc_ref_camera_settings cs = {(uint32_t)(o.spp ? o.spp : 64), (uint32_t)o.max_depth, (uint32_t)o.rr_depth,
+                                 (uint64_t)o.seed, o.quiet};
+    lc_lcb *bake = NULL;
+    lc_ref *r = NULL;
+    lc_ref_state st;
+    memset(&st, 0, sizeof st);
+    lc_ref_image img;
+    memset(&img, 0, sizeof img);
+    int rc = EXIT_FAIL;
+    if (lc_lcb_open(pos[0], &bake, err, sizeof err) != 0) goto done;
+    if (lc_ref_state_load(bake, o.state[0] ? o.state : NULL, 1, &st, err, sizeof err) != 0) goto done;
+    if (!(r = lc_ref_create(bake, &st.st, o.threads, err, sizeof err))) goto done;
+    if (lc_ref_camera_render(r, &cam, &cs, &img, err, sizeof err) != 0) goto done;
+    if (o.exr[0] && lc_image_write_float(o.exr, img.width, img.height, 3, img.rgb, err, sizeof err) != 0) goto done;
+    if (o.png[0] &&
+        lc_ref_image_write_png(o.png, &img, (lc_ref_tonemap_kind)o.tonemap, o.exposure, err, sizeof err) != 0)
+        goto done;
+    fprintf(stderr,
+            "lucent-ref: camera %ux%u, %u spp, max depth %u: %.2f s, %.2f Mrays/s; noise: mean relative "
+            "stderr %.4f over the %u pixels above 5%% of the mean luminance\n",
+            img.width, img.height, cs.spp, cs.max_depth, img.seconds,
+            img.seconds > 0 ? img.rays / img.seconds / 1e6 : 0, img.mean_rel_stderr, img.n_bright);
+    rc = EXIT_OK;
+done:
+    if (rc != EXIT_OK) fprintf(stderr, "lucent-ref: %s\n", err);
+    lc_ref_image_free(&img);
+    lc_ref_release(r);
+    lc_ref_state_free(&st);
+    lc_lcb_close(bake);
+    return rc;
+}
+
 int main(int argc, char **argv) {
     if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
         usage(argc < 2 ? stderr : stdout);
@@ -517,6 +665,7 @@ int main(int argc, char **argv) {
     if (!strcmp(argv[1], "render")) return cmd_render(argc, argv);
     if (!strcmp(argv[1], "compare")) return cmd_compare(argc, argv);
     if (!strcmp(argv[1], "fidelity")) return cmd_fidelity(argc, argv);
-    fprintf(stderr, "lucent-ref: unknown command '%s' (render, compare, fidelity; see --help)\n", argv[1]);
+    if (!strcmp(argv[1], "camera")) return cmd_camera(argc, argv);
+    fprintf(stderr, "lucent-ref: unknown command '%s' (render, compare, fidelity, camera; see --help)\n", argv[1]);
     return EXIT_USAGE;
 }
