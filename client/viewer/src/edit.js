@@ -14,6 +14,8 @@ function toLinear(hex) {
   return [c.r, c.g, c.b].map((x) => Number(x.toFixed(5)));
 }
 
+const short = (x) => Number(Number(x).toPrecision(6));
+
 function toHex(rgb) {
   const peak = Math.max(rgb[0], rgb[1], rgb[2], 1);
   return `#${new THREE.Color().setRGB(rgb[0] / peak, rgb[1] / peak, rgb[2] / peak, THREE.LinearSRGBColorSpace).getHexString()}`;
@@ -196,13 +198,13 @@ export class Editor {
     $('sel-light').classList.toggle('hidden', !light);
     if (!light) return;
     $('sel-color').value = toHex(spec.color || [1, 1, 1]);
-    $('sel-intensity').value = spec.intensity ?? 1;
+    $('sel-intensity').value = short(spec.intensity ?? 1);
     $('sel-intensity-label').textContent = { point: 'candela', spot: 'candela', directional: 'lux', area: 'nits' }[spec.type];
-    $('sel-range').value = spec.range ?? 0;
+    $('sel-range').value = short(spec.range ?? 0);
     const deg = (x) => Number(THREE.MathUtils.radToDeg(x).toFixed(3));
     $('sel-inner').value = deg(spec.innerConeAngle ?? 0);
     $('sel-outer').value = deg(spec.outerConeAngle ?? Math.PI / 4);
-    $('sel-size').value = (spec.size || [1])[0];
+    $('sel-size').value = short((spec.size || [1])[0]);
     for (const el of document.querySelectorAll('.spot-only')) el.classList.toggle('hidden', spec.type !== 'spot');
     for (const el of document.querySelectorAll('.area-only')) el.classList.toggle('hidden', spec.type !== 'area');
   }
@@ -252,8 +254,9 @@ export class Editor {
     if (!env) return;
     const known = ['none', 'constant'].includes(env.type);
     $('env-type').value = known ? env.type : 'constant';
+    if (env.type === 'none') return; // keep the panel's sky colour for when one is switched on
     if (env.color) $('env-color').value = toHex(env.color);
-    if (env.intensity !== undefined) $('env-intensity').value = env.intensity;
+    if (env.intensity !== undefined) $('env-intensity').value = short(env.intensity);
   }
 
   uniqueId(prefix, taken) {

@@ -64,7 +64,7 @@ class Viewer {
     const hasAssets = (this.objects.assetNames().length || (scene.assets || []).length) > 0;
     if (hasAssets) await this.client.subscribe('objects', { encoding: 'f32' });
     if (this.mode === 'probes') await this.subscribeGrid();
-    if (this.url.heatmap) this.setHeatmap(await loadHeatmap(this.url.heatmap));
+    if (this.url.heatmap) this.setHeatmap(await loadHeatmap(this.url.heatmap), !this.url.mode);
     this.applyMode();
     await this.firstFrame;
   }
@@ -185,6 +185,8 @@ class Viewer {
     this.latency.own(t0, p, () => this.shownRevision);
     p.then((ok) => {
       if (ok.revision > this.serverRevision) { this.serverRevision = ok.revision; this.hud.revision(ok.revision); }
+      // Lights and objects were applied here before sending; anything else comes from the state.
+      if (msg.type !== 'light.set' && msg.type !== 'object.set') this.refreshState();
     }).catch((e) => {
       const text = `${msg.type} refused: ${e.code || 'error'}${e.message ? ` — ${e.message}` : ''}`;
       this.errors.push(text);
@@ -228,13 +230,20 @@ class Viewer {
     this.requestRender();
   }
 
-  setHeatmap(tex) {
+  /** A loaded heat map is shown at once unless the URL asked for another mode. */
+  setHeatmap(tex, show = true) {
     this.staticScene.setHeatmap(tex);
-    this.mode = 'heatmap';
+    if (show) this.mode = 'heatmap';
     this.applyMode();
   }
 
   bindPanel() {
+    const panel = $('panel');
+    if (window.innerWidth < 700) panel.classList.add('collapsed'); // small windows: the canvas first
+    $('panel-toggle').addEventListener('click', () => panel.classList.toggle('collapsed'));
+    window.addEventListener('keydown', (e) => {
+      if (e.key === 'h' && !['INPUT', 'SELECT'].includes(e.target.tagName)) panel.classList.toggle('collapsed');
+    });
     $('mode').addEventListener('change', (e) => { this.mode = e.target.value; this.applyMode(); });
     $('tonemap').addEventListener('change', (e) => { this.tonemap = e.target.value; this.applyToneMap(); this.onCamera(); });
     $('exposure').addEventListener('change', (e) => {

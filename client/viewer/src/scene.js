@@ -122,10 +122,10 @@ export class StaticScene {
       return { camera: eye.toArray(), target: c.toArray(), fov };
     }
     const eye = c.clone();
-    eye.y = b.min.y + 0.3 * s.y;
+    eye.y = b.min.y + 0.25 * s.y;
     const target = eye.clone();
-    if (s.x >= s.z) { eye.x = b.min.x + 0.1 * s.x; target.x = b.max.x; } else { eye.z = b.min.z + 0.1 * s.z; target.z = b.max.z; }
-    target.y = c.y;
+    if (s.x >= s.z) { eye.x = b.min.x + 0.2 * s.x; target.x = b.max.x; } else { eye.z = b.min.z + 0.2 * s.z; target.z = b.max.z; }
+    target.y = b.min.y + 0.35 * s.y;
     return { camera: eye.toArray(), target: target.toArray(), fov: 60 };
   }
 }
