@@ -5,7 +5,8 @@
 import { execFileSync } from 'node:child_process';
 import { writeFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { CORNELL, LUCENT_REF, SHOTS, check, connect, meanAbsDiff, openViewer, run, screenshot, skip, waitQuiet, waitShown } from './lib.mjs';
+import { CORNELL, LUCENT_REF, SHOTS, check, connect, meanAbsDiff, openViewer, requirePrereqs, run, screenshot, skip, waitQuiet,
+  waitShown } from './lib.mjs';
 import { readPng, writePng } from './png.mjs';
 
 const W = 320, H = 240, MARGIN = 3, SPP = 128;
@@ -15,6 +16,7 @@ const VIEW = `?ui=0&camera=${EYE}&target=${TARGET}&fov=${FOV}&mode=full&tonemap=
 // part of it. Tolerances a little above.
 const TOLERANCE = { lamp: 3.0, point: 3.0 };
 
+requirePrereqs();
 try {
   execFileSync(LUCENT_REF, ['camera', '--help'], { stdio: 'ignore' });
 } catch (e) {
