@@ -1,7 +1,6 @@
 // Shared pieces of the viewer's browser tests: skip rules (exit 77), lucentd on a free port,
 // headless chromium (Debian's /usr/bin/chromium, WebGL2 on SwiftShader) through playwright-core,
 // a protocol client (client/js/lucent.js over the ws package), and image statistics.
-import { spawn } from 'node:child_process';
 import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { createRequire } from 'node:module';
 import { tmpdir } from 'node:os';
@@ -48,34 +47,20 @@ const require = createRequire(join(NODE_MODULES, 'x.js'));
 export const { chromium } = require('playwright-core');
 const WebSocket = require('ws');
 const { LucentClient } = await import(pathToFileURL(join(SOURCE, 'client', 'js', 'lucent.js')).href);
+const harness = await import(pathToFileURL(join(SOURCE, 'client', 'js', 'harness', 'lucentd.mjs')).href);
 
-/** Starts lucentd (--port 0, cpu backend, its state in a fresh temporary directory) and waits
+/** Starts lucentd through the JS client's test harness (--port 0, cpu backend, no tokens, this
+ *  build's viewer as --www, its state in a fresh temporary directory) and waits
  *  for its `lucentd listening port=N` line. Returns {port, proc, stop(), log()}. */
 export async function startLucentd(args = []) {
   const dir = mkdtempSync(join(tmpdir(), 'lucent-viewer-'));
-  const cmd = [LUCENTD, '--bake', CORNELL, '--port', '0', '--state-dir', join(dir, 'state'), '--backend', 'cpu',
-    '--threads', '2', '--log-level', 'warn', '--www', WWW, ...args];
-  const proc = spawn(cmd[0], cmd.slice(1), { stdio: ['ignore', 'pipe', 'pipe'] });
-  let err = '';
-  proc.stderr.on('data', (b) => { err += b; });
-  const port = await new Promise((res, rej) => {
-    const timer = setTimeout(() => rej(new Error(`lucentd said nothing for 30 s: ${err.slice(-400)}`)), 30000);
-    let out = '';
-    proc.stdout.on('data', (b) => {
-      out += b;
-      const m = /lucentd listening port=(\d+)/.exec(out);
-      if (m) { clearTimeout(timer); res(Number(m[1])); }
-    });
-    proc.on('exit', (code) => rej(new Error(`lucentd exited ${code}: ${err.slice(-400)}`)));
-  });
+  const d = await harness.startLucentd({ stateDir: join(dir, 'state'), tokens: false, args: ['--www', WWW, ...args] });
   return {
-    port, proc, dir,
-    log: () => err,
-    stop: () => new Promise((res) => {
-      if (proc.exitCode !== null) { rmSync(dir, { recursive: true, force: true }); return res(); }
-      proc.once('exit', () => { rmSync(dir, { recursive: true, force: true }); res(); });
-      proc.kill('SIGTERM');
-    }),
+    ...d, dir,
+    stop: async () => {
+      await d.stop();
+      rmSync(dir, { recursive: true, force: true });
+    },
   };
 }
 

@@ -36,15 +36,16 @@ export function cleanup(dir) {
 
 /**
  * Starts lucentd on `port` (0: any free port, read from its `lucentd listening port=N` line)
- * with its state in `stateDir`, the build's Cornell bake, the cpu backend and the test tokens.
+ * with its state in `stateDir`, the build's Cornell bake, the cpu backend and the test tokens
+ * (tokens: false for none: every client is then a controller). Also used by tests/viewer.
  * Resolves {proc, port, url, stateDir, log(), stop(signal)}.
  */
-export function startLucentd({ stateDir, port = 0, args = [], timeoutMs = 20000 }) {
+export function startLucentd({ stateDir, port = 0, args = [], tokens = true, timeoutMs = 20000 }) {
   const errPath = `${stateDir}.err`;
   const errFd = openSync(errPath, 'a');
+  const tokenArgs = tokens ? ['--controller-tokens', TOKENS.controller, '--viewer-tokens', TOKENS.viewer] : [];
   const argv = ['--bake', CORNELL, '--port', String(port), '--state-dir', stateDir, '--backend', 'cpu',
-    '--log-level', 'warn', '--controller-tokens', TOKENS.controller, '--viewer-tokens', TOKENS.viewer,
-    '--threads', '2', '--rate', '10000', ...args];
+    '--log-level', 'warn', ...tokenArgs, '--threads', '2', '--rate', '10000', ...args];
   const proc = spawn(LUCENTD, argv, { stdio: ['ignore', 'pipe', errFd] });
   closeSync(errFd);
   const log = () => (existsSync(errPath) ? readFileSync(errPath, 'utf8') : '');
