@@ -35,6 +35,11 @@
 static char config_default_bake[LC_CONFIG_PATH_MAX]; /* the "bake" option's default */
 static char config_default_www[LC_CONFIG_PATH_MAX];  /* the "www" option's default */
 
+static int config_is_dir(const char *path) {
+    struct stat st;
+    return stat(path, &st) == 0 && S_ISDIR(st.st_mode);
+}
+
 static void config_resolve_default_bake(void) {
     if (!config_default_bake[0])
         lc_fs_beside_exe(LUCENT_DEFAULT_BAKE_REL, LUCENT_DEFAULT_BAKE, config_default_bake, sizeof config_default_bake);
@@ -190,9 +195,8 @@ int lc_config_load(lc_config *c, int argc, char **argv, char *err, size_t errlen
     if (lc_opt_parse(config_options, &probe, argc, argv, 1, pos, 0, err, errlen) < 0) return -1;
     if (probe.config_file[0] && config_apply_json(c, probe.config_file, err, errlen) != 0) return -1;
     if (lc_opt_parse(config_options, c, argc, argv, 1, pos, 0, err, errlen) < 0) return -1;
-    struct stat st;
     /* A build without node has no viewer: the default folder is then simply absent. */
-    if (!strcmp(c->www, config_default_www) && (stat(c->www, &st) != 0 || !S_ISDIR(st.st_mode))) c->www[0] = 0;
+    if (!strcmp(c->www, config_default_www) && !config_is_dir(c->www)) c->www[0] = 0;
     return lc_config_validate(c, err, errlen);
 }
 
@@ -343,8 +347,7 @@ int lc_config_validate(const lc_config *c, char *err, size_t errlen) {
         return -1;
     }
     if (c->tls_cert[0] && config_check_tls(c, err, errlen) != 0) return -1;
-    struct stat st;
-    if (c->www[0] && (stat(c->www, &st) != 0 || !S_ISDIR(st.st_mode))) {
+    if (c->www[0] && !config_is_dir(c->www)) {
         lc_set_err(err, errlen, "--www %s: not a directory (give the folder of the pages to serve, or \"\" for none)",
                    c->www);
         return -1;
