@@ -26,6 +26,7 @@ struct lc_compute {
     lc_compute_wake_fn wake; /* read-only after start */
     void *wake_arg;
     int backend, threads, refine_passes, refine_delay_ms;
+    double refine_tolerance;
     pthread_t thread;
     pthread_mutex_t lock;
     pthread_cond_t cond;
@@ -107,6 +108,49 @@ static lc_published *compute_publish(const lc_engine_frame *fr, compute_job *job
     return p;
 }
 
+/* Compute thread: what the refinement's stopping rule remembers of the passes so far. */
+typedef struct compute_refine {
+    float *luma;        /* W*H luminance of the last frame, NULL before one (or out of memory) */
+    size_t texels;      /* entries of luma */
+    double last_change; /* change of the previous refinement pass; < 0 before one */
+} compute_refine;
+
+/* Compute thread: sum |Y - Y_prev| / sum Y of fr's lightmap against the previous frame's (-1
+ * when there is none to compare), then remembers fr's luminance. */
+static double compute_frame_change(compute_refine *r, const lc_engine_frame *fr) {
+    size_t texels = (size_t)fr->lightmap_width * fr->lightmap_height;
+    int comparable = r->luma && r->texels == texels;
+    if (!comparable) {
+        free(r->luma);
+        r->luma = malloc((texels ? texels : 1) * sizeof *r->luma);
+        r->texels = r->luma ? texels : 0;
+    }
+    if (!r->luma) return -1;
+    double diff = 0, sum = 0;
+    for (size_t i = 0; i < texels; i++) {
+        const float *c = fr->lightmap + 3 * i;
+        float y = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
+        if (comparable) diff += fabs((double)y - r->luma[i]);
+        sum += y;
+        r->luma[i] = y;
+    }
+    return comparable ? (sum > 0 ? diff / sum : 0) : -1;
+}
+
+/* Compute thread: after refinement pass `pass` (>= 1) changed the lightmap by `change`, is the
+ * light still to come below tolerance? Each pass adds a bounce, so the changes fall roughly
+ * geometrically (ratio q = change / last change, the scene's effective albedo): what the
+ * passes left would add is about change * q / (1 - q). */
+static int compute_refine_done(compute_refine *r, double change, double tolerance) {
+    double last = r->last_change;
+    r->last_change = change;
+    if (tolerance <= 0 || change < 0) return 0;
+    if (change == 0) return 1;
+    if (last <= 0) return 0; /* one change says nothing about the rate */
+    double q = change / last;
+    return q < 1 && change * q / (1 - q) <= tolerance;
+}
+
 static void *compute_main(void *arg) {
     lc_compute *c = arg;
     char err[512];
@@ -125,6 +169,7 @@ static void *compute_main(void *arg) {
     /* The last state relit, kept for progressive refinement while no update is waiting:
      * each extra pass adds a bounce (same revision, a newer frame). */
     compute_job *last = NULL;
+    compute_refine refine = {NULL, 0, -1};
     int refine_left = 0, pass = 0;
     struct timespec refine_due = {0, 0}; /* CLOCK_MONOTONIC: no refinement pass before this */
     for (;;) {
@@ -167,6 +212,9 @@ static void *compute_main(void *arg) {
             lc_error("compute", "relight of revision %llu failed: %s", (unsigned long long)last->st.revision, err);
             refine_left = 0;
         } else {
+            double change = compute_frame_change(&refine, fr);
+            if (job) refine.last_change = -1; /* a new revision: its passes start a new series */
+            else if (compute_refine_done(&refine, change, c->refine_tolerance)) refine_left = 0;
             p = compute_publish(fr, last);
             if (!p) {
                 snprintf(err, sizeof err, "out of memory publishing the frame");
@@ -211,11 +259,12 @@ static void *compute_main(void *arg) {
         refine_due.tv_nsec %= 1000000000L;
     }
     compute_job_free(last);
+    free(refine.luma);
     lc_engine_release(e);
     return NULL;
 }
 
-lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, int refine_delay_ms,
+lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, const lc_compute_refinement *refinement,
                              lc_compute_wake_fn wake, void *wake_arg, char *err, size_t errlen) {
     lc_compute *c = calloc(1, sizeof *c);
     if (!c) {
@@ -227,8 +276,9 @@ lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int r
     c->wake_arg = wake_arg;
     c->backend = backend;
     c->threads = threads;
-    c->refine_passes = refine_passes;
-    c->refine_delay_ms = refine_delay_ms;
+    c->refine_passes = refinement->max_passes;
+    c->refine_delay_ms = refinement->delay_ms;
+    c->refine_tolerance = refinement->tolerance;
     pthread_mutex_init(&c->lock, NULL);
     pthread_condattr_t ca;
     pthread_condattr_init(&ca);

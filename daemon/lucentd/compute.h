@@ -34,12 +34,20 @@ typedef struct lc_published {
 
 typedef struct lc_compute lc_compute;
 
+/* Progressive refinement while no update waits: extra relights of the same state, each adding a
+ * bounce (frames of the same revision). The first waits delay_ms after the update's own frame,
+ * so that frame goes out first; the rest run back to back, so they end long before a next
+ * update is due. They stop after max_passes, or earlier once the change per pass says the light
+ * still to come is below `tolerance` (a share of the lightmap's luminance; 0 = always
+ * max_passes); the last frame is marked converged. */
+typedef struct lc_compute_refinement {
+    int max_passes, delay_ms;
+    double tolerance;
+} lc_compute_refinement;
+
 /* Starts the thread and creates the engine on it (the EGL context belongs to that thread).
- * With progressive settings, up to refine_passes extra relights of the same state run
- * while no update waits (the first refine_delay_ms after the update's own frame, so that frame
- * goes out first; the rest back to back, so they end long before a next update is due), each adding a bounce (frames of the same revision).
  * Returns NULL with err when the engine cannot start. */
-lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, int refine_passes, int refine_delay_ms,
+lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, const lc_compute_refinement *refinement,
                              lc_compute_wake_fn wake, void *wake_arg, char *err, size_t errlen);
 /* Service thread: submit the state to relight (copied). *job (may be NULL) receives the
  * submission's id, increasing from 1. The server submits before its journal fsync so the

@@ -101,8 +101,12 @@ static const lc_opt config_options[] = {
     {"refine-delay", LC_OPT_INT, OFF(refine_delay), 0, 10000, "20", NULL,
      "milliseconds after an update's frame before the idle refinement passes (lets the frame reach clients first)",
      "MS", NULL},
-    {"refine-passes", LC_OPT_INT, OFF(refine_passes), 0, 64, "4", NULL,
-     "extra progressive relights while no update waits (each adds a bounce)", NULL, NULL},
+    {"refine-passes", LC_OPT_INT, OFF(refine_passes), 0, 64, "48", NULL,
+     "at most this many extra progressive relights while no update waits (each adds a bounce)", NULL, NULL},
+    {"refine-tolerance", LC_OPT_FLOAT, OFF(refine_tolerance), 0, 1, "0.001", NULL,
+     "refinement stops once the light still to come is estimated below this share of the lightmap (0 = run all "
+     "--refine-passes)",
+     NULL, NULL},
     {"bounces", LC_OPT_INT, OFF(bounces), 0, 16, "0", NULL,
      "initial feedback bounces per relight (updates stay fast; refinement adds the rest)", NULL, NULL},
     {"tile", LC_OPT_INT, OFF(tile), 0, 256, "0", NULL,
@@ -234,6 +238,7 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
     RESTART_IF(backend, "backend")
     RESTART_IF(threads, "threads")
     RESTART_IF(refine_passes, "refine-passes")
+    RESTART_IF(refine_tolerance, "refine-tolerance")
     RESTART_IF(refine_delay, "refine-delay")
     RESTART_IF(bounces, "bounces")
     RESTART_IF(max_lights, "max-lights")

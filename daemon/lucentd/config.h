@@ -35,10 +35,11 @@ typedef struct lc_config {
     int slow_timeout;    /* seconds a client may leave a frame unread before it is dropped */
     int backend;         /* 0 auto, 1 cpu, 2 egl */
     int threads;
-    int refine_passes; /* extra progressive relights while idle */
-    int refine_delay;  /* ms after an update's frame before the refinement passes */
-    int bounces;       /* initial feedback bounces per relight (a snapshot's settings win) */
-    int tile;          /* lightmap tile size for delta frames */
+    int refine_passes;       /* at most this many extra progressive relights while idle */
+    double refine_tolerance; /* stop refining once the estimated remaining change is below this */
+    int refine_delay;        /* ms after an update's frame before the refinement passes */
+    int bounces;             /* initial feedback bounces per relight (a snapshot's settings win) */
+    int tile;                /* lightmap tile size for delta frames */
     int keyframe_interval;
     double delta_threshold; /* relative change that marks a tile dirty */
     int compact_bytes;      /* journal size that triggers a snapshot */

@@ -648,8 +648,8 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     for (uint32_t i = 0; i < s->v->n_materials; i++) s->material_names[i] = s->v->materials[i].name;
     if (server_geometry_build(s) != 0 || server_open_state(s) != 0 || server_listen(s) != 0) goto done;
     const lc_config *cfg = s->cfg;
-    s->compute = lc_compute_start(bake, cfg->backend, cfg->threads, cfg->refine_passes, cfg->refine_delay, server_wake,
-                                  s->ctx, err, sizeof err);
+    lc_compute_refinement refine = {cfg->refine_passes, cfg->refine_delay, cfg->refine_tolerance};
+    s->compute = lc_compute_start(bake, cfg->backend, cfg->threads, &refine, server_wake, s->ctx, err, sizeof err);
     if (!s->compute) {
         lc_error("server", "%s", err);
         goto done;
