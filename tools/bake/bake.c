@@ -420,6 +420,7 @@ static int bake_lightmap_uv(bake_job *b, char *err, size_t errlen) {
     const lc_bake_settings *s = b->s;
     lc_uv_params uvp = {.texels_per_metre = s->texel_density,
                         .atlas_size = s->texel_density > 0 ? 0 : (uint32_t)s->atlas_size,
+                        .min_texels_per_metre = s->min_texel_density,
                         .padding = (uint32_t)s->padding,
                         .chart_angle_deg = s->chart_angle,
                         .threads = s->threads};

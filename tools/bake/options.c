@@ -63,6 +63,10 @@ static const lc_opt bake_options[] = {
      "lightmap texels per metre (0 = fit --atlas-size)", NULL, NULL},
     {"atlas-size", LC_OPT_INT, OFF(atlas_size), 16, 8192, "128", NULL, "lightmap atlas width and height in texels",
      NULL, NULL},
+    {"min-texel-density", LC_OPT_FLOAT, OFF(min_texel_density), 0, 10000, "2", NULL,
+     "fitting --atlas-size never gives fewer lightmap texels per metre than this: a larger scene gets a larger "
+     "atlas (0 = exactly --atlas-size)",
+     NULL, NULL},
     {"padding", LC_OPT_INT, OFF(padding), 2, 16, "2", NULL, "empty texels between lightmap charts", NULL, NULL},
     {"chart-angle", LC_OPT_FLOAT, OFF(chart_angle), 1, 89, "45", NULL, "max normal deviation inside a chart (degrees)",
      NULL, NULL},

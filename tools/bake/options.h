@@ -27,6 +27,7 @@ typedef struct lc_bake_settings {
     double scale;
     int flip_winding;
     double texel_density;
+    double min_texel_density; /* fit mode: the atlas grows rather than go below this */
     int atlas_size;
     int padding;
     double chart_angle;

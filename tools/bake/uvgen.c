@@ -1709,6 +1709,12 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
               : uvgen_pack_in_atlas(fin, n_final, items, sky, params, fmax(rect_area, total_area), &W, &H, &d, err,
                                     errlen) != 0)
         goto err;
+    if (params->texels_per_metre <= 0 && d < params->min_texels_per_metre) {
+        lc_info("uvgen", "%ux%u gives %.2f texels/m, below the minimum %.2f: the atlas grows to fit that density", W, H,
+                d, params->min_texels_per_metre);
+        d = params->min_texels_per_metre;
+        if (uvgen_pack_at_density(fin, n_final, items, sky, d, pad, &W, &H, err, errlen) != 0) goto err;
+    }
 
     /* 5. rewrite; 6. usage */
     if (uvgen_split_vertices(&cx, fin, chart_of, d, W, H, &rm, err, errlen) != 0) goto err;
@@ -1756,11 +1762,22 @@ int lc_uvgen_measure(const lc_mesh *mesh, const lc_uv_params *params, lc_uv_stat
         return -1;
     }
     uint32_t W, H;
-    if (params->texels_per_metre > 0) {
-        double side = sqrt(area) * params->texels_per_metre;
+    double uv_frac = 0; /* uv area of the triangles in the unit square */
+    for (uint32_t t = 0; t < mesh->n_triangles; t++) {
+        const uint32_t *ix = mesh->index + 3 * (size_t)t;
+        const float *a = mesh->uv1 + 2 * (size_t)ix[0], *b = mesh->uv1 + 2 * (size_t)ix[1],
+                    *c = mesh->uv1 + 2 * (size_t)ix[2];
+        uv_frac += 0.5 * fabs((double)(b[0] - a[0]) * (c[1] - a[1]) - (double)(b[1] - a[1]) * (c[0] - a[0]));
+    }
+    double side = 0; /* atlas side for a density, 0: atlas_size */
+    if (params->texels_per_metre > 0) side = sqrt(area) * params->texels_per_metre;
+    else if (params->min_texels_per_metre > 0 && uv_frac > 0 &&
+             params->atlas_size * sqrt(uv_frac / area) < params->min_texels_per_metre)
+        side = params->min_texels_per_metre * sqrt(area / uv_frac); /* the asset's charts at the minimum */
+    if (side > 0) {
         if (side > UVGEN_MAX_ATLAS) {
-            lc_set_err(err, errlen, "uvgen: texels_per_metre %g needs a %.0f texel atlas (max %u); lower it",
-                       params->texels_per_metre, side, UVGEN_MAX_ATLAS);
+            lc_set_err(err, errlen, "uvgen: the lightmap density needs a %.0f texel atlas (max %u); lower it", side,
+                       UVGEN_MAX_ATLAS);
             return -1;
         }
         W = H = uvgen_round4(side);

@@ -9,14 +9,16 @@
 #include "bake/scene.h"
 
 typedef struct lc_uv_params {
-    double texels_per_metre; /* > 0: density mode; the atlas grows to fit */
-    uint32_t atlas_size;     /* > 0 (and density 0): fit into atlas_size x atlas_size, density chosen;
+    double texels_per_metre;     /* > 0: density mode; the atlas grows to fit */
+    uint32_t atlas_size;         /* > 0 (and density 0): fit into atlas_size x atlas_size, density chosen;
                                 when the charts cannot fit even at the minimum density the atlas grows
                                 (x1.25 steps, warned) up to 8192 */
-    uint32_t padding;        /* empty texels between charts and at the border, >= 2 */
-    double chart_angle_deg;  /* max normal deviation from the chart's projection normal, (0, 90);
+    double min_texels_per_metre; /* > 0 (fit mode): when fitting atlas_size would give a lower density,
+                                    use this density instead (the atlas grows) */
+    uint32_t padding;            /* empty texels between charts and at the border, >= 2 */
+    double chart_angle_deg;      /* max normal deviation from the chart's projection normal, (0, 90);
                                 sub-texel bevels merged into a neighbour may exceed it (up to 88) */
-    int threads;             /* parallel-for workers, 0 = all cores (the result does not depend on it) */
+    int threads;                 /* parallel-for workers, 0 = all cores (the result does not depend on it) */
 } lc_uv_params;
 
 typedef struct lc_uv_stats {

@@ -417,7 +417,7 @@ static lc_uv_stats run_case(const char *name, const lc_mesh *src, lc_uv_params p
     CHECK(bad_uv == 0, "%s: %u uv1 values outside [0, 1]", name, bad_uv);
     CHECK(sa.usage > 0 && sa.usage <= 1, "%s: usage %g in (0, 1]", name, sa.usage);
     CHECK(sa.width % 4 == 0 && sa.height % 4 == 0, "%s: atlas %ux%u multiple of 4", name, sa.width, sa.height);
-    if (p.atlas_size && p.texels_per_metre == 0 && !expect_growth)
+    if (p.atlas_size && p.texels_per_metre == 0 && !expect_growth && sa.texels_per_metre > p.min_texels_per_metre)
         CHECK(sa.width == p.atlas_size && sa.height == p.atlas_size, "%s: atlas %ux%u honours atlas_size %u", name,
               sa.width, sa.height, p.atlas_size);
     if (expect_growth)
@@ -496,9 +496,41 @@ static void test_measure(void) {
     lc_mesh_release(&cube);
 }
 
+/* Fit mode with a minimum density: a 40 m box fitted into 64x64 would get ~0.6 texels/m; with
+ * min_texels_per_metre 2 the charts are packed at 2 texels/m (the atlas grows), while a box
+ * that fits above the minimum keeps atlas_size exactly. The same for an asset's own uv1. */
+static void test_min_density(void) {
+    lc_mesh hall = make_box(40, 10, 40);
+    lc_uv_params p = {.atlas_size = 64, .min_texels_per_metre = 2, .padding = 2, .chart_angle_deg = 30};
+    lc_uv_stats s = run_case("hall/min-density", &hall, p, 1);
+    CHECK(s.texels_per_metre == 2 && s.width > 64, "hall packed %ux%u at %.3f texels/m, expected the minimum 2",
+          s.width, s.height, s.texels_per_metre);
+    /* the box's 4000 m^2 at 2 texels/m: at least 16000 footprint texels */
+    CHECK(s.usage * s.width * s.height >= 16000, "hall footprint %g texels < 4000 m^2 x 4",
+          s.usage * s.width * s.height);
+    lc_mesh small = make_box(1, 1, 1);
+    s = run_case("cube/min-density-unused", &small, p, 1);
+    CHECK(s.width == 64 && s.texels_per_metre > 2, "a 1 m cube keeps 64x64 (%ux%u, %.1f texels/m)", s.width, s.height,
+          s.texels_per_metre);
+    /* the hall's own uv1 (as an asset would bring them), measured at atlas 64: grown too */
+    lc_mesh own = copy_mesh(&hall);
+    lc_uv_params fit = {.atlas_size = 64, .padding = 2, .chart_angle_deg = 30};
+    lc_uv_stats g, m;
+    char err[256];
+    CHECK(lc_uvgen(&own, &fit, &g, err, sizeof err) == 0, "uvgen: %s", err);
+    CHECK(lc_uvgen_measure(&own, &p, &m, err, sizeof err) == 0, "measure: %s", err);
+    CHECK(m.texels_per_metre >= 1.99 && m.texels_per_metre < 2.2 && m.width > 64,
+          "own uv1 measured with the minimum: %ux%u at %.3f texels/m (fit gave %.3f)", m.width, m.height,
+          m.texels_per_metre, g.texels_per_metre);
+    lc_mesh_release(&own);
+    lc_mesh_release(&small);
+    lc_mesh_release(&hall);
+}
+
 int main(void) {
     test_errors();
     test_measure();
+    test_min_density();
 
     lc_uv_params atlas = {.atlas_size = 256, .padding = 2, .chart_angle_deg = 30};
     lc_uv_params dens = {.texels_per_metre = 40, .padding = 3, .chart_angle_deg = 30};
