@@ -2,7 +2,7 @@
 // geometry (welcome.scene.geometry), streams the lightmap, the objects' SH and (for the probe
 // view) the SH grid, and renders in physical units (see shading.js for the formula).
 // Test hook: window.lucentViewer = { ready, revision(), lastLatencyMs(), role(), lastError(),
-// camera(), frameCount() } — the only global.
+// camera(), frameCount(), overlay() } — the only global.
 import * as THREE from 'three';
 import { LucentClient } from '../../js/lucent.js';
 import { readView, writeView } from './urlstate.js';
@@ -10,7 +10,8 @@ import { loadGlb, StaticScene } from './scene.js';
 import { LightmapTexture } from './lightmap.js';
 import { LightSet } from './lights.js';
 import { ObjectSet } from './objects.js';
-import { ProbeGrid, loadHeatmap } from './probes.js';
+import { ProbeGrid } from './probes.js';
+import { decodeOverlay, fetchOverlay, overlaySizeError, overlayTexture, readOverlayFile, setOverlayNearest } from './overlay.js';
 import { Environment } from './environment.js';
 import { Hud, toast, banner } from './hud.js';
 import { CameraRig } from './camera.js';
@@ -26,6 +27,10 @@ class Viewer {
     this.mode = this.url.mode || 'full';
     this.tonemap = this.url.tonemap || 'none';
     this.exposure = this.url.exposure ?? 1;
+    this.liveMode = this.mode === 'heatmap' ? 'full' : this.mode; // what the overlay toggle returns to
+    this.overlay = null; // {name, kind, width, height, scalar, texture}
+    this.overlayMax = this.url.overlayMax ?? 1;
+    this.overlayNearest = true;
     this.errors = [];
     this.frames = 0;
     this.shownRevision = null;
@@ -64,7 +69,7 @@ class Viewer {
     const hasAssets = (this.objects.assetNames().length || (scene.assets || []).length) > 0;
     if (hasAssets) await this.client.subscribe('objects', { encoding: 'f32' });
     if (this.mode === 'probes') await this.subscribeGrid();
-    if (this.url.heatmap) this.setHeatmap(await loadHeatmap(this.url.heatmap), !this.url.mode);
+    if (this.url.overlay) await this.loadOverlay(() => fetchOverlay(this.url.overlay), !this.url.mode);
     this.applyMode();
     await this.firstFrame;
   }
@@ -215,6 +220,8 @@ class Viewer {
     this.lights.setEnabled(m === 'full' || m === 'direct' || m === 'probes');
     this.objects.setGain(m === 'direct' ? 0 : 1);
     this.lightmap.setNearest(m === 'texels');
+    if (m !== 'heatmap') this.liveMode = m;
+    this.drawLegend();
     this.probes.setVisible(m === 'probes');
     this.renderer.shadowMap.needsUpdate = true;
     if (m === 'probes') this.subscribeGrid().catch((e) => this.errors.push(e.message));
@@ -230,11 +237,86 @@ class Viewer {
     this.requestRender();
   }
 
-  /** A loaded heat map is shown at once unless the URL asked for another mode. */
-  setHeatmap(tex, show = true) {
-    this.staticScene.setHeatmap(tex);
+  // ----------------------------------------------------------------- the overlay (overlay.js)
+
+  /** Loads an overlay from `source()` ({name, bytes}); shown at once unless `show` is false
+   *  (the URL asked for a mode). Refusals (size, format, fetch) are shown and kept as the
+   *  last error; the previous overlay, if any, stays. Resolves true when it was taken. */
+  async loadOverlay(source, show = true) {
+    let ov;
+    try {
+      ov = await decodeOverlay(await source());
+      const lm = (this.welcome && this.welcome.scene && this.welcome.scene.lightmap) || this.lightmap.texture?.image;
+      if (!lm || !lm.width) throw new Error(`overlay ${ov.name}: the lightmap's size is not known yet`);
+      const why = overlaySizeError(ov, lm.width, lm.height);
+      if (why) throw new Error(why);
+    } catch (e) {
+      this.fail(e.message || String(e));
+      return false;
+    }
+    if (this.overlay) this.overlay.texture.dispose();
+    ov.texture = overlayTexture(ov, this.overlayNearest);
+    delete ov.data;
+    this.overlay = ov;
+    this.staticScene.setOverlay(ov.texture, ov.scalar, this.overlayMax);
+    $('overlay-status').textContent = `${ov.name}: ${ov.width}x${ov.height} ${ov.kind.toUpperCase()}${ov.scalar ? ', one channel (coloured by the scale)' : ''}`;
+    $('toast').classList.add('hidden');
     if (show) this.mode = 'heatmap';
     this.applyMode();
+    return true;
+  }
+
+  /** The overlay toggle: heat map mode, or back to the mode before it. */
+  showOverlay(on) {
+    this.mode = on ? 'heatmap' : this.liveMode;
+    this.applyMode();
+  }
+
+  drawLegend() {
+    const shown = this.mode === 'heatmap';
+    $('legend').classList.toggle('hidden', !shown);
+    document.body.classList.toggle('legend', shown); // messages move up, above the legend
+    $('overlay-show').checked = shown;
+    if (!shown) return;
+    const pct = `${Number((this.overlayMax * 100).toPrecision(4))}%`;
+    $('legend-min').textContent = `−${pct}`;
+    $('legend-max').textContent = `+${pct}`;
+    const o = this.overlay;
+    $('legend-title').textContent = o ? `${o.name} (${o.width}x${o.height})` : 'no overlay loaded';
+  }
+
+  bindOverlay() {
+    const fromFile = (f) => { if (f) this.loadOverlay(() => readOverlayFile(f)); };
+    $('overlay-file').addEventListener('change', (e) => { fromFile(e.target.files[0]); e.target.value = ''; });
+    $('overlay-show').addEventListener('change', (e) => this.showOverlay(e.target.checked));
+    $('overlay-crisp').addEventListener('change', (e) => {
+      this.overlayNearest = e.target.checked;
+      if (this.overlay) setOverlayNearest(this.overlay.texture, this.overlayNearest);
+      this.requestRender();
+    });
+    $('overlay-max').value = Number((this.overlayMax * 100).toPrecision(6));
+    $('overlay-max').addEventListener('change', (e) => {
+      const v = Number(e.target.value);
+      if (!(Number.isFinite(v) && v > 0)) return;
+      this.overlayMax = v / 100;
+      this.staticScene.setOverlay(this.overlay ? this.overlay.texture : null, !!this.overlay?.scalar, this.overlayMax);
+      this.drawLegend();
+      this.requestRender();
+    });
+    // Drag and drop anywhere on the page (files only; the drop zone shows while dragging).
+    const drop = $('drop');
+    let depth = 0;
+    const hasFiles = (e) => e.dataTransfer && Array.from(e.dataTransfer.types || []).includes('Files');
+    window.addEventListener('dragenter', (e) => { if (hasFiles(e)) { depth++; drop.classList.remove('hidden'); } });
+    window.addEventListener('dragleave', () => { if (--depth <= 0) { depth = 0; drop.classList.add('hidden'); } });
+    window.addEventListener('dragover', (e) => { if (hasFiles(e)) { e.preventDefault(); e.dataTransfer.dropEffect = 'copy'; } });
+    window.addEventListener('drop', (e) => {
+      depth = 0;
+      drop.classList.add('hidden');
+      if (!e.dataTransfer || !e.dataTransfer.files.length) return;
+      e.preventDefault();
+      fromFile(e.dataTransfer.files[0]);
+    });
   }
 
   bindPanel() {
@@ -242,7 +324,9 @@ class Viewer {
     if (window.innerWidth < 700) panel.classList.add('collapsed'); // small windows: the canvas first
     $('panel-toggle').addEventListener('click', () => panel.classList.toggle('collapsed'));
     window.addEventListener('keydown', (e) => {
-      if (e.key === 'h' && !['INPUT', 'SELECT'].includes(e.target.tagName)) panel.classList.toggle('collapsed');
+      if (['INPUT', 'SELECT'].includes(e.target.tagName)) return;
+      if (e.key === 'h') panel.classList.toggle('collapsed');
+      if (e.key === 'o') this.showOverlay(this.mode !== 'heatmap');
     });
     $('mode').addEventListener('change', (e) => { this.mode = e.target.value; this.applyMode(); });
     $('tonemap').addEventListener('change', (e) => { this.tonemap = e.target.value; this.applyToneMap(); this.onCamera(); });
@@ -252,13 +336,7 @@ class Viewer {
     });
     $('sky-surfaces').addEventListener('change', (e) => { this.environment.setSkyOnSurfaces(e.target.checked); this.requestRender(); });
     $('fly').addEventListener('change', (e) => { this.rig.setFly(e.target.checked); this.onCamera(); });
-    $('heatmap-file').addEventListener('change', (e) => {
-      const f = e.target.files[0];
-      if (!f) return;
-      const rd = new FileReader(); // a data: URL: the CSP allows data: images, not blob:
-      rd.onload = () => loadHeatmap(rd.result).then((t) => this.setHeatmap(t)).catch((err) => toast(err.message));
-      rd.readAsDataURL(f);
-    });
+    this.bindOverlay();
   }
 
   onCamera() {
@@ -303,6 +381,9 @@ class Viewer {
       camera: () => (v.rig ? { ...v.rig.view(), aspect: v.camera.aspect, width: v.renderer.domElement.clientWidth,
         height: v.renderer.domElement.clientHeight } : null),
       frameCount: () => v.frames,
+      overlay: () => ({ shown: v.mode === 'heatmap', max: v.overlayMax, nearest: v.overlayNearest,
+        image: v.overlay ? { name: v.overlay.name, kind: v.overlay.kind, width: v.overlay.width, height: v.overlay.height,
+          scalar: v.overlay.scalar } : null }),
     };
   }
 }

@@ -1,7 +1,5 @@
 // SH grid probes drawn as spheres (each a white Lambertian sphere lit by its sample's
-// irradiance SH: radiance E(n)/pi for the sphere's normal n), and the error heat map of a
-// fidelity run (lucent-ref fidelity/compare --out DIR writes error_lightmap.png: per-texel
-// relative error, coloured, row 0 = v 0) shown on the lightmap UVs.
+// irradiance SH: radiance E(n)/pi for the sphere's normal n).
 import * as THREE from 'three';
 import { SH_GLSL } from './shading.js';
 
@@ -92,20 +90,4 @@ export class ProbeGrid {
     this.visible = on;
     if (this.mesh) this.mesh.visible = on;
   }
-}
-
-/** Loads a heat map PNG (a URL under the page's origin, or a data: URL from a file input)
- *  into a texture on the lightmap UVs. */
-export function loadHeatmap(url) {
-  return new Promise((resolve, reject) => {
-    new THREE.TextureLoader().load(url, (t) => {
-      t.flipY = false;
-      t.channel = 1;
-      t.colorSpace = THREE.SRGBColorSpace;
-      t.magFilter = THREE.NearestFilter;
-      t.generateMipmaps = false;
-      t.minFilter = THREE.LinearFilter;
-      resolve(t);
-    }, undefined, () => reject(new Error(`heat map ${url.slice(0, 80)} did not load`)));
-  });
 }

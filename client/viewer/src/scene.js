@@ -4,6 +4,7 @@
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { staticMaterial } from './shading.js';
+import { overlayMaterial } from './overlay.js';
 
 export async function loadGlb(url) {
   return new GLTFLoader().loadAsync(url);
@@ -13,7 +14,9 @@ export class StaticScene {
   constructor(gltf) {
     this.group = new THREE.Group();
     this.group.name = 'static';
-    this.entries = []; // {mesh, lambert, texels, heat, name}
+    this.entries = []; // {mesh, lambert, texels, name, hasUv1}
+    this.overlay = overlayMaterial(); // heat map mode, shared (overlay.js)
+    this.noUv = new THREE.MeshBasicMaterial({ color: 0x404040, toneMapped: false }); // heat map mode without TEXCOORD_1
     this.byName = new Map();
     const meshes = [];
     gltf.scene.updateMatrixWorld(true);
@@ -27,8 +30,7 @@ export class StaticScene {
       mesh.castShadow = mesh.receiveShadow = true;
       mesh.name = sm.name;
       const texels = new THREE.MeshBasicMaterial({ color: new THREE.Color(1 / Math.PI, 1 / Math.PI, 1 / Math.PI) });
-      const heat = new THREE.MeshBasicMaterial({ color: 0x808080, toneMapped: false });
-      const e = { mesh, lambert, texels, heat, name: sm.name, hasUv1: !!g.attributes.uv1 };
+      const e = { mesh, lambert, texels, name: sm.name, hasUv1: !!g.attributes.uv1 };
       this.entries.push(e);
       if (!this.byName.has(sm.name)) this.byName.set(sm.name, []);
       this.byName.get(sm.name).push(e);
@@ -48,12 +50,17 @@ export class StaticScene {
     }
   }
 
-  setHeatmap(tex) {
-    for (const e of this.entries) {
-      e.heat.map = e.hasUv1 ? tex : null;
-      e.heat.color.set(tex ? 0xffffff : 0x808080);
-      e.heat.needsUpdate = true;
+  /** The overlay of heat map mode (overlay.js): its texture (null: none, flat grey), whether
+   *  it is one channel to colour by the scale, and the scale's max (a fraction, 1 = 100%). */
+  setOverlay(tex, scalar = false, max = 1) {
+    const m = this.overlay;
+    if (m.map !== tex) {
+      m.map = tex;
+      m.color.set(tex ? 0xffffff : 0x404040);
+      m.needsUpdate = true;
     }
+    m.userData.scalar.value = scalar ? 1 : 0;
+    m.userData.max.value = max;
   }
 
   /** The state's emission per material name (nits, linear RGB). */
@@ -67,11 +74,12 @@ export class StaticScene {
   }
 
   /** mode: full/probes (lit, lightmap), direct (no lightmap), indirect (lightmap; lights are
-   *  switched off by the caller), texels (E/pi of the lightmap alone), heatmap. */
+   *  switched off by the caller), texels (E/pi of the lightmap alone), heatmap (the overlay,
+   *  unlit). */
   applyMode(mode) {
     for (const e of this.entries) {
       if (mode === 'texels') e.mesh.material = e.texels;
-      else if (mode === 'heatmap') e.mesh.material = e.heat;
+      else if (mode === 'heatmap') e.mesh.material = e.hasUv1 ? this.overlay : this.noUv;
       else {
         e.mesh.material = e.lambert;
         e.lambert.lightMapIntensity = mode === 'direct' ? 0 : 1;

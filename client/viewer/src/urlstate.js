@@ -1,6 +1,8 @@
 // Shareable views: the query string carries the camera, the mode, the exposure and the tone map
 // (?camera=x,y,z&target=x,y,z&fov=DEG&mode=full&exposure=1&tonemap=none), plus token= for the
-// role and ui=0 for a clean canvas (no HUD, panel or light gizmos: screenshots, comparisons).
+// role and ui=0 for a clean canvas (no HUD, panel or light gizmos: screenshots, comparisons),
+// overlay=URL (heatmap=URL, the older name) for an image on the lightmap's UVs (overlay.js)
+// and overlay_max=PERCENT for its legend's scale (-max..0..+max; default 100).
 // Reading the URL back reproduces the view exactly: the numbers are written with enough digits.
 
 export const MODES = ['full', 'direct', 'indirect', 'texels', 'probes', 'heatmap'];
@@ -10,6 +12,13 @@ function vec3(text) {
   if (!text) return null;
   const v = text.split(',').map(Number);
   return v.length === 3 && v.every(Number.isFinite) ? v : null;
+}
+
+/** A percentage ("50", "50%") as a fraction, or null. */
+function percent(text) {
+  if (text === null || text === '') return null;
+  const v = num(text.replace(/%$/, ''), 1e-6, 1e6);
+  return v === null || v <= 0 ? null : v / 100;
 }
 
 function num(text, lo, hi) {
@@ -31,7 +40,8 @@ export function readView(search) {
     exposure: num(q.get('exposure'), 1e-6, 1e6),
     tonemap: TONEMAPS.includes(tonemap) ? tonemap : null,
     token: q.get('token'),
-    heatmap: q.get('heatmap'),
+    overlay: q.get('overlay') || q.get('heatmap'),
+    overlayMax: percent(q.get('overlay_max')),
     clean: q.get('ui') === '0',
   };
 }
