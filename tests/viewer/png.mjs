@@ -78,15 +78,16 @@ function chunk(type, body) {
   return out;
 }
 
-/** Writes RGBA pixels ({width, height, data}) as an 8-bit RGB PNG. */
-export function writePng(file, img) {
+/** Writes RGBA pixels ({width, height, data}) as an 8-bit RGB PNG (RGBA with alpha: true). */
+export function writePng(file, img, { alpha = false } = {}) {
   const { width, height, data } = img;
-  const raw = Buffer.alloc((width * 3 + 1) * height);
+  const n = alpha ? 4 : 3;
+  const raw = Buffer.alloc((width * n + 1) * height);
   for (let y = 0; y < height; y++)
     for (let x = 0; x < width; x++)
-      for (let k = 0; k < 3; k++) raw[y * (width * 3 + 1) + 1 + 3 * x + k] = data[4 * (y * width + x) + k];
+      for (let k = 0; k < n; k++) raw[y * (width * n + 1) + 1 + n * x + k] = data[4 * (y * width + x) + k];
   const ihdr = Buffer.alloc(13);
   ihdr.writeUInt32BE(width, 0); ihdr.writeUInt32BE(height, 4);
-  ihdr[8] = 8; ihdr[9] = 2;
+  ihdr[8] = 8; ihdr[9] = alpha ? 6 : 2;
   writeFileSync(file, Buffer.concat([SIG, chunk('IHDR', ihdr), chunk('IDAT', deflateSync(raw)), chunk('IEND', Buffer.alloc(0))]));
 }
