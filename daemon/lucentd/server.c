@@ -517,7 +517,9 @@ static int server_listen(lc_server *s) {
                 cfg->max_clients, s->max_clients, s->fd_budget);
     /* Mounts: the bake's geometry (answered by the http protocol's callback, so a file of
      * the same name under --www cannot shadow it), then the --www folder at /. */
-    static const struct lws_protocol_vhost_options glb_mime = {NULL, NULL, ".glb", "model/gltf-binary"};
+    /* lws knows neither: scene geometry, and lucent-ref's heat maps for the viewer's overlay */
+    static const struct lws_protocol_vhost_options exr_mime = {NULL, NULL, ".exr", "image/x-exr"};
+    static const struct lws_protocol_vhost_options glb_mime = {&exr_mime, NULL, ".glb", "model/gltf-binary"};
     memset(&s->mount, 0, sizeof s->mount);
     s->mount.mountpoint = "/";
     s->mount.mountpoint_len = 1;

@@ -40,6 +40,19 @@
  * draws from its own random stream (seed, cache, pass): results are identical for any thread
  * count.
  *
+ * TEXEL SURFACE POINTS (surface.c): the reference does not trust the bake's texel caches'
+ * positions (lucent-bake moves caches that sit inside or behind geometry, LC_CACHE_MOVED: e.g.
+ * the Cornell floor under the blocks, where the engine then shows light the floor never gets).
+ * From the .lcb's static triangles and their uv1 (glTF convention: texel (x, y)'s centre is
+ * uv ((x + 0.5) / W, (y + 0.5) / H), row 0 = top = v 0, as the bake rasterizes) it finds, for
+ * every texel owning a cache, a triangle whose uv contains the centre (several: any; none:
+ * the triangle with the nearest uv point, clamped barycentrics, counted as "outside"), and
+ * takes the barycentric point, the interpolated vertex normal normalised (the winding normal
+ * when that is degenerate or on the other side, the bake's rule for its caches) and the texel
+ * spacing sqrt(world area / (uv area x W x H)) of that triangle. eps: ONE offset for every
+ * texel and every path vertex, lc_ray_lift_scene of the scene's largest |coordinate| (0.1 mm
+ * plus ~17 ulps; util/ray_offset.h), the same as the engine's runtime rays.
+ *
  * THE CAMERA VIEW (camera.c, lc_ref_radiance) is another quantity over the same scene: the
  * full illumination a pinhole camera sees (emitters and the environment seen directly, direct
  * light from every light, indirect light), for comparing a viewer's screenshot.
@@ -73,6 +86,41 @@ typedef struct lc_ref_state {
 int lc_ref_state_load(const lc_lcb *bake, const char *path, int bake_lights, lc_ref_state *out, char *err,
                       size_t errlen);
 void lc_ref_state_free(lc_ref_state *s);
+
+/* --- texel surface points (surface.c) ---------------------------------------------------------- */
+
+/* Per texel: surface point xyz, unit normal xyz, texel spacing (m). */
+#define LC_REF_SURFACE_STRIDE 7
+
+typedef struct lc_ref_surface_stats {
+    uint32_t texels;  /* texels asked for */
+    uint32_t outside; /* of those, centres no triangle's uv contains (the nearest triangle taken) */
+    uint32_t missing; /* no triangle with a valid uv at all (left NAN) */
+} lc_ref_surface_stats;
+
+/* The texel surface points (ref.h, "texel surface points") of the texels with want[i] != 0
+ * (want NULL: every texel) into out (W*H*LC_REF_SURFACE_STRIDE floats, NAN for the others).
+ * Triangles with non-finite or zero-area uv are ignored. Returns 0 or -1 with err set (a
+ * vertex index out of range, the lightmap or uv grid over its cap, out of memory). */
+int lc_ref_texel_surfaces(const lc_lcb_vertex *vertices, uint32_t n_vertices, const lc_lcb_triangle *triangles,
+                          uint32_t n_triangles, uint32_t width, uint32_t height, const uint8_t *want, float *out,
+                          lc_ref_surface_stats *stats, char *err, size_t errlen);
+
+/* The same for the bake's texel caches (want = the texels owning a cache), and the moved
+ * mask (W*H, may be NULL): 1 where the texel's cache has LC_CACHE_MOVED. */
+int lc_ref_bake_texels(const lc_lcb_view *v, float *surface, uint8_t *moved, lc_ref_surface_stats *stats, char *err,
+                       size_t errlen);
+
+/* Texel spacing over the texels with a surface point (surface: LC_REF_SURFACE_STRIDE per texel,
+ * spacing = element 6): mean, nearest-rank p50/p95, max, and the share above over_m metres.
+ * Returns 0, or -1 when no texel has one. */
+typedef struct lc_ref_spacing {
+    uint32_t n;
+    double mean, p50, p95, max;
+    double over_m, share_over; /* the limit and the fraction of texels above it */
+} lc_ref_spacing;
+int lc_ref_spacing_stats(const float *surface, uint32_t width, uint32_t height, double over_m, lc_ref_spacing *out);
+char *lc_ref_spacing_json(const lc_ref_spacing *s);
 
 /* --- the reference renderer -------------------------------------------------------------------- */
 

@@ -43,7 +43,7 @@ export async function fetchOverlay(url) {
   }
   if (!r.ok) {
     throw new Error(`overlay ${u.href.slice(0, 120)}: HTTP ${r.status}${r.status === 415
-      ? ' (the server does not serve this file type: lucentd serves PNG, not EXR; drop the file on the page instead)' : ''}`);
+      ? ' (the server does not serve this file type; drop the file on the page instead)' : ''}`);
   }
   const len = Number(r.headers.get('content-length') || 0);
   if (len > OVERLAY_MAX_BYTES) throw new Error(`overlay ${u.href.slice(0, 120)}: ${len} bytes, more than ${OVERLAY_MAX_BYTES}`);
