@@ -6,9 +6,18 @@
 #   3. sponza-dabrovic, moderate, under a sun-like directional light, and its variants;
 #   4. sibenik and the conference room, moderate, under point lights (neither has emitters).
 # Steps 3 and 4 skip the scenes that ../shared/scenes lacks.
+# Served rows (issue 16: what a client receives): for every scene of steps 1, 3 and 4 the same bake
+# served by lucentd with its defaults (no quality or refinement flags), the state applied with
+# lucentctl, lucentctl snapshot once the refinement is over, lucent-ref compare against the same
+# reference (bench/served.py row; rows NAME-served, "served": true); and on Cornell and Sponza
+# the time to converge after one light change as a client sees it (bench/served.py converge;
+# fidelity.json "convergence").
 # Usage: bench/fidelity.sh BUILD_DIR [OUT_JSON]   (default OUT_JSON: bench/out/fidelity.json)
 # Environment: CORNELL_SPP (8192), SPONZA_SPP (8192), OTHER_SPP (4096: sibenik, conference),
-#              THREADS (0 = all cores), TRADEOFF=0 to skip step 2, SHARED (../shared).
+#              THREADS (0 = all cores), TRADEOFF=0 to skip step 2, SHARED (../shared),
+#              FIDELITY_WORK (bench/out/fidelity: the per-step outputs),
+#              SERVED=0 to skip the served rows, SERVED_BACKEND (cpu), SERVED_FLAGS (extra lucentd
+#              flags for the served runs, e.g. "--refine-passes 4 --refine-tolerance 0"; default none).
 # Each step's lucent-ref output (reference EXR, error heat maps, per-texel CSV) stays in
 # bench/out/fidelity/. Runtime on 2 cores: ~4 min (Cornell + trade-off) + ~10 min (Sponza)
 # + ~12 min (sibenik, conference room).
@@ -23,11 +32,14 @@ threads="${THREADS:-0}"
 cornell_spp="${CORNELL_SPP:-8192}"
 sponza_spp="${SPONZA_SPP:-8192}"
 other_spp="${OTHER_SPP:-4096}"
-for tool in lucent-bake lucent-ref; do
-  [ -x "$bin/$tool" ] || { echo "fidelity: $bin/$tool missing (build first)" >&2; exit 1; }
+served="${SERVED:-1}"
+tools=(lucent-bake lucent-ref)
+[ "$served" = 0 ] || tools+=(lucentd lucentctl)
+for tool in "${tools[@]}"; do
+  [ -x "$bin/$tool" ] || { echo "fidelity: $bin/$tool missing (build first, or SERVED=0)" >&2; exit 1; }
 done
 command -v jq >/dev/null || { echo "fidelity: needs jq" >&2; exit 1; }
-work="$root/bench/out/fidelity"
+work="${FIDELITY_WORK:-$root/bench/out/fidelity}"
 mkdir -p "$work" "$(dirname "$out_json")"
 tmp="$(mktemp -d)"; trap 'rm -rf "$tmp"' EXIT
 
@@ -49,6 +61,37 @@ fidelity() { # NAME BAKE REFDIR [extra lucent-ref flags]; prints the fidelity.js
 }
 
 results=()
+convergence=()
+# The fields lucent-ref adds when it evaluates texels at their surface points (null before).
+surface_fields='lightmap_moved: (.lightmap_moved // null), lightmap_unmoved: (.lightmap_unmoved // null),
+  blotch: (.blotch // null), texel_spacing_m: (.texel_spacing_m // null)'
+served_flags=()
+for fl in ${SERVED_FLAGS:-}; do served_flags+=("--daemon-arg=$fl"); done
+
+served_row() { # NAME CONVERGED_ROW SCENE BAKE REFDIR [STATE]: lucentd's defaults, as a client receives them
+  local name="$1" conv="$2" scene="$3" lcb="$4" ref="$5" state="${6:-}"
+  [ "$served" = 0 ] && return 0
+  echo "fidelity: $name: served by lucentd (its defaults)..." >&2
+  /usr/bin/python3 "$root/bench/served.py" row --bin "$bin" --bake "$lcb" --reference "$ref" --out "$work/$name" \
+      --backend "${SERVED_BACKEND:-cpu}" ${state:+--state "$state"} ${served_flags[@]+"${served_flags[@]}"} \
+      2>"$work/$name.txt" || { cat "$work/$name.txt" >&2; return 1; }
+  results+=("$(jq -c --arg n "$name" --arg c "$conv" --arg sc "$scene" "{name: \$n, scene: \$sc, served: true,
+    converged_row: \$c, daemon, encoding, revision, pass, converged, refine_ms, frames, lightmap, grid, stream, reference,
+    $surface_fields}" "$work/$name/served.json")")
+  jq -r '"  served: pass \(.pass) lightmap mean \(.lightmap.mean*100)% p95 \(.lightmap.p95*100)% bias \(.lightmap.bias*100)%"' \
+    "$work/$name/served.json" >&2
+}
+
+converge_row() { # NAME BAKE MASK CHANGE_JSON [STATE]: time to converge after one change, at a client
+  local name="$1" lcb="$2" mask="$3" change="$4" state="${5:-}"
+  [ "$served" = 0 ] && return 0
+  echo "fidelity: $name: time to converge after one change, as a client sees it..." >&2
+  /usr/bin/python3 "$root/bench/served.py" converge --bin "$bin" --bake "$lcb" --mask "$mask" --change "$change" \
+      --out "$work/$name-converge.json" --backend "${SERVED_BACKEND:-cpu}" ${state:+--state "$state"} \
+      ${served_flags[@]+"${served_flags[@]}"} 2>"$work/$name-converge.txt" || { cat "$work/$name-converge.txt" >&2; return 1; }
+  convergence+=("$(jq -c --arg n "$name" '{name: $n} + .' "$work/$name-converge.json")")
+  cat "$work/$name-converge.txt" >&2
+}
 
 # --- 1. Cornell box, moderate ------------------------------------------------------------------
 echo "fidelity: Cornell box: bake + reference ($cornell_spp spp)..." >&2
@@ -58,8 +101,15 @@ bake "$tmp/cornell.lcb" "$cornell_obj" "${cornell_flags[@]}"
 f="$(fidelity cornell-moderate "$tmp/cornell.lcb" "$work/cornell-reference")"
 results+=("$(jq -c '{name: "cornell-moderate", scene: "cornell-box (embedded)", state: "daemon initial state (ceiling lamp, emissive 17/12/4 nits)",
   preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands,
-  lightmap, grid, bound, reference, relights, b0_power_engine, b0_power_reference}' "$f")")
+  lightmap, grid, bound, reference, relights, b0_power_engine, b0_power_reference, '"$surface_fields"'}' "$f")")
 jq -r '"  lightmap mean \(.lightmap.mean*100)% p95 \(.lightmap.p95*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
+# served: the daemon's initial state is the reference's (the lamp, no lights); one change: a point
+# light added under the ceiling, off the lamp
+served_row cornell-served cornell-moderate "cornell-box (embedded)" "$tmp/cornell.lcb" "$work/cornell-reference" ||
+  echo "fidelity: cornell-served failed" >&2
+converge_row cornell-served "$tmp/cornell.lcb" "$work/cornell-reference/reference_texels.bin" \
+  '{"type": "light.set", "light": {"id": "served-probe", "type": "point", "position": [0.15, 0.4, 0.2], "color": [1, 0.9, 0.8], "intensity": 0.05}}' ||
+  echo "fidelity: cornell-served convergence failed" >&2
 
 # Bounce-by-bounce (diagnostics): only the lamp seen directly (0) and one reflection (1).
 for b in 0 1; do
@@ -105,8 +155,14 @@ EOF
   f="$(fidelity sponza-moderate "$tmp/sponza.lcb" "$work/sponza-reference" --state "$tmp/sun.json")"
   results+=("$(jq -c '{name: "sponza-moderate-sun", scene: "sponza-dabrovic", state: "directional (0.3,-1,0.2), 100000 lux, colour (1,0.95,0.9)",
     preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, bound, reference,
-    relights, b0_power_engine, b0_power_reference}' "$f")")
+    relights, b0_power_engine, b0_power_reference, '"$surface_fields"'}' "$f")")
   jq -r '"  lightmap mean \(.lightmap.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
+  served_row sponza-sun-served sponza-moderate-sun sponza-dabrovic "$tmp/sponza.lcb" "$work/sponza-reference" \
+    "$tmp/sun.json" || echo "fidelity: sponza-sun-served failed" >&2
+  # one change: the sun 10 degrees lower (elevation 70.2 -> 60.2 degrees, same azimuth)
+  converge_row sponza-served "$tmp/sponza.lcb" "$work/sponza-reference/reference_texels.bin" \
+    '{"type": "light.set", "light": {"id": "sun", "type": "directional", "color": [1, 0.95, 0.9], "intensity": 100000, "direction": [0.4136, -0.8678, 0.2757]}}' \
+    "$tmp/sun.json" || echo "fidelity: sponza-served convergence failed" >&2
   for v in "surfels=65536:--surfels 65536" "surfels=131072:--surfels 131072" "links=512:--links 512" "exposure:--exposure" \
            "links=256:--links 256" "high:--quality high" "ultra:--quality ultra"; do
     name="${v%%:*}"; flags="${v#*:}"
@@ -144,13 +200,21 @@ for entry in "${others[@]}"; do
   f="$(fidelity "$name-moderate" "$tmp/$name.lcb" "$work/$name-reference" --state "$work/$name-points-state.json")" || continue
   results+=("$(jq -c --arg n "$name-moderate-points" --arg sc "$name" '{name: $n, scene: $sc, state: "point lights (bench/fidelity.sh)",
     preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, bound, reference,
-    relights}' "$f")")
+    relights, '"$surface_fields"'}' "$f")")
   jq -r '"  lightmap mean \(.lightmap.mean*100)% bound \(.bound.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
+  served_row "$name-points-served" "$name-moderate-points" "$name" "$tmp/$name.lcb" "$work/$name-reference" \
+    "$work/$name-points-state.json" || echo "fidelity: $name-points-served failed" >&2
   rm -f "$tmp/$name.lcb"
 done
 
+conv_file="$tmp/convergence.jsonl"
+printf '%s\n' ${convergence[@]+"${convergence[@]}"} >"$conv_file"
 printf '%s\n' "${results[@]}" | jq -s --arg date "$(date -u +%FT%TZ)" --arg host "$(uname -n)" \
+  --slurpfile conv "$conv_file" \
   '{bench: "fidelity", date: $date, host: $host,
     metric: "relative error of luminance per texel (owners, > 1% of the brightest reference texel); grid: sum over 14 directions of |dE| / sum E",
-    targets: {cornell_mean: 0.10, cornell_p95: 0.25, sponza_mean: 0.15}, results: .}' >"$out_json"
+    targets: {scene_mean: 0.12, scene_bias: 0.05, scene_p95: 0.35, scene_grid_mean: 0.12,
+              cornell_mean: 0.04, cornell_p95: 0.10, cornell_bias: 0.02, texel_spacing_m: 0.5, blotch_ratio: 1.2,
+              t_within_1pct_ms: 500},
+    results: ., convergence: $conv}' >"$out_json"
 echo "fidelity: wrote $out_json" >&2
