@@ -71,8 +71,13 @@ lc_ref_settings lc_ref_default_settings(void) {
                          .threads = 0,
                          .texels = 1,
                          .grid = 1,
-                         .quiet = 0};
+                         .quiet = 0,
+                         .texel_at = LC_REF_TEXEL_AT_SURFACE};
     return s;
+}
+
+const char *lc_ref_texel_at_name(int texel_at) {
+    return texel_at == LC_REF_TEXEL_AT_SURFACE ? "surface" : texel_at == LC_REF_TEXEL_AT_CACHE ? "cache" : "unknown";
 }
 
 /* --- small vector helpers ------------------------------------------------------------------ */
@@ -933,7 +938,8 @@ typedef struct {
     uint32_t cell; /* grid cell, or LC_NONE for a texel cache */
     uint32_t n;    /* samples so far */
     int done;
-    double sum[27]; /* texel: RGB irradiance; grid: radiance SH */
+    float p[3], nrm[3]; /* texel: the evaluation point (before the lift) and its unit normal */
+    double sum[27];     /* texel: RGB irradiance; grid: radiance SH */
     double sq[27];
     double sqy; /* squared luminance (texel: E; grid: coefficient 0) */
     uint64_t rays;
@@ -961,10 +967,9 @@ static void ref_pass_range(void *vctx, size_t begin, size_t end, int thread) {
         uint32_t nb = ctx->batch;
         if (ctx->s->target_stderr <= 0 && j->n + nb > ctx->s->spp) nb = ctx->s->spp - j->n;
         if (j->cell == LC_NONE) {
-            float n[3] = {ca->normal[0], ca->normal[1], ca->normal[2]};
-            ref_normalize(n);
+            const float *n = j->nrm;
             float org[3];
-            for (int k = 0; k < 3; k++) org[k] = ca->position[k] + n[k] * r->eps;
+            for (int k = 0; k < 3; k++) org[k] = j->p[k] + n[k] * r->eps;
             for (uint32_t s = 0; s < nb; s++) {
                 float e[3];
                 ref_sample_texel(r, &cfg, org, n, &rng, e, &j->rays);
@@ -1047,7 +1052,86 @@ void lc_ref_result_free(lc_ref_result *res) {
     free(res->grid_sh);
     free(res->grid_sh_stderr);
     free(res->grid_mask);
+    free(res->texel_surface);
+    free(res->texel_moved);
     memset(res, 0, sizeof *res);
+}
+
+/* The texel jobs' evaluation points: the texels' surface points (out->texel_surface, also kept
+ * for the comparison's blotch and spacing metrics) or, with LC_REF_TEXEL_AT_CACHE and for a
+ * texel no triangle holds, the cache's position and normal. */
+static int ref_texel_jobs(const lc_ref *r, const lc_ref_settings *s, ref_job *jobs, uint32_t n_texel,
+                          lc_ref_result *out, char *err, size_t errlen) {
+    const lc_lcb_view *v = r->v;
+    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
+    out->texel_at = s->texel_at == LC_REF_TEXEL_AT_CACHE ? LC_REF_TEXEL_AT_CACHE : LC_REF_TEXEL_AT_SURFACE;
+    out->unmoved_offset_max = 0;
+    out->texel_surface = malloc((texels * LC_REF_SURFACE_STRIDE + 1) * sizeof(float));
+    out->texel_moved = calloc(texels + 1, 1);
+    if (!out->texel_surface || !out->texel_moved) {
+        lc_set_err(err, errlen, "out of memory for %zu texel surface points", texels);
+        return -1;
+    }
+    if (lc_ref_bake_texels(v, out->texel_surface, out->texel_moved, &out->surface_stats, err, errlen) != 0) return -1;
+    for (uint32_t c = 0; c < n_texel; c++) {
+        const lc_lcb_cache *ca = &v->caches[c];
+        ref_job *j = &jobs[c];
+        *j = (ref_job){.cache = c, .cell = LC_NONE};
+        memcpy(j->p, ca->position, sizeof j->p);
+        memcpy(j->nrm, ca->normal, sizeof j->nrm);
+        ref_normalize(j->nrm);
+        const float *sf = ca->index < texels ? out->texel_surface + LC_REF_SURFACE_STRIDE * (size_t)ca->index : NULL;
+        if (!sf || isnan(sf[0])) continue;
+        if (!(ca->flags & LC_CACHE_MOVED)) {
+            float d[3] = {sf[0] - ca->position[0], sf[1] - ca->position[1], sf[2] - ca->position[2]};
+            out->unmoved_offset_max = fmax(out->unmoved_offset_max, ref_len(d));
+        }
+        if (out->texel_at != LC_REF_TEXEL_AT_SURFACE) continue;
+        memcpy(j->p, sf, sizeof j->p);
+        memcpy(j->nrm, sf + 3, sizeof j->nrm);
+    }
+    return 0;
+}
+
+/* Lightmap and grid from the finished jobs. */
+static void ref_fill_outputs(const lc_ref *r, const ref_job *jobs, uint32_t n_texel, uint32_t n_jobs,
+                             lc_ref_result *out) {
+    const lc_lcb_view *v = r->v;
+    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
+    uint32_t cells = v->grid_dims[0] * v->grid_dims[1] * v->grid_dims[2];
+    /* Lightmap: each texel shows its cache, as the engine's (dilated texels copy it). */
+    out->width = v->lightmap_width;
+    out->height = v->lightmap_height;
+    for (size_t i = 0; i < texels; i++) {
+        uint32_t c = v->lightmap[i];
+        if (c == LC_NONE || c >= n_texel) continue;
+        const ref_job *j = &jobs[c];
+        for (int k = 0; k < 3; k++) {
+            double m = j->n ? j->sum[k] / j->n : 0;
+            double var = j->n > 1 ? (j->sq[k] - j->n * m * m) / (j->n - 1) : 0;
+            out->lightmap[3 * i + k] = (float)m;
+            out->lightmap_stderr[3 * i + k] = (float)sqrt(fmax(var, 0) / (j->n ? j->n : 1));
+        }
+        out->texel_mask[i] = v->caches[c].index == i ? 1 : 2;
+    }
+    /* Grid: radiance SH -> irradiance SH (A_l). */
+    memcpy(out->grid_dims, v->grid_dims, sizeof out->grid_dims);
+    memcpy(out->grid_origin, v->grid_origin, sizeof out->grid_origin);
+    out->grid_cell = v->grid_cell;
+    out->n_cells = cells;
+    static const double A[9] = {M_PI,     2 * M_PI / 3, 2 * M_PI / 3, 2 * M_PI / 3, M_PI / 4,
+                                M_PI / 4, M_PI / 4,     M_PI / 4,     M_PI / 4};
+    for (uint32_t i = n_texel; i < n_jobs; i++) {
+        const ref_job *j = &jobs[i];
+        float *o = out->grid_sh + 27 * (size_t)j->cell, *oe = out->grid_sh_stderr + 27 * (size_t)j->cell;
+        for (int k = 0; k < 27; k++) {
+            double m = j->n ? j->sum[k] / j->n : 0;
+            double var = j->n > 1 ? (j->sq[k] - j->n * m * m) / (j->n - 1) : 0;
+            o[k] = (float)(A[k / 3] * m);
+            oe[k] = (float)(A[k / 3] * sqrt(fmax(var, 0) / (j->n ? j->n : 1)));
+        }
+        out->grid_mask[j->cell] = 1;
+    }
 }
 
 int lc_ref_render(lc_ref *r, const lc_ref_settings *s, lc_ref_result *out, char *err, size_t errlen) {
@@ -1080,7 +1164,9 @@ int lc_ref_render(lc_ref *r, const lc_ref_settings *s, lc_ref_result *out, char 
         lc_set_err(err, errlen, "out of memory for %u reference jobs", n_jobs);
         goto err;
     }
-    for (uint32_t c = 0; c < n_texel; c++) jobs[c] = (ref_job){.cache = c, .cell = LC_NONE};
+    out->texel_at = LC_REF_TEXEL_AT_UNKNOWN;
+    out->unmoved_offset_max = -1;
+    if (n_texel && ref_texel_jobs(r, s, jobs, n_texel, out, err, errlen) != 0) goto err;
     uint32_t g = n_texel;
     if (s->grid)
         for (uint32_t i = 0; i < cells; i++)
@@ -1122,39 +1208,7 @@ int lc_ref_render(lc_ref *r, const lc_ref_settings *s, lc_ref_result *out, char 
         n_active = next;
     }
 
-    /* Lightmap: each texel shows its cache, as the engine's (dilated texels copy it). */
-    out->width = v->lightmap_width;
-    out->height = v->lightmap_height;
-    for (size_t i = 0; i < texels; i++) {
-        uint32_t c = v->lightmap[i];
-        if (c == LC_NONE || c >= n_texel) continue;
-        const ref_job *j = &jobs[c];
-        for (int k = 0; k < 3; k++) {
-            double m = j->n ? j->sum[k] / j->n : 0;
-            double var = j->n > 1 ? (j->sq[k] - j->n * m * m) / (j->n - 1) : 0;
-            out->lightmap[3 * i + k] = (float)m;
-            out->lightmap_stderr[3 * i + k] = (float)sqrt(fmax(var, 0) / (j->n ? j->n : 1));
-        }
-        out->texel_mask[i] = v->caches[c].index == i ? 1 : 2;
-    }
-    /* Grid: radiance SH -> irradiance SH (A_l). */
-    memcpy(out->grid_dims, v->grid_dims, sizeof out->grid_dims);
-    memcpy(out->grid_origin, v->grid_origin, sizeof out->grid_origin);
-    out->grid_cell = v->grid_cell;
-    out->n_cells = cells;
-    static const double A[9] = {M_PI,     2 * M_PI / 3, 2 * M_PI / 3, 2 * M_PI / 3, M_PI / 4,
-                                M_PI / 4, M_PI / 4,     M_PI / 4,     M_PI / 4};
-    for (uint32_t i = n_texel; i < n_jobs; i++) {
-        const ref_job *j = &jobs[i];
-        float *o = out->grid_sh + 27 * (size_t)j->cell, *oe = out->grid_sh_stderr + 27 * (size_t)j->cell;
-        for (int k = 0; k < 27; k++) {
-            double m = j->n ? j->sum[k] / j->n : 0;
-            double var = j->n > 1 ? (j->sq[k] - j->n * m * m) / (j->n - 1) : 0;
-            o[k] = (float)(A[k / 3] * m);
-            oe[k] = (float)(A[k / 3] * sqrt(fmax(var, 0) / (j->n ? j->n : 1)));
-        }
-        out->grid_mask[j->cell] = 1;
-    }
+    ref_fill_outputs(r, jobs, n_texel, n_jobs, out);
     ref_stats(jobs, 0, n_texel, &out->texel_stats, scratch);
     ref_stats(jobs, n_texel, n_grid, &out->grid_stats, scratch);
     for (uint32_t i = 0; i < n_jobs; i++) out->rays += jobs[i].rays;

@@ -6,8 +6,11 @@
  *   grid cell       L_lm(p) = integral over the sphere of L_s(p, w) y_lm(w) dw, output as the
  *                   cosine-convolved irradiance SH c_lm = A_l L_lm (A = pi, 2pi/3, pi/4), the
  *                   layout of lc_engine_frame.grid_sh (cells x 9 coefficients x RGB)
- * where p, n are the cache's (relocated) position and normal from the bake, and L_s(p, w) is
- * the radiance leaving the FIRST SURFACE seen from p along w, toward p:
+ * where, for a lightmap texel, p is the texel's own surface point and n its surface normal,
+ * found by the reference from the mesh (below, "texel surface points"; `--texel-at cache`
+ * instead takes the bake's cache position, which the bake may have moved out of geometry,
+ * and normal), lifted by eps n; for a grid cell p is the cell's cache position from the bake.
+ * L_s(p, w) is the radiance leaving the FIRST SURFACE seen from p along w, toward p:
  *   - only front faces count: a back face is black (the bake's links drop back-face hits);
  *   - L_s = L_e + (albedo / pi) * E_all(x): the surface's emission (the state's material
  *     emission, nits, one-sided) plus everything it reflects: direct light from the point,
@@ -137,7 +140,15 @@ typedef struct lc_ref_settings {
     int threads;      /* 0 = all cores */
     int texels, grid; /* which outputs to compute */
     int quiet;        /* no progress bars */
+    int texel_at;     /* LC_REF_TEXEL_AT_SURFACE (default) or LC_REF_TEXEL_AT_CACHE */
 } lc_ref_settings;
+
+/* Where a texel's irradiance is evaluated: its own surface point (the default, what a user
+ * sees drawn there) or the bake's cache position (moved caches stay where the bake put them:
+ * the engine's own evaluation point). */
+enum { LC_REF_TEXEL_AT_SURFACE = 0, LC_REF_TEXEL_AT_CACHE = 1, LC_REF_TEXEL_AT_UNKNOWN = -1 };
+/* "surface", "cache" or "unknown" (a reference written before texel_at existed). */
+const char *lc_ref_texel_at_name(int texel_at);
 
 lc_ref_settings lc_ref_default_settings(void);
 
@@ -167,6 +178,12 @@ typedef struct lc_ref_result {
     uint64_t rays;
     uint32_t cache_crc;   /* CRC-32 of the bake's caches (position, normal, flags, index) */
     uint32_t max_bounces; /* the paths' reflection limit it was rendered with */
+    int texel_at;         /* LC_REF_TEXEL_AT_*: where the texels were evaluated */
+    /* Per texel owning a cache (NULL when the reference has none: written before they existed). */
+    float *texel_surface; /* W*H*LC_REF_SURFACE_STRIDE (lc_ref_texel_surfaces), NAN elsewhere */
+    uint8_t *texel_moved; /* W*H: 1 = the bake moved this texel's cache (LC_CACHE_MOVED) */
+    lc_ref_surface_stats surface_stats;
+    double unmoved_offset_max; /* max distance surface point - cache position over unmoved caches (m; -1 unknown) */
 } lc_ref_result;
 
 typedef struct lc_ref lc_ref;

@@ -127,6 +127,11 @@ int lc_ref_write(const char *dir, const lc_ref_result *res, const char *extra_js
         snprintf(path, sizeof path, "%s/reference_lightmap_stderr.exr", dir);
         if (lc_image_write_float(path, res->width, res->height, 3, res->lightmap_stderr, err, errlen) != 0) goto err;
         if (ref_write_raw(dir, "reference_texels.bin", res->texel_mask, texels, err, errlen) != 0) goto err;
+        if (res->texel_surface &&
+            (ref_write_raw(dir, "reference_surface.bin", res->texel_surface,
+                           texels * LC_REF_SURFACE_STRIDE * sizeof(float), err, errlen) != 0 ||
+             ref_write_raw(dir, "reference_moved.bin", res->texel_moved, texels, err, errlen) != 0))
+            goto err;
     }
     if (res->n_cells) {
         if (ref_write_raw(dir, "reference_grid.bin", res->grid_sh, (size_t)res->n_cells * 27 * sizeof(float), err,
@@ -151,6 +156,20 @@ int lc_ref_write(const char *dir, const lc_ref_result *res, const char *extra_js
     cJSON_AddStringToObject(lm, "layout",
                             "float32 RGB irradiance W/m^2, row 0 = top; mask u8 per texel: 0 empty, "
                             "1 owns its cache, 2 dilated copy of a neighbour's cache");
+    cJSON_AddStringToObject(lm, "texel_at", lc_ref_texel_at_name(res->texel_at));
+    if (res->texel_surface) {
+        cJSON_AddStringToObject(lm, "surface_file", "reference_surface.bin");
+        cJSON_AddStringToObject(lm, "moved_file", "reference_moved.bin");
+        cJSON_AddStringToObject(lm, "surface_layout",
+                                "float32 little-endian per texel: surface point xyz (m), unit normal xyz, texel "
+                                "spacing (m), found by lucent-ref from the mesh's uv1; NAN for texels owning no "
+                                "cache. moved: u8 per texel, 1 = the bake moved the texel's cache (LC_CACHE_MOVED)");
+        cJSON *ss = cJSON_AddObjectToObject(lm, "surface");
+        cJSON_AddNumberToObject(ss, "texels", res->surface_stats.texels);
+        cJSON_AddNumberToObject(ss, "outside_triangles", res->surface_stats.outside);
+        cJSON_AddNumberToObject(ss, "missing", res->surface_stats.missing);
+        cJSON_AddNumberToObject(ss, "unmoved_cache_offset_max_m", res->unmoved_offset_max);
+    }
     cJSON_AddItemToObject(lm, "stats", ref_stats_json(&res->texel_stats));
     cJSON *gr = cJSON_AddObjectToObject(root, "grid");
     cJSON *dims = cJSON_AddArrayToObject(gr, "dims");
@@ -247,6 +266,23 @@ int lc_ref_read(const char *dir, lc_ref_result *res, char *err, size_t errlen) {
     }
     res->grid_cell = (float)cell->valuedouble;
     ref_stats_parse(cJSON_GetObjectItemCaseSensitive(lm, "stats"), &res->texel_stats);
+    /* Written before texel_at existed: the texels were evaluated at their caches. */
+    const cJSON *at = cJSON_GetObjectItemCaseSensitive(lm, "texel_at");
+    res->texel_at = !cJSON_IsString(at)       ? LC_REF_TEXEL_AT_CACHE
+        : !strcmp(at->valuestring, "surface") ? LC_REF_TEXEL_AT_SURFACE
+        : !strcmp(at->valuestring, "cache")   ? LC_REF_TEXEL_AT_CACHE
+                                              : LC_REF_TEXEL_AT_UNKNOWN;
+    const cJSON *ss = cJSON_GetObjectItemCaseSensitive(lm, "surface"), *it;
+    res->unmoved_offset_max = -1;
+    if (cJSON_IsNumber(it = cJSON_GetObjectItemCaseSensitive(ss, "texels")))
+        res->surface_stats.texels = (uint32_t)it->valuedouble;
+    if (cJSON_IsNumber(it = cJSON_GetObjectItemCaseSensitive(ss, "outside_triangles")))
+        res->surface_stats.outside = (uint32_t)it->valuedouble;
+    if (cJSON_IsNumber(it = cJSON_GetObjectItemCaseSensitive(ss, "missing")))
+        res->surface_stats.missing = (uint32_t)it->valuedouble;
+    if (cJSON_IsNumber(it = cJSON_GetObjectItemCaseSensitive(ss, "unmoved_cache_offset_max_m")))
+        res->unmoved_offset_max = it->valuedouble;
+    int have_surface = cJSON_IsString(cJSON_GetObjectItemCaseSensitive(lm, "surface_file"));
     ref_stats_parse(cJSON_GetObjectItemCaseSensitive(gr, "stats"), &res->grid_stats);
     const cJSON *crc = cJSON_GetObjectItemCaseSensitive(root, "cache_crc");
     if (cJSON_IsString(crc)) res->cache_crc = (uint32_t)strtoul(crc->valuestring, NULL, 16);
@@ -271,6 +307,11 @@ int lc_ref_read(const char *dir, lc_ref_result *res, char *err, size_t errlen) {
             img = NULL;
         }
         if (!(res->texel_mask = ref_read_raw(dir, "reference_texels.bin", texels, err, errlen))) goto err;
+        if (have_surface &&
+            (!(res->texel_surface = ref_read_raw(dir, "reference_surface.bin",
+                                                 texels * LC_REF_SURFACE_STRIDE * sizeof(float), err, errlen)) ||
+             !(res->texel_moved = ref_read_raw(dir, "reference_moved.bin", texels, err, errlen))))
+            goto err;
     }
     if (res->n_cells) {
         size_t bytes = (size_t)res->n_cells * 27 * sizeof(float);

@@ -1,8 +1,11 @@
 /* lucent-ref: the ground-truth reference and the comparison tool.
- *   lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N] [--target-stderr F] ...
+ *   lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N] [--target-stderr F]
+ *                     [--texel-at surface|cache] ...
  *   lucent-ref compare --reference DIR --lightmap EXR_OR_F32 [--grid F32] [--out DIR]
  *   lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--backend cpu] [--out DIR]
  *   lucent-ref camera BAKE.lcb [--state STATE.json] --eye X,Y,Z --target X,Y,Z [--exr F] [--png F] ...
+ * Texels are evaluated at their own surface points (found from the mesh's uv1, ref.h), not at
+ * the caches the bake may have moved.
  * Exit codes: 0 ok, 1 failure, 2 usage error. */
 #include <cjson/cJSON.h>
 #include <math.h>
@@ -27,7 +30,7 @@ typedef struct ref_opts {
     char state[REF_PATH_MAX], out[REF_PATH_MAX], reference[REF_PATH_MAX], lightmap[REF_PATH_MAX], grid[REF_PATH_MAX];
     int spp, batch, max_bounces, rr_depth, seed, threads, texels, grid_on, quiet;
     double target_stderr, floor_frac, threshold, max_err, tol;
-    int zoom, max_relights, backend, bounce_limit, bound_rays;
+    int zoom, max_relights, backend, bounce_limit, bound_rays, texel_at;
     /* camera */
     char exr[REF_PATH_MAX], png[REF_PATH_MAX];
     int width, height, max_depth, tonemap;
@@ -93,6 +96,11 @@ static const lc_opt ref_options[] = {
      NULL},
     {"cells", LC_OPT_BOOL, OFF(grid_on), 0, 1, "true", NULL, "[render] compute the SH grid cells (--no-cells)", NULL,
      NULL},
+    {"texel-at", LC_OPT_ENUM, OFF(texel_at), 0, 0, "surface", "surface|cache",
+     "[render, fidelity] where each texel is evaluated: surface = its own surface point, found from the mesh's uv1 "
+     "(what a user sees drawn there); cache = the bake's cache position, which the bake moves out of geometry "
+     "(LC_CACHE_MOVED)",
+     NULL, NULL},
     {"reference", LC_OPT_STRING, OFF(reference), 0, REF_PATH_MAX, NULL, NULL,
      "[compare, fidelity] reference directory from `render` (fidelity: rendered into OUT/reference when absent)", "DIR",
      NULL},
@@ -145,8 +153,10 @@ static const lc_opt ref_options[] = {
 static void usage(FILE *out) {
     fprintf(
         out,
-        "usage: lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N | --target-stderr F] ...\n"
-        "         path-trace the engine's indirect irradiance at every texel cache and SH grid cell\n"
+        "usage: lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N | --target-stderr F]\n"
+        "                         [--texel-at surface|cache] ...\n"
+        "         path-trace the engine's indirect irradiance at every texel (its own surface point) and SH grid "
+        "cell\n"
         "       lucent-ref compare --reference DIR --lightmap EXR_OR_F32 [--grid F32] [--out DIR]\n"
         "         relative error of a lightmap / SH grid against a reference\n"
         "       lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--out DIR]\n"
@@ -193,6 +203,7 @@ static lc_ref_settings settings_from(const ref_opts *o) {
     s.texels = o->texels;
     s.grid = o->grid_on;
     s.quiet = o->quiet;
+    s.texel_at = o->texel_at == 1 ? LC_REF_TEXEL_AT_CACHE : LC_REF_TEXEL_AT_SURFACE;
     return s;
 }
 
@@ -217,11 +228,19 @@ static int do_render(const char *bake_path, const lc_lcb *bake, const lc_ref_sta
     cJSON_AddNumberToObject(run, "rr_depth", s.rr_depth);
     cJSON_AddNumberToObject(run, "seed", (double)s.seed);
     cJSON_AddNumberToObject(run, "threads", o->threads);
+    cJSON_AddStringToObject(run, "texel_at", lc_ref_texel_at_name(s.texel_at));
     char *extra = cJSON_PrintUnformatted(run);
     cJSON_Delete(run);
     rc = lc_ref_write(dir, res, extra, err, errlen);
     cJSON_free(extra);
     if (rc != 0) return -1;
+    if (res->texel_surface)
+        fprintf(stderr,
+                "lucent-ref: texels evaluated at their %s points; surface points of %u texels from the mesh (%u "
+                "centres outside every triangle's uv: nearest triangle; %u without one), unmoved caches within %.3g m "
+                "of them\n",
+                lc_ref_texel_at_name(res->texel_at), res->surface_stats.texels, res->surface_stats.outside,
+                res->surface_stats.missing, res->unmoved_offset_max);
     fprintf(stderr,
             "lucent-ref: %s: %u texel caches, %.0f spp mean, relative stderr mean %.4f p95 %.4f max %.4f; "
             "%u grid cells, stderr mean %.4f max %.4f; %.1f s, %.2f Mrays/s\n",

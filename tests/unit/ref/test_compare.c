@@ -113,6 +113,13 @@ static void test_roundtrip(void) {
     a.grid_mask[1] = 1;
     a.texel_stats.mean_rel_stderr = 0.0123;
     a.cache_crc = 0xDEADBEEFu;
+    a.texel_at = LC_REF_TEXEL_AT_CACHE;
+    a.texel_surface = malloc(15 * LC_REF_SURFACE_STRIDE * sizeof(float));
+    a.texel_moved = calloc(15, 1);
+    for (int i = 0; i < 15 * LC_REF_SURFACE_STRIDE; i++) a.texel_surface[i] = i % 11 == 3 ? NAN : 0.1f * i - 2.0f;
+    a.texel_moved[4] = a.texel_moved[7] = 1;
+    a.surface_stats = (lc_ref_surface_stats){12, 2, 1};
+    a.unmoved_offset_max = 2.5e-7;
     char dir[] = "/tmp/lc_ref_rt_XXXXXX", err[256];
     CHECK(mkdtemp(dir) != NULL, "mkdtemp");
     CHECK(lc_ref_write(dir, &a, "{\"note\": 1}", err, sizeof err) == 0, "write: %s", err);
@@ -127,13 +134,20 @@ static void test_roundtrip(void) {
         CHECK(b.cache_crc == 0xDEADBEEFu, "cache crc %08x", b.cache_crc);
         CHECK_NEAR(b.texel_stats.mean_rel_stderr, 0.0123, 1e-9);
         CHECK_NEAR(b.grid_cell, 0.25, 1e-7);
+        CHECK(b.texel_at == LC_REF_TEXEL_AT_CACHE, "texel_at %d", b.texel_at);
+        CHECK(b.texel_surface && memcmp(a.texel_surface, b.texel_surface, 15 * LC_REF_SURFACE_STRIDE * 4) == 0,
+              "texel surfaces differ");
+        CHECK(b.texel_moved && memcmp(a.texel_moved, b.texel_moved, 15) == 0, "moved mask differs");
+        CHECK(b.surface_stats.texels == 12 && b.surface_stats.outside == 2 && b.surface_stats.missing == 1,
+              "surface stats %u %u %u", b.surface_stats.texels, b.surface_stats.outside, b.surface_stats.missing);
+        CHECK_NEAR(b.unmoved_offset_max, 2.5e-7, 1e-9);
     }
     lc_ref_result_free(&b);
     /* A directory that is not a reference is refused with a message. */
     CHECK(lc_ref_read("/nonexistent-lc-ref", &b, err, sizeof err) != 0 && err[0], "missing dir must fail");
-    const char *names[] = {"reference.json",         "reference_lightmap.exr", "reference_lightmap_stderr.exr",
-                           "reference_texels.bin",   "reference_grid.bin",     "reference_grid_stderr.bin",
-                           "reference_grid_mask.bin"};
+    const char *names[] = {"reference.json",          "reference_lightmap.exr", "reference_lightmap_stderr.exr",
+                           "reference_texels.bin",    "reference_grid.bin",     "reference_grid_stderr.bin",
+                           "reference_grid_mask.bin", "reference_surface.bin",  "reference_moved.bin"};
     for (size_t i = 0; i < sizeof names / sizeof *names; i++) {
         char path[128];
         snprintf(path, sizeof path, "%s/%s", dir, names[i]);
