@@ -39,27 +39,40 @@ static void cmp_finish(double *rel, uint32_t n, double sum_signed, double sum_di
     out->ref_noise = n ? noise / n : 0;
 }
 
-int lc_ref_compare_lightmap(const float *approx, const float *ref, const float *ref_stderr, const uint8_t *mask,
-                            uint32_t width, uint32_t height, double threshold_frac, lc_ref_errstats *out,
-                            float *err_image) {
+int lc_ref_compare_lightmap_subset(const float *approx, const float *ref, const float *ref_stderr, const uint8_t *mask,
+                                   const uint8_t *select, uint8_t want, uint32_t width, uint32_t height,
+                                   double threshold_frac, lc_ref_errstats *out, float *err_image) {
     memset(out, 0, sizeof *out);
     size_t texels = (size_t)width * height;
     double ymax = 0;
     for (size_t i = 0; i < texels; i++) {
         if (err_image) err_image[i] = NAN;
         if (mask && mask[i] != 1) continue;
-        out->n_total++;
         ymax = fmax(ymax, lc_ref_luminance(ref + 3 * i));
+        if (!select || select[i] == want) out->n_total++;
     }
     out->threshold = threshold_frac * ymax;
+    double bright_sum = 0, bright_n = 0, abs_sum = 0;
+    for (size_t i = 0; i < texels; i++) {
+        double yr = lc_ref_luminance(ref + 3 * i);
+        if ((mask && mask[i] != 1) || !(yr > out->threshold) || !(yr > 0)) continue;
+        bright_sum += yr, bright_n++;
+    }
+    out->ref_mean = bright_n ? bright_sum / bright_n : 0;
     double *rel = malloc((texels ? texels : 1) * sizeof *rel);
     if (!rel) return -1;
     uint32_t n = 0;
     double sum_signed = 0, sum_diff = 0, sum_ref = 0, noise = 0;
     for (size_t i = 0; i < texels; i++) {
-        if (mask && mask[i] != 1) continue;
+        if ((mask && mask[i] != 1) || (select && select[i] != want)) continue;
         double yr = lc_ref_luminance(ref + 3 * i), ya = lc_ref_luminance(approx + 3 * i);
-        if (!(yr > out->threshold) || !(yr > 0) || !isfinite(ya)) continue;
+        if (out->ref_mean > 0 && isfinite(ya)) abs_sum += fabs(ya - yr) / out->ref_mean;
+        if (!(yr > out->threshold) || !(yr > 0)) {
+            out->n_dark++;
+            out->n_dark_lit += ya > out->threshold;
+            continue;
+        }
+        if (!isfinite(ya)) continue;
         double s = (ya - yr) / yr;
         rel[n++] = fabs(s);
         sum_signed += s;
@@ -69,8 +82,78 @@ int lc_ref_compare_lightmap(const float *approx, const float *ref, const float *
         if (err_image) err_image[i] = (float)s;
     }
     cmp_finish(rel, n, sum_signed, sum_diff, sum_ref, noise, out);
+    out->abs_err_vs_mean = out->n_total ? abs_sum / out->n_total : 0;
     free(rel);
     return n ? 0 : -1;
+}
+
+int lc_ref_compare_lightmap(const float *approx, const float *ref, const float *ref_stderr, const uint8_t *mask,
+                            uint32_t width, uint32_t height, double threshold_frac, lc_ref_errstats *out,
+                            float *err_image) {
+    return lc_ref_compare_lightmap_subset(approx, ref, ref_stderr, mask, NULL, 0, width, height, threshold_frac, out,
+                                          err_image);
+}
+
+/* --- blotches ------------------------------------------------------------------------ */
+
+/* Texels a and b lie on one surface: points within 2x the larger spacing, normals within 25 degrees. */
+static int cmp_same_surface(const float *sa, const float *sb) {
+    static const double cos_max = 0.90630778703665; /* cos 25 degrees */
+    double d2 = 0, dot = 0, lim = 2.0 * fmax(sa[6], sb[6]);
+    for (int k = 0; k < 3; k++) {
+        double d = (double)sa[k] - sb[k];
+        d2 += d * d;
+        dot += (double)sa[3 + k] * sb[3 + k];
+    }
+    return isfinite(d2) && d2 <= lim * lim && dot >= cos_max;
+}
+
+static double cmp_rel_diff(double a, double b) { return a + b > 0 ? fabs(a - b) / (0.5 * (a + b)) : 0; }
+
+int lc_ref_blotch_metric(const float *approx, const float *ref, const float *ref_stderr, const uint8_t *mask,
+                         const float *surface, uint32_t width, uint32_t height, double threshold, lc_ref_blotch *out) {
+    memset(out, 0, sizeof *out);
+    double sum_a = 0, sum_r = 0, noise = 0;
+    for (uint32_t y = 0; y < height; y++)
+        for (uint32_t x = 0; x < width; x++) {
+            size_t i = (size_t)y * width + x;
+            for (int dir = 0; dir < 2; dir++) { /* right and down neighbours: each pair once */
+                if ((dir == 0 && x + 1 >= width) || (dir == 1 && y + 1 >= height)) continue;
+                size_t j = dir == 0 ? i + 1 : i + width;
+                if (mask && (mask[i] != 1 || mask[j] != 1)) continue;
+                double ri = lc_ref_luminance(ref + 3 * i), rj = lc_ref_luminance(ref + 3 * j);
+                double ai = lc_ref_luminance(approx + 3 * i), aj = lc_ref_luminance(approx + 3 * j);
+                if (!(ri > threshold) || !(rj > threshold) || !(ri > 0) || !(rj > 0) || !isfinite(ai) || !isfinite(aj))
+                    continue;
+                if (surface &&
+                    !cmp_same_surface(surface + LC_REF_SURFACE_STRIDE * i, surface + LC_REF_SURFACE_STRIDE * j))
+                    continue;
+                out->pairs++;
+                sum_a += cmp_rel_diff(ai, aj);
+                sum_r += cmp_rel_diff(ri, rj);
+                if (ref_stderr)
+                    noise +=
+                        0.5 * (lc_ref_luminance(ref_stderr + 3 * i) / ri + lc_ref_luminance(ref_stderr + 3 * j) / rj);
+            }
+        }
+    if (!out->pairs) return -1;
+    out->approx = sum_a / out->pairs;
+    out->reference = sum_r / out->pairs;
+    out->ratio = out->reference > 0 ? out->approx / out->reference : 0;
+    out->ref_noise = noise / out->pairs;
+    return 0;
+}
+
+char *lc_ref_blotch_json(const lc_ref_blotch *b) {
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "pairs", b->pairs);
+    cJSON_AddNumberToObject(o, "approx", b->approx);
+    cJSON_AddNumberToObject(o, "reference", b->reference);
+    cJSON_AddNumberToObject(o, "ratio", b->ratio);
+    cJSON_AddNumberToObject(o, "ref_noise", b->ref_noise);
+    char *text = cJSON_PrintUnformatted(o);
+    cJSON_Delete(o);
+    return text;
 }
 
 /* The 6 axes and the 8 cube diagonals. */
@@ -187,6 +270,77 @@ int lc_ref_write_heatmap(const char *path, const float *err_image, uint32_t widt
     return rc;
 }
 
+/* The signed scale of lc_ref_heatmap_uv (ref.h). */
+static void cmp_signed_colour(double e, double max_err, uint8_t *o) {
+    double t = e / max_err;
+    t = t < -1 ? -1 : t > 1 ? 1 : t;
+    double rgb[3] = {t < 0 ? 1 + t : 1, 1 - fabs(t), t > 0 ? 1 - t : 1};
+    for (int k = 0; k < 3; k++) o[k] = (uint8_t)lround(255.0 * rgb[k]);
+    o[3] = 255;
+}
+
+int lc_ref_heatmap_uv(const float *err_image, const uint8_t *mask, uint32_t width, uint32_t height, double max_err,
+                      uint8_t *rgba) {
+    if (!(max_err > 0)) max_err = 0.5;
+    size_t texels = (size_t)width * height;
+    uint32_t *queue = malloc((texels ? texels : 1) * sizeof *queue);
+    uint8_t *done = calloc(texels ? texels : 1, 1);
+    if (!queue || !done) {
+        free(queue);
+        free(done);
+        return -1;
+    }
+    size_t head = 0, tail = 0;
+    memset(rgba, 0, texels * 4);
+    for (size_t i = 0; i < texels; i++)
+        if (mask[i] != 0 && !isnan(err_image[i])) {
+            cmp_signed_colour(err_image[i], max_err, rgba + 4 * i);
+            done[i] = 1;
+            queue[tail++] = (uint32_t)i;
+        }
+    /* Breadth-first from the compared texels through covered ones: each copies its parent's colour. */
+    while (head < tail) {
+        uint32_t i = queue[head++], x = i % width, y = i / width;
+        for (int dy = -1; dy <= 1; dy++)
+            for (int dx = -1; dx <= 1; dx++) {
+                int64_t nx = (int64_t)x + dx, ny = (int64_t)y + dy;
+                if ((!dx && !dy) || nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
+                size_t j = (size_t)ny * width + (size_t)nx;
+                if (done[j] || mask[j] == 0) continue;
+                memcpy(rgba + 4 * j, rgba + 4 * (size_t)i, 4);
+                done[j] = 1;
+                queue[tail++] = (uint32_t)j;
+            }
+    }
+    for (size_t i = 0; i < texels; i++)
+        if (mask[i] != 0 && !done[i]) rgba[4 * i] = rgba[4 * i + 1] = rgba[4 * i + 2] = 128, rgba[4 * i + 3] = 255;
+    free(queue);
+    free(done);
+    return 0;
+}
+
+int lc_ref_write_heatmap_uv(const char *path, const float *err_image, const uint8_t *mask, uint32_t width,
+                            uint32_t height, double max_err, char *err, size_t errlen) {
+    size_t texels = (size_t)width * height;
+    if (!width || !height || width > 16384 || height > 16384) {
+        lc_set_err(err, errlen, "%s: heat map size %ux%u out of range", path, width, height);
+        return -1;
+    }
+    uint8_t *rgba = malloc(texels * 4);
+    float *img = malloc(texels * 4 * sizeof *img);
+    int rc = -1;
+    if (!rgba || !img || lc_ref_heatmap_uv(err_image, mask, width, height, max_err, rgba) != 0) {
+        lc_set_err(err, errlen, "out of memory");
+        goto done;
+    }
+    for (size_t i = 0; i < texels * 4; i++) img[i] = rgba[i] / 255.0f;
+    rc = lc_image_write(path, width, height, 4, img, err, errlen);
+done:
+    free(rgba);
+    free(img);
+    return rc;
+}
+
 char *lc_ref_errstats_json(const lc_ref_errstats *s) {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddNumberToObject(o, "compared", s->n);
@@ -199,6 +353,12 @@ char *lc_ref_errstats_json(const lc_ref_errstats *s) {
     cJSON_AddNumberToObject(o, "bias", s->bias);
     cJSON_AddNumberToObject(o, "mean_signed", s->mean_signed);
     cJSON_AddNumberToObject(o, "ref_noise", s->ref_noise);
+    if (s->ref_mean > 0) { /* lightmap rows */
+        cJSON_AddNumberToObject(o, "dark", s->n_dark);
+        cJSON_AddNumberToObject(o, "dark_lit", s->n_dark_lit);
+        cJSON_AddNumberToObject(o, "ref_mean", s->ref_mean);
+        cJSON_AddNumberToObject(o, "abs_err_vs_mean", s->abs_err_vs_mean);
+    }
     char *text = cJSON_PrintUnformatted(o);
     cJSON_Delete(o);
     return text;

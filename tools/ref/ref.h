@@ -307,6 +307,12 @@ typedef struct lc_ref_errstats {
     double bias;                /* sum(a - r) / sum(r): the luminance-weighted signed error */
     double mean_signed;         /* mean of (a - r) / r */
     double ref_noise;           /* mean relative standard error of the reference over the same set (0 if unknown) */
+    /* Lightmap rows only, over ALL candidates (dark ones too, which the relative error cannot judge: a
+     * texel buried in a contact is black in the reference, and the engine's light there is a leak). */
+    uint32_t n_dark;        /* candidates with the reference at or below the threshold */
+    uint32_t n_dark_lit;    /* of those, texels where the approximation is above the threshold */
+    double ref_mean;        /* mean reference luminance over the WHOLE lightmap's compared texels (the scale) */
+    double abs_err_vs_mean; /* mean over the candidates of |Y_a - Y_r| / ref_mean */
 } lc_ref_errstats;
 
 /* Luminance (Rec. 709) of linear RGB. */
@@ -321,6 +327,32 @@ int lc_ref_compare_lightmap(const float *approx, const float *ref, const float *
                             uint32_t width, uint32_t height, double threshold_frac, lc_ref_errstats *out,
                             float *err_image);
 
+/* The same over a subset: texels with select[i] == want (select NULL: all, which is
+ * lc_ref_compare_lightmap). The threshold and ref_mean stay those of the WHOLE lightmap, so the
+ * rows of one comparison (all, moved, unmoved) share them. Returns -1 also when the subset has
+ * candidates but none above the threshold (n_total, n_dark, abs_err_vs_mean are still set). */
+int lc_ref_compare_lightmap_subset(const float *approx, const float *ref, const float *ref_stderr, const uint8_t *mask,
+                                   const uint8_t *select, uint8_t want, uint32_t width, uint32_t height,
+                                   double threshold_frac, lc_ref_errstats *out, float *err_image);
+
+/* Neighbour-to-neighbour variation ("blotches"). Pairs of 4-adjacent texels that both own their
+ * cache (mask 1), both have a reference luminance above `threshold` (absolute: the compared set)
+ * and lie on the same surface: surface points (surface, LC_REF_SURFACE_STRIDE per texel) within
+ * 2x the larger of the two texel spacings and normals within 25 degrees, so pairs across chart
+ * seams and creases do not count (surface NULL: every pair counts, for synthetic images). Per
+ * image: the mean over the pairs of |Y_a - Y_b| / ((Y_a + Y_b) / 2) (a pair of zeros counts 0).
+ * The reference's own noise raises its value: ref_noise is its mean relative standard error over
+ * the pairs' texels (ref_stderr NULL: 0). */
+typedef struct lc_ref_blotch {
+    uint32_t pairs;
+    double approx, reference; /* the mean relative neighbour difference of each image */
+    double ratio;             /* approx / reference (0 when the reference's is 0) */
+    double ref_noise;
+} lc_ref_blotch;
+int lc_ref_blotch_metric(const float *approx, const float *ref, const float *ref_stderr, const uint8_t *mask,
+                         const float *surface, uint32_t width, uint32_t height, double threshold, lc_ref_blotch *out);
+char *lc_ref_blotch_json(const lc_ref_blotch *b);
+
 /* Per grid cell: both SH evaluated as irradiance E(d) = sum c_i y_i(d) at 14 directions (the 6
  * axes and the 8 cube diagonals); err = sum_d |Y_a(d) - Y_r(d)| / sum_d max(Y_r(d), 0). Cells
  * with mask 1 whose mean reference irradiance exceeds threshold_frac x the brightest cell's.
@@ -332,6 +364,23 @@ int lc_ref_compare_grid(const float *approx_sh, const float *ref_sh, const float
  * PNG, each texel scaled up `zoom` times. Returns 0 or -1 with err set. */
 int lc_ref_write_heatmap(const char *path, const float *err_image, uint32_t width, uint32_t height, double max_err,
                          uint32_t zoom, char *err, size_t errlen);
+
+/* The lightmap's own layout (W x H, row 0 = top = v 0, so it maps onto uv1 like the lightmap;
+ * the viewer loads it as a heat map), 8-bit RGBA: the SIGNED error err_image (a - r) / r on a
+ * diverging scale, t = clamp(e / max_err, -1, 1): t < 0 is (1 + t, 1 + t, 1) (blue at -max_err:
+ * the engine too dark), t = 0 white (right), t > 0 is (1, 1 - t, 1 - t) (red at +max_err: too
+ * bright), byte = round(255 x value), alpha 255. Covered texels (mask 1 or 2) without an error
+ * (not compared: dark, or dilated copies) take the colour of the nearest compared texel reached
+ * through covered texels (8-neighbour breadth-first, ties to the first in row order), so bilinear
+ * filtering across chart edges stays sane; covered texels that reach none are grey (128), alpha
+ * 255; empty texels (mask 0) are transparent black. An infinite error saturates: `compare` and
+ * `fidelity` pass +INFINITY for texels dark in the reference (not compared) that the engine
+ * lights above the threshold (a buried texel's leak), so they show red, not a neighbour's colour.
+ * lc_ref_heatmap_uv fills rgba (W*H*4); returns 0 or -1 (out of memory). */
+int lc_ref_heatmap_uv(const float *err_image, const uint8_t *mask, uint32_t width, uint32_t height, double max_err,
+                      uint8_t *rgba);
+int lc_ref_write_heatmap_uv(const char *path, const float *err_image, const uint8_t *mask, uint32_t width,
+                            uint32_t height, double max_err, char *err, size_t errlen);
 
 /* JSON object text for stats (malloc'd). */
 char *lc_ref_errstats_json(const lc_ref_errstats *s);

@@ -2,10 +2,12 @@
  *   lucent-ref render BAKE.lcb --out DIR [--state STATE.json] [--spp N] [--target-stderr F]
  *                     [--texel-at surface|cache] ...
  *   lucent-ref compare --reference DIR --lightmap EXR_OR_F32 [--grid F32] [--out DIR]
+ * Texels are evaluated at their own surface points (found from the mesh's uv1, ref.h), not at
+ * the caches the bake may have moved; compare and fidelity report the lightmap over all texels,
+ * the texels whose cache the bake moved and the rest, the blotch metric (neighbour-to-neighbour
+ * variation), the texel spacing, and write error_lightmap_uv.png (the lightmap's layout).
  *   lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--backend cpu] [--out DIR]
  *   lucent-ref camera BAKE.lcb [--state STATE.json] --eye X,Y,Z --target X,Y,Z [--exr F] [--png F] ...
- * Texels are evaluated at their own surface points (found from the mesh's uv1, ref.h), not at
- * the caches the bake may have moved.
  * Exit codes: 0 ok, 1 failure, 2 usage error. */
 #include <cjson/cJSON.h>
 #include <math.h>
@@ -169,7 +171,13 @@ static void usage(FILE *out) {
     lc_opt_help(ref_options, out);
     fprintf(out,
             "\nerrors are |Y_a - Y_r| / Y_r on luminance per texel that owns its cache, over texels above\n"
-            "--threshold x the brightest; grid cells: sum over 14 directions of |dE| / sum of E.\n"
+            "--threshold x the brightest (rows: all texels, lm_moved = texels whose cache the bake moved,\n"
+            "lm_unmoved = the rest; `moved` also counts the moved texels dark in the reference that the\n"
+            "engine lights); grid cells: sum over 14 directions of |dE| / sum of E. blotch: mean\n"
+            "|Y_a - Y_b| / ((Y_a + Y_b) / 2) over 4-adjacent compared texels on one surface, engine and\n"
+            "reference (its noise raises it). spacing: world distance between texel centres.\n"
+            "compare/fidelity --out: compare.json/fidelity.json, error_lightmap.png (zoomed |error|),\n"
+            "error_lightmap_uv.png (W x H signed: blue too dark, white right, red too bright, at +-max-err).\n"
             "exit codes: 0 ok, 1 failure, 2 usage error\n");
 }
 
@@ -308,18 +316,171 @@ static void print_row(const char *what, const lc_ref_errstats *s) {
            100 * s->p95, 100 * s->max, 100 * s->bias, 100 * s->ref_noise);
 }
 
-/* Compares and reports; writes DIR/compare.json (+ heat maps) when dir is set. extra may be NULL. */
+/* The lightmap's rows and texel metrics of one comparison. */
+typedef struct ref_lm_report {
+    lc_ref_errstats all, moved, unmoved;
+    int have_all, have_moved; /* moved/unmoved: the reference knows which caches the bake moved */
+    lc_ref_blotch blotch;
+    int have_blotch;
+    lc_ref_spacing spacing;
+    int have_spacing;
+} ref_lm_report;
+
+#define REF_SPACING_LIMIT_M 0.5 /* issue 16: texels no more than 0.5 m apart */
+
+/* Fills rep and err_img (W*H signed errors, NAN where not compared). Returns -1 when out of memory. */
+static int compare_lightmap(const lc_ref_result *ref, const float *lightmap, const ref_opts *o, float *err_img,
+                            ref_lm_report *rep) {
+    memset(rep, 0, sizeof *rep);
+    rep->have_all = lc_ref_compare_lightmap(lightmap, ref->lightmap, ref->lightmap_stderr, ref->texel_mask, ref->width,
+                                            ref->height, o->threshold, &rep->all, err_img) == 0;
+    if (!rep->have_all) return 0;
+    if (ref->texel_moved) {
+        rep->have_moved = 1;
+        lc_ref_compare_lightmap_subset(lightmap, ref->lightmap, ref->lightmap_stderr, ref->texel_mask, ref->texel_moved,
+                                       1, ref->width, ref->height, o->threshold, &rep->moved, NULL);
+        lc_ref_compare_lightmap_subset(lightmap, ref->lightmap, ref->lightmap_stderr, ref->texel_mask, ref->texel_moved,
+                                       0, ref->width, ref->height, o->threshold, &rep->unmoved, NULL);
+    }
+    if (ref->texel_surface) {
+        rep->have_blotch =
+            lc_ref_blotch_metric(lightmap, ref->lightmap, ref->lightmap_stderr, ref->texel_mask, ref->texel_surface,
+                                 ref->width, ref->height, rep->all.threshold, &rep->blotch) == 0;
+        rep->have_spacing =
+            lc_ref_spacing_stats(ref->texel_surface, ref->width, ref->height, REF_SPACING_LIMIT_M, &rep->spacing) == 0;
+    }
+    return 0;
+}
+
+static void print_lightmap_report(const lc_ref_result *ref, const ref_lm_report *rep) {
+    if (rep->have_moved)
+        printf(
+            "moved      %u of %u texels' caches moved by the bake; in the reference %u of them are dark (at or below "
+            "the threshold), %u of those lit by the engine; |Y_a - Y_r| / mean Y_r over all of them %.2f%% "
+            "(unmoved %.2f%%)\n",
+            rep->moved.n_total, rep->all.n_total, rep->moved.n_dark, rep->moved.n_dark_lit,
+            100 * rep->moved.abs_err_vs_mean, 100 * rep->unmoved.abs_err_vs_mean);
+    if (rep->have_blotch)
+        printf("blotch     %u pairs: neighbour variation engine %.2f%%, reference %.2f%% (its noise %.2f%%), ratio "
+               "%.3f\n",
+               rep->blotch.pairs, 100 * rep->blotch.approx, 100 * rep->blotch.reference, 100 * rep->blotch.ref_noise,
+               rep->blotch.ratio);
+    if (rep->have_spacing)
+        printf("spacing    %u texels: mean %.4f m, p50 %.4f m, p95 %.4f m, max %.4f m; %.2f%% above %.2g m\n",
+               rep->spacing.n, rep->spacing.mean, rep->spacing.p50, rep->spacing.p95, rep->spacing.max,
+               100 * rep->spacing.share_over, rep->spacing.over_m);
+    printf("texels evaluated at their %s points (moved caches: %s)\n", lc_ref_texel_at_name(ref->texel_at),
+           ref->texel_moved ? "known" : "unknown, the reference predates them");
+}
+
+/* Adds "name": the malloc'd JSON object text (freed). */
+static void json_add_text(cJSON *root, const char *name, char *text) {
+    cJSON *item = text ? cJSON_Parse(text) : NULL;
+    free(text);
+    if (item) cJSON_AddItemToObject(root, name, item);
+}
+
+static void json_add_lightmap_report(cJSON *root, const lc_ref_result *ref, const ref_lm_report *rep) {
+    json_add_text(root, "lightmap", lc_ref_errstats_json(&rep->all));
+    if (rep->have_moved) {
+        json_add_text(root, "lightmap_moved", lc_ref_errstats_json(&rep->moved));
+        json_add_text(root, "lightmap_unmoved", lc_ref_errstats_json(&rep->unmoved));
+    }
+    if (rep->have_blotch) json_add_text(root, "blotch", lc_ref_blotch_json(&rep->blotch));
+    if (rep->have_spacing) json_add_text(root, "texel_spacing_m", lc_ref_spacing_json(&rep->spacing));
+    cJSON_AddStringToObject(root, "texel_at", lc_ref_texel_at_name(ref->texel_at));
+    if (ref->texel_surface) {
+        cJSON *ss = cJSON_AddObjectToObject(root, "texel_surfaces");
+        cJSON_AddNumberToObject(ss, "texels", ref->surface_stats.texels);
+        cJSON_AddNumberToObject(ss, "outside_triangles", ref->surface_stats.outside);
+        cJSON_AddNumberToObject(ss, "missing", ref->surface_stats.missing);
+        cJSON_AddNumberToObject(ss, "unmoved_cache_offset_max_m", ref->unmoved_offset_max);
+    }
+}
+
+static const char REF_METRIC_TEXT[] =
+    "relative error |Y_a - Y_r| / Y_r of luminance per texel owning its cache, over texels whose reference exceeds "
+    "threshold x the brightest; lightmap_moved / lightmap_unmoved: the same over the texels whose cache the bake "
+    "moved out of geometry (LC_CACHE_MOVED) / the rest, with the same threshold; the reference evaluates each texel "
+    "at texel_at (surface: its own surface point from the mesh, what a user sees drawn there); grid: sum_d |dE(d)| / "
+    "sum_d E(d) over 14 directions per cell; p50/p95 nearest rank; bias = sum(a - r) / sum(r); ref_noise = mean "
+    "relative standard error of the reference over the same set; blotch: mean over pairs of 4-adjacent compared "
+    "texels on the same surface (points within 2x the larger texel spacing, normals within 25 degrees) of |Y_a - "
+    "Y_b| / ((Y_a + Y_b) / 2), for the engine (approx) and the reference, ratio = approx / reference; the "
+    "reference's own noise (blotch.ref_noise, its mean relative standard error over those texels) raises its "
+    "value; texel_spacing_m: sqrt(world area / (uv area x W x H)) of each cache-owning texel's triangle";
+
+/* Writes DIR/compare.json and the heat maps. Takes root (extra, or NULL). */
+static int compare_write(const lc_ref_result *ref, const float *lightmap, const ref_opts *o, const char *dir,
+                         cJSON *root, const ref_lm_report *rep, const lc_ref_errstats *gr, int have_grid,
+                         float *err_img, const float *cell_err, char *err, size_t errlen) {
+    char path[REF_PATH_MAX + 64];
+    size_t texels = (size_t)ref->width * ref->height;
+    int rc = -1;
+    if (!root) root = cJSON_CreateObject();
+    mkdir(dir, 0755);
+    if (rep->have_all) {
+        snprintf(path, sizeof path, "%s/error_lightmap.png", dir);
+        if (lc_ref_write_heatmap(path, err_img, ref->width, ref->height, o->max_err, (uint32_t)o->zoom, err, errlen) !=
+            0)
+            goto done;
+        /* The uv map marks light where the reference is dark (a buried texel the engine lights) as
+         * too bright; they are NAN (not compared) in err_img. Then err_img's NANs become 0 for the EXR. */
+        for (size_t i = 0; i < texels; i++)
+            if (ref->texel_mask[i] == 1 && isnan(err_img[i]) &&
+                !(lc_ref_luminance(ref->lightmap + 3 * i) > rep->all.threshold) &&
+                lc_ref_luminance(lightmap + 3 * i) > rep->all.threshold)
+                err_img[i] = INFINITY;
+        snprintf(path, sizeof path, "%s/error_lightmap_uv.png", dir);
+        if (lc_ref_write_heatmap_uv(path, err_img, ref->texel_mask, ref->width, ref->height, o->max_err, err, errlen) !=
+            0)
+            goto done;
+        for (size_t i = 0; i < texels; i++)
+            if (isnan(err_img[i]) || isinf(err_img[i])) err_img[i] = 0;
+        snprintf(path, sizeof path, "%s/error_lightmap.exr", dir);
+        if (lc_image_write_float(path, ref->width, ref->height, 1, err_img, err, errlen) != 0) goto done;
+    }
+    if (have_grid) {
+        snprintf(path, sizeof path, "%s/error_grid.bin", dir);
+        if (lc_fs_write_atomic(path, cell_err, (size_t)ref->n_cells * sizeof(float), err, errlen) != 0) goto done;
+    }
+    cJSON_AddStringToObject(root, "metric", REF_METRIC_TEXT);
+    cJSON_AddNumberToObject(root, "threshold_frac", o->threshold);
+    cJSON_AddNumberToObject(root, "heatmap_max_err", o->max_err);
+    if (rep->have_all) json_add_lightmap_report(root, ref, rep);
+    if (have_grid) json_add_text(root, "grid", lc_ref_errstats_json(gr));
+    cJSON *rs = cJSON_AddObjectToObject(root, "reference");
+    cJSON_AddNumberToObject(rs, "texel_mean_rel_stderr", ref->texel_stats.mean_rel_stderr);
+    cJSON_AddNumberToObject(rs, "texel_max_rel_stderr", ref->texel_stats.max_rel_stderr);
+    cJSON_AddNumberToObject(rs, "texel_spp_mean", ref->texel_stats.spp_mean);
+    cJSON_AddNumberToObject(rs, "grid_mean_rel_stderr", ref->grid_stats.mean_rel_stderr);
+    cJSON_AddNumberToObject(rs, "seconds", ref->seconds);
+    char *text = cJSON_Print(root);
+    snprintf(path, sizeof path, "%s/compare.json", dir);
+    int wrc = text ? lc_fs_write_atomic(path, text, strlen(text), err, errlen) : -1;
+    if (!text) lc_set_err(err, errlen, "out of memory");
+    cJSON_free(text);
+    if (wrc != 0) goto done;
+    fprintf(stderr, "lucent-ref: wrote %s (and error_lightmap.png/_uv.png/.exr)\n", path);
+    rc = 0;
+done:
+    cJSON_Delete(root);
+    return rc;
+}
+
+/* Compares and reports; writes DIR/compare.json (+ heat maps) when dir is set. extra may be NULL
+ * (taken: freed here); bound (may be NULL) is printed as a row of the table. */
 static int do_compare(const lc_ref_result *ref, const float *lightmap, const float *grid, const ref_opts *o,
-                      const char *dir, cJSON *extra, char *err, size_t errlen) {
-    lc_ref_errstats lm = {0}, gr = {0};
+                      const char *dir, cJSON *extra, const lc_ref_errstats *bound, char *err, size_t errlen) {
+    ref_lm_report rep;
+    memset(&rep, 0, sizeof rep);
+    lc_ref_errstats gr = {0};
     float *err_img = NULL, *cell_err = NULL;
-    int have_lm = 0, have_grid = 0, rc = -1;
+    int have_grid = 0, rc = -1;
     size_t texels = (size_t)ref->width * ref->height;
     if (lightmap && texels) {
         err_img = malloc(texels * sizeof(float));
-        if (!err_img) goto oom;
-        have_lm = lc_ref_compare_lightmap(lightmap, ref->lightmap, ref->lightmap_stderr, ref->texel_mask, ref->width,
-                                          ref->height, o->threshold, &lm, err_img) == 0;
+        if (!err_img || compare_lightmap(ref, lightmap, o, err_img, &rep) != 0) goto oom;
     }
     if (grid && ref->n_cells) {
         cell_err = malloc((size_t)ref->n_cells * sizeof(float));
@@ -327,62 +488,24 @@ static int do_compare(const lc_ref_result *ref, const float *lightmap, const flo
         have_grid = lc_ref_compare_grid(grid, ref->grid_sh, ref->grid_sh_stderr, ref->grid_mask, ref->n_cells,
                                         o->threshold, &gr, cell_err) == 0;
     }
-    if (!have_lm && !have_grid) {
+    if (!rep.have_all && !have_grid) {
         lc_set_err(err, errlen, "nothing to compare (no lightmap/grid given, or no texel above the threshold)");
         goto done;
     }
     printf("%-10s %8s %9s %9s %9s %9s %9s %9s\n", "", "n", "mean", "p50", "p95", "max", "bias", "ref-noise");
-    if (have_lm) print_row("lightmap", &lm);
+    if (rep.have_all) print_row("lightmap", &rep.all);
+    if (rep.have_moved) {
+        print_row("lm_moved", &rep.moved);
+        print_row("lm_unmoved", &rep.unmoved);
+    }
+    if (bound) print_row("bound", bound); /* the same texels gathered from the surfels, no links */
     if (have_grid) print_row("grid", &gr);
+    if (rep.have_all) print_lightmap_report(ref, &rep);
     fflush(stdout);
     if (dir && dir[0]) {
-        char path[REF_PATH_MAX + 64];
-        mkdir(dir, 0755);
-        if (have_lm) {
-            snprintf(path, sizeof path, "%s/error_lightmap.png", dir);
-            if (lc_ref_write_heatmap(path, err_img, ref->width, ref->height, o->max_err, (uint32_t)o->zoom, err,
-                                     errlen) != 0)
-                goto done;
-            for (size_t i = 0; i < texels; i++)
-                if (isnan(err_img[i])) err_img[i] = 0;
-            snprintf(path, sizeof path, "%s/error_lightmap.exr", dir);
-            if (lc_image_write_float(path, ref->width, ref->height, 1, err_img, err, errlen) != 0) goto done;
-        }
-        if (have_grid) {
-            snprintf(path, sizeof path, "%s/error_grid.bin", dir);
-            if (lc_fs_write_atomic(path, cell_err, (size_t)ref->n_cells * sizeof(float), err, errlen) != 0) goto done;
-        }
-        cJSON *root = extra ? extra : cJSON_CreateObject();
+        rc = compare_write(ref, lightmap, o, dir, extra, &rep, &gr, have_grid, err_img, cell_err, err, errlen);
         extra = NULL;
-        cJSON_AddStringToObject(root, "metric",
-                                "relative error |Y_a - Y_r| / Y_r of luminance per texel owning its cache, over texels "
-                                "whose reference exceeds threshold x the brightest; grid: sum_d |dE(d)| / sum_d E(d) "
-                                "over 14 directions per cell; p50/p95 nearest rank; bias = sum(a - r) / sum(r); "
-                                "ref_noise = mean relative standard error of the reference over the same set");
-        cJSON_AddNumberToObject(root, "threshold_frac", o->threshold);
-        if (have_lm) {
-            char *t = lc_ref_errstats_json(&lm);
-            cJSON_AddItemToObject(root, "lightmap", cJSON_Parse(t));
-            cJSON_free(t);
-        }
-        if (have_grid) {
-            char *t = lc_ref_errstats_json(&gr);
-            cJSON_AddItemToObject(root, "grid", cJSON_Parse(t));
-            cJSON_free(t);
-        }
-        cJSON *rs = cJSON_AddObjectToObject(root, "reference");
-        cJSON_AddNumberToObject(rs, "texel_mean_rel_stderr", ref->texel_stats.mean_rel_stderr);
-        cJSON_AddNumberToObject(rs, "texel_max_rel_stderr", ref->texel_stats.max_rel_stderr);
-        cJSON_AddNumberToObject(rs, "texel_spp_mean", ref->texel_stats.spp_mean);
-        cJSON_AddNumberToObject(rs, "grid_mean_rel_stderr", ref->grid_stats.mean_rel_stderr);
-        cJSON_AddNumberToObject(rs, "seconds", ref->seconds);
-        char *text = cJSON_Print(root);
-        cJSON_Delete(root);
-        snprintf(path, sizeof path, "%s/compare.json", dir);
-        int wrc = text ? lc_fs_write_atomic(path, text, strlen(text), err, errlen) : -1;
-        cJSON_free(text);
-        if (wrc != 0) goto done;
-        fprintf(stderr, "lucent-ref: wrote %s (and error_lightmap.png/.exr)\n", path);
+        goto done;
     }
     rc = 0;
     goto done;
@@ -419,7 +542,7 @@ static int cmd_compare(int argc, char **argv) {
             goto done;
         }
     }
-    if (do_compare(&ref, lm, grid, &o, o.out, NULL, err, sizeof err) != 0) goto done;
+    if (do_compare(&ref, lm, grid, &o, o.out, NULL, NULL, err, sizeof err) != 0) goto done;
     rc = EXIT_OK;
 done:
     if (rc != EXIT_OK) fprintf(stderr, "lucent-ref: %s\n", err);
@@ -452,6 +575,59 @@ static int fidelity_bound(const lc_lcb *bake, const lc_ref_engine_run *run, cons
 done:
     free(bound);
     return rc;
+}
+
+/* The reference's texel surfaces (computed from the bake when the reference has none) and the
+ * moved mask, from the bake's cache flags. Returns 0 or -1 with err set. */
+static int fidelity_texels(const lc_lcb_view *v, lc_ref_result *ref, char *err, size_t errlen) {
+    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
+    int have = ref->texel_surface != NULL;
+    float *surface = have ? NULL : malloc((texels * LC_REF_SURFACE_STRIDE + 1) * sizeof(float));
+    uint8_t *moved = malloc(texels + 1);
+    lc_ref_surface_stats st;
+    if ((!have && !surface) || !moved) {
+        lc_set_err(err, errlen, "out of memory for %zu texels", texels);
+        goto err;
+    }
+    if (have) {
+        memset(moved, 0, texels);
+        for (uint32_t c = 0; c < v->n_texel_caches; c++)
+            if ((v->caches[c].flags & LC_CACHE_TEXEL) && v->caches[c].index < texels)
+                moved[v->caches[c].index] = (v->caches[c].flags & LC_CACHE_MOVED) != 0;
+    } else {
+        if (lc_ref_bake_texels(v, surface, moved, &st, err, errlen) != 0) goto err;
+        ref->texel_surface = surface;
+        ref->surface_stats = st;
+    }
+    free(ref->texel_moved);
+    ref->texel_moved = moved;
+    return 0;
+err:
+    free(surface);
+    free(moved);
+    return -1;
+}
+
+/* DIR/texels.csv: one row per texel cache (best effort: a file that cannot be opened is skipped). */
+static void fidelity_csv(const char *path, const lc_lcb_view *v, const lc_ref_result *ref, const float *lightmap) {
+    FILE *csv = fopen(path, "w");
+    if (!csv) return;
+    fprintf(csv, "cache,x,y,px,py,pz,nx,ny,nz,moved,ref_y,ref_stderr_y,engine_y,rel_err,sx,sy,sz,spacing\n");
+    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
+    for (uint32_t c = 0; c < v->n_texel_caches; c++) {
+        const lc_lcb_cache *ca = &v->caches[c];
+        uint32_t i = ca->index;
+        if (i >= texels) continue;
+        double yr = lc_ref_luminance(ref->lightmap + 3 * (size_t)i), ya = lc_ref_luminance(lightmap + 3 * (size_t)i);
+        const float nan3[LC_REF_SURFACE_STRIDE] = {NAN, NAN, NAN, NAN, NAN, NAN, NAN};
+        const float *sf = ref->texel_surface ? ref->texel_surface + LC_REF_SURFACE_STRIDE * (size_t)i : nan3;
+        fprintf(csv, "%u,%u,%u,%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%d,%.6g,%.6g,%.6g,%.6g,%.5f,%.5f,%.5f,%.5g\n", c,
+                i % v->lightmap_width, i / v->lightmap_width, ca->position[0], ca->position[1], ca->position[2],
+                ca->normal[0], ca->normal[1], ca->normal[2], (ca->flags & LC_CACHE_MOVED) != 0, yr,
+                lc_ref_luminance(ref->lightmap_stderr + 3 * (size_t)i), ya, yr > 0 ? (ya - yr) / yr : 0, sf[0], sf[1],
+                sf[2], sf[6]);
+    }
+    fclose(csv);
 }
 
 static int cmd_fidelity(int argc, char **argv) {
@@ -497,6 +673,7 @@ static int cmd_fidelity(int argc, char **argv) {
         snprintf(path, sizeof path, "%s/reference", dir);
         if (do_render(pos[0], bake, &st, &o, path, &ref, err, sizeof err) != 0) goto done;
     }
+    if (ref.width && fidelity_texels(v, &ref, err, sizeof err) != 0) goto done;
     static const lc_backend_kind kinds[3] = {LC_BACKEND_AUTO, LC_BACKEND_CPU, LC_BACKEND_EGL};
     if (lc_ref_engine_converge(bake, &st.st, kinds[o.backend], o.threads, o.tol, (uint32_t)o.max_relights,
                                o.bounce_limit, &run, err, sizeof err) != 0)
@@ -524,22 +701,7 @@ static int cmd_fidelity(int argc, char **argv) {
         goto done;
     /* Per texel cache, for digging into where the error is. */
     snprintf(path, sizeof path, "%s/texels.csv", dir);
-    FILE *csv = fopen(path, "w");
-    if (csv) {
-        fprintf(csv, "cache,x,y,px,py,pz,nx,ny,nz,moved,ref_y,ref_stderr_y,engine_y,rel_err\n");
-        for (uint32_t c = 0; c < v->n_texel_caches; c++) {
-            const lc_lcb_cache *ca = &v->caches[c];
-            uint32_t i = ca->index;
-            if (i >= (uint32_t)(v->lightmap_width * v->lightmap_height)) continue;
-            double yr = lc_ref_luminance(ref.lightmap + 3 * (size_t)i),
-                   ya = lc_ref_luminance(run.lightmap + 3 * (size_t)i);
-            fprintf(csv, "%u,%u,%u,%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%d,%.6g,%.6g,%.6g,%.6g\n", c, i % v->lightmap_width,
-                    i / v->lightmap_width, ca->position[0], ca->position[1], ca->position[2], ca->normal[0],
-                    ca->normal[1], ca->normal[2], (ca->flags & LC_CACHE_MOVED) != 0, yr,
-                    lc_ref_luminance(ref.lightmap_stderr + 3 * (size_t)i), ya, yr > 0 ? (ya - yr) / yr : 0);
-        }
-        fclose(csv);
-    }
+    fidelity_csv(path, v, &ref, run.lightmap);
     fflush(stdout);
     /* How close any link budget could get with these surfels (see lc_ref_gather_bound). */
     lc_ref_errstats bs = {0};
@@ -554,6 +716,7 @@ static int cmd_fidelity(int argc, char **argv) {
     cJSON_AddNumberToObject(extra, "relights", run.relights);
     cJSON_AddNumberToObject(extra, "last_change", run.last_change);
     cJSON_AddNumberToObject(extra, "bounce_limit", o.bounce_limit);
+    cJSON_AddStringToObject(extra, "reference_texel_at", lc_ref_texel_at_name(ref.texel_at));
     cJSON_AddNumberToObject(extra, "bounces_per_relight", st.st.settings.bounces);
     cJSON_AddNumberToObject(extra, "bands", st.st.settings.bands);
     cJSON_AddNumberToObject(extra, "surfels", v->n_surfels);
@@ -572,8 +735,8 @@ static int cmd_fidelity(int argc, char **argv) {
             cJSON_AddItemToObject(extra, "bound", b);
         }
     }
-    if (do_compare(&ref, run.lightmap, run.grid_sh, &o, dir, extra, err, sizeof err) != 0) goto done;
-    if (have_bound) print_row("bound", &bs); /* the same texels gathered from the surfels, no links */
+    if (do_compare(&ref, run.lightmap, run.grid_sh, &o, dir, extra, have_bound ? &bs : NULL, err, sizeof err) != 0)
+        goto done;
     snprintf(path, sizeof path, "%s/compare.json", dir);
     char dst[REF_PATH_MAX + 64];
     snprintf(dst, sizeof dst, "%s/fidelity.json", dir);

@@ -157,7 +157,141 @@ static void test_roundtrip(void) {
     lc_ref_result_free(&a);
 }
 
+/* The moved / unmoved rows: one threshold and one scale for all rows; dark texels counted, and
+ * the engine's light on them in abs_err_vs_mean. */
+static void test_subset_rows(void) {
+    /* 10 owners: reference 1.0 for 0..7 (engine 1.1), 0.005 for 8..9 (dark: below 1% of 1.0...
+     * the brightest is texel 0 at 2.0, threshold 0.02); engine 0.5 on the dark ones. Moved: 6..9. */
+    float ref[10 * 3], app[10 * 3];
+    uint8_t mask[10], moved[10];
+    for (int i = 0; i < 10; i++) {
+        float r = i == 0 ? 2.0f : i < 8 ? 1.0f : 0.005f, a = i < 8 ? 1.1f * r : 0.5f;
+        for (int c = 0; c < 3; c++) ref[3 * i + c] = r, app[3 * i + c] = a;
+        mask[i] = 1;
+        moved[i] = i >= 6;
+    }
+    lc_ref_errstats all, mv, um;
+    CHECK(lc_ref_compare_lightmap(app, ref, NULL, mask, 10, 1, 0.01, &all, NULL) == 0, "all");
+    CHECK(lc_ref_compare_lightmap_subset(app, ref, NULL, mask, moved, 1, 10, 1, 0.01, &mv, NULL) == 0, "moved");
+    CHECK(lc_ref_compare_lightmap_subset(app, ref, NULL, mask, moved, 0, 10, 1, 0.01, &um, NULL) == 0, "unmoved");
+    CHECK(all.n == 8 && mv.n == 2 && um.n == 6, "compared %u / %u / %u", all.n, mv.n, um.n);
+    CHECK(all.n_total == 10 && mv.n_total == 4 && um.n_total == 6, "candidates %u / %u / %u", all.n_total, mv.n_total,
+          um.n_total);
+    CHECK_NEAR(mv.threshold, 0.02, 1e-7);
+    CHECK_NEAR(um.threshold, 0.02, 1e-7);
+    CHECK(mv.n_dark == 2 && mv.n_dark_lit == 2 && um.n_dark == 0 && all.n_dark == 2, "dark %u lit %u / %u / %u",
+          mv.n_dark, mv.n_dark_lit, um.n_dark, all.n_dark);
+    CHECK_NEAR(mv.mean, 0.1, 1e-6);
+    double scale = (2.0 + 7 * 1.0) / 8; /* mean reference over the whole lightmap's compared texels */
+    CHECK_NEAR(mv.ref_mean, scale, 1e-6);
+    CHECK_NEAR(um.ref_mean, scale, 1e-6);
+    /* moved: two texels off by 0.1, two dark ones lit 0.495 too bright */
+    CHECK_NEAR(mv.abs_err_vs_mean, (2 * 0.1 + 2 * 0.495) / 4 / scale, 1e-6);
+    CHECK_NEAR(um.abs_err_vs_mean, (0.2 + 5 * 0.1) / 6 / scale, 1e-6);
+    /* A subset with candidates but none bright: -1, the dark counts still set. */
+    for (int i = 0; i < 10; i++) moved[i] = i >= 8;
+    CHECK(lc_ref_compare_lightmap_subset(app, ref, NULL, mask, moved, 1, 10, 1, 0.01, &mv, NULL) != 0,
+          "all-dark subset must report nothing compared");
+    CHECK(mv.n == 0 && mv.n_total == 2 && mv.n_dark_lit == 2 && mv.abs_err_vs_mean > 0, "all-dark subset: %u %u %u",
+          mv.n, mv.n_total, mv.n_dark_lit);
+}
+
+/* Fills an image of w x h with v(x, y) in every channel. */
+static void fill(float *img, uint32_t w, uint32_t h, float (*v)(uint32_t, uint32_t)) {
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++)
+            for (int c = 0; c < 3; c++) img[3 * (y * w + x) + c] = v(x, y);
+}
+static float v_const(uint32_t x, uint32_t y) { return (void)x, (void)y, 3.0f; }
+static float v_check12(uint32_t x, uint32_t y) { return (x + y) % 2 ? 2.0f : 1.0f; }
+static float v_check15(uint32_t x, uint32_t y) { return (x + y) % 2 ? 1.5f : 1.0f; }
+
+/* The blotch metric: 0 on a constant image, 2/3 on a checkerboard of 1 and 2 (|1 - 2| / 1.5);
+ * pairs across a seam (normals apart, or points far apart) do not count. */
+static void test_blotch(void) {
+    enum { W = 8, H = 6 };
+    float a[W * H * 3], r[W * H * 3], se[W * H * 3], surf[W * H * LC_REF_SURFACE_STRIDE];
+    uint8_t mask[W * H];
+    for (int i = 0; i < W * H; i++) mask[i] = 1;
+    for (int i = 0; i < W * H * 3; i++) se[i] = 0.01f;
+    /* a flat surface: texels 0.1 m apart on the plane y = 0, normal +y */
+    for (uint32_t y = 0; y < H; y++)
+        for (uint32_t x = 0; x < W; x++) {
+            float *s = surf + LC_REF_SURFACE_STRIDE * (y * W + x);
+            s[0] = 0.1f * x, s[1] = 0, s[2] = 0.1f * y, s[3] = 0, s[4] = 1, s[5] = 0, s[6] = 0.1f;
+        }
+    const uint32_t all_pairs = (W - 1) * H + W * (H - 1);
+    lc_ref_blotch b;
+    fill(a, W, H, v_const);
+    fill(r, W, H, v_const);
+    CHECK(lc_ref_blotch_metric(a, r, se, mask, surf, W, H, 0.0, &b) == 0, "constant");
+    CHECK(b.pairs == all_pairs && b.approx == 0 && b.reference == 0 && b.ratio == 0, "constant: %u %g %g", b.pairs,
+          b.approx, b.reference);
+    CHECK_NEAR(b.ref_noise, 0.01 / 3, 1e-6);
+    fill(a, W, H, v_check12);
+    CHECK(lc_ref_blotch_metric(a, r, NULL, mask, NULL, W, H, 0.0, &b) == 0, "checker, no surface");
+    CHECK(b.pairs == all_pairs, "pairs %u", b.pairs);
+    CHECK_NEAR(b.approx, 2.0 / 3.0, 1e-6);
+    fill(r, W, H, v_check15);
+    CHECK(lc_ref_blotch_metric(a, r, NULL, mask, surf, W, H, 0.0, &b) == 0, "checker vs checker");
+    CHECK_NEAR(b.approx, 2.0 / 3.0, 1e-6);
+    CHECK_NEAR(b.reference, 0.4, 1e-6); /* 0.5 / 1.25 */
+    CHECK_NEAR(b.ratio, (2.0 / 3.0) / 0.4, 1e-6);
+    /* A seam: the right half (x >= 4) turned 90 degrees (normal +x): the H pairs across it go. */
+    for (uint32_t y = 0; y < H; y++)
+        for (uint32_t x = 4; x < W; x++) {
+            float *s = surf + LC_REF_SURFACE_STRIDE * (y * W + x);
+            s[3] = 1, s[4] = 0;
+        }
+    CHECK(lc_ref_blotch_metric(a, r, NULL, mask, surf, W, H, 0.0, &b) == 0 && b.pairs == all_pairs - H,
+          "normal seam: %u pairs, expected %u", b.pairs, all_pairs - H);
+    /* Points apart: row 0 moved 1 m away (beyond 2 x 0.1 m): the W pairs between rows 0 and 1 go too. */
+    for (uint32_t x = 0; x < W; x++) surf[LC_REF_SURFACE_STRIDE * x + 1] = 1.0f;
+    CHECK(lc_ref_blotch_metric(a, r, NULL, mask, surf, W, H, 0.0, &b) == 0 && b.pairs == all_pairs - H - W,
+          "distance seam: %u pairs, expected %u", b.pairs, all_pairs - H - W);
+    /* Dark reference texels (threshold) and non-owners (mask 2) leave with their pairs. */
+    mask[0] = 2; /* corner: 2 pairs, one already gone with row 0's */
+    CHECK(lc_ref_blotch_metric(a, r, NULL, mask, NULL, W, H, 0.0, &b) == 0 && b.pairs == all_pairs - 2,
+          "mask: %u pairs", b.pairs);
+    CHECK(lc_ref_blotch_metric(a, r, NULL, mask, NULL, W, H, 1.2, &b) != 0, "every pair has a texel of 1.0: none");
+}
+
+/* The uv heat map: the diverging scale, copies into covered texels, transparent empty ones. */
+static void test_heatmap_uv(void) {
+    /* 4 x 2:  row 0: -max, 0, +max/2, NAN (covered: copies +max/2, its only compared neighbour)
+     *         row 1: empty, empty, NAN (owner: the texels above-left and above are both one step
+     *         away, the first in row order wins: white), empty */
+    float e[8] = {-0.5f, 0.0f, 0.25f, NAN, NAN, NAN, NAN, NAN};
+    uint8_t mask[8] = {1, 1, 1, 2, 0, 0, 1, 0}, rgba[8 * 4];
+    CHECK(lc_ref_heatmap_uv(e, mask, 4, 2, 0.5, rgba) == 0, "heat map");
+    const uint8_t want[8][4] = {{0, 0, 255, 255}, {255, 255, 255, 255}, {255, 128, 128, 255}, {255, 128, 128, 255},
+                                {0, 0, 0, 0},     {0, 0, 0, 0},         {255, 255, 255, 255}, {0, 0, 0, 0}};
+    for (int i = 0; i < 8; i++)
+        CHECK(!memcmp(rgba + 4 * i, want[i], 4), "texel %d: %u %u %u %u, expected %u %u %u %u", i, rgba[4 * i],
+              rgba[4 * i + 1], rgba[4 * i + 2], rgba[4 * i + 3], want[i][0], want[i][1], want[i][2], want[i][3]);
+    /* Saturation (and infinity: a lit texel the reference says is dark), and a covered texel
+     * that reaches no compared one: grey. */
+    float e2[4] = {2.0f, INFINITY, -INFINITY, NAN};
+    uint8_t m2[4] = {1, 1, 1, 1}, m3[4] = {0, 0, 0, 1};
+    CHECK(lc_ref_heatmap_uv(e2, m2, 4, 1, 0.5, rgba) == 0, "heat map");
+    CHECK(rgba[0] == 255 && rgba[1] == 0 && rgba[4] == 255 && rgba[5] == 0 && rgba[8] == 0 && rgba[10] == 255,
+          "saturation");
+    float e3[4] = {NAN, NAN, NAN, NAN};
+    CHECK(lc_ref_heatmap_uv(e3, m3, 4, 1, 0.5, rgba) == 0, "heat map");
+    CHECK(rgba[12] == 128 && rgba[13] == 128 && rgba[15] == 255 && rgba[3] == 0, "lone covered texel: grey");
+    char dir[] = "/tmp/lc_ref_uv_XXXXXX", path[128], err[256];
+    CHECK(mkdtemp(dir) != NULL, "mkdtemp");
+    snprintf(path, sizeof path, "%s/uv.png", dir);
+    CHECK(lc_ref_write_heatmap_uv(path, e, mask, 4, 2, 0.5, err, sizeof err) == 0, "write: %s", err);
+    CHECK(access(path, R_OK) == 0, "uv heat map missing");
+    unlink(path);
+    rmdir(dir);
+}
+
 int main(void) {
+    test_subset_rows();
+    test_blotch();
+    test_heatmap_uv();
     test_lightmap_stats();
     test_grid_stats();
     test_roundtrip();
