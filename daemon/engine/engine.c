@@ -12,6 +12,7 @@
 #include <time.h>
 
 #include "engine/embree_device.h"
+#include "engine/lightmap_filter.h"
 #include "engine/scene_math.h"
 #include "engine/transport.h"
 #include "util/clock.h"
@@ -52,6 +53,8 @@ struct lc_engine {
     lc_engine_environment env;
     lc_engine_settings settings;
     int have_state;
+    lc_lmfilter *lmfilter; /* same-surface 3x3 smoothing of the lightmap (lightmap_filter.h) */
+    float *lightmap;       /* W*H*3: the filtered lightmap the frame points at */
     lc_engine_frame frame;
 };
 
@@ -130,6 +133,8 @@ void lc_engine_release(lc_engine *e) {
     free(e->lights);
     free(e->objects);
     free(e->emission);
+    lc_lmfilter_release(e->lmfilter);
+    free(e->lightmap);
     free(e);
 }
 
@@ -167,6 +172,9 @@ lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int thread
     e->b0 = calloc((size_t)v->n_surfels * 3, sizeof(float));
     e->emission = calloc((size_t)(v->n_materials ? v->n_materials : 1) * 3, sizeof(float));
     if (!e->e_direct || !e->b0 || !e->emission) goto oom;
+    e->lightmap = malloc(((size_t)v->lightmap_width * v->lightmap_height + 1) * 3 * sizeof(float));
+    if (!e->lightmap) goto oom;
+    if (!(e->lmfilter = lc_lmfilter_create(v, err, errlen))) goto err;
 
     /* Backend: AUTO tries EGL on a hardware device only (on llvmpipe the CPU backend is faster;
      * docs/ARCHITECTURE.md, Performance). */
@@ -555,6 +563,8 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     e->have_state = 1;
     fr.lightmap_width = v->lightmap_width;
     fr.lightmap_height = v->lightmap_height;
+    lc_lmfilter_apply(e->lmfilter, fr.lightmap, e->lightmap);
+    fr.lightmap = e->lightmap;
     fr.sh_bands = st->settings.bands;
     fr.sh_stride = LC_SH_MAX_COEFFS; /* both backends keep full-size records */
     fr.n_caches = v->n_caches;
