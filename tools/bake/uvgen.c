@@ -1189,6 +1189,50 @@ static uint32_t uvgen_round4(double v) {
     return (u + 3) & ~3u;
 }
 
+/* ---- stretch compensation ---------------------------------------------------------------- */
+
+/* A chart projected onto its plane loses area where its triangles tilt away from the plane
+ * (up to the chart angle: 1/cos 45 = 1.41 at most), so its texels would lie farther apart on the
+ * surface than the density says. Each chart is scaled by sqrt(world area / projected area)
+ * (at most UVGEN_STRETCH_MAX): on average over the chart a texel then covers 1/d^2 of the
+ * surface. Sponza at 2 texels/m: half the texels were more than 0.5 m apart before. */
+#define UVGEN_STRETCH_MAX 2.0
+static void uvgen_compensate_stretch(const uvgen_ctx *cx, uvgen_chart *fin, uint32_t n) {
+    for (uint32_t i = 0; i < n; i++) {
+        uvgen_chart *c = &fin[i];
+        double world = 0, proj = 0;
+        for (uint32_t q = c->start; q < c->start + c->count; q++) {
+            const double *u = cx->cu + 3 * (size_t)q, *v = cx->cv + 3 * (size_t)q;
+            proj += 0.5 * fabs((u[1] - u[0]) * (v[2] - v[0]) - (v[1] - v[0]) * (u[2] - u[0]));
+            double p[3][3];
+            for (int k = 0; k < 3; k++) uvgen_load(cx->m, cx->weld[cx->m->index[3 * (size_t)cx->order[q] + k]], p[k]);
+            double e1[3], e2[3], x[3];
+            for (int k = 0; k < 3; k++) {
+                e1[k] = p[1][k] - p[0][k];
+                e2[k] = p[2][k] - p[0][k];
+            }
+            uvgen_cross(e1, e2, x);
+            world += 0.5 * sqrt(uvgen_dot(x, x));
+        }
+        if (!(proj > 0) || !(world > proj)) continue;
+        double sc = fmin(sqrt(world / proj), UVGEN_STRETCH_MAX);
+        for (int k = 0; k < 3; k++) {
+            c->U[k] *= sc;
+            c->V[k] *= sc;
+        }
+        c->umin *= sc;
+        c->vmin *= sc;
+        c->w *= sc;
+        c->h *= sc;
+        c->au *= sc;
+        c->av *= sc;
+        for (uint32_t q = 3 * c->start; q < 3 * (c->start + c->count); q++) {
+            cx->cu[q] *= sc;
+            cx->cv[q] *= sc;
+        }
+    }
+}
+
 /* ---- conservative footprint (usage) ----------------------------------------------------- */
 
 /* Marks texels whose closed square touches triangle (x[k], y[k]) (texel units) in bitmap.
@@ -1705,14 +1749,19 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
     for (uint32_t i = 0; i < n_final; i++) rect_area += fin[i].w * fin[i].h;
     uint32_t W = 0, H = 0;
     double d = params->texels_per_metre;
-    if (d > 0 ? uvgen_pack_at_density(fin, n_final, items, sky, d, pad, &W, &H, err, errlen) != 0
-              : uvgen_pack_in_atlas(fin, n_final, items, sky, params, fmax(rect_area, total_area), &W, &H, &d, err,
-                                    errlen) != 0)
-        goto err;
-    if (params->texels_per_metre <= 0 && d < params->min_texels_per_metre) {
-        lc_info("uvgen", "%ux%u gives %.2f texels/m, below the minimum %.2f: the atlas grows to fit that density", W, H,
-                d, params->min_texels_per_metre);
-        d = params->min_texels_per_metre;
+    if (d <= 0) { /* fit atlas_size: one density for every chart, as projected */
+        if (uvgen_pack_in_atlas(fin, n_final, items, sky, params, fmax(rect_area, total_area), &W, &H, &d, err,
+                                errlen) != 0)
+            goto err;
+        if (d < params->min_texels_per_metre) {
+            lc_info("uvgen", "%ux%u gives %.2f texels/m, below the minimum %.2f: the atlas grows to fit that density",
+                    W, H, d, params->min_texels_per_metre);
+            d = -params->min_texels_per_metre; /* density mode below */
+        }
+    }
+    if (params->texels_per_metre > 0 || d < 0) { /* a density on the surface: charts compensated for tilt */
+        d = fabs(d);
+        uvgen_compensate_stretch(&cx, fin, n_final);
         if (uvgen_pack_at_density(fin, n_final, items, sky, d, pad, &W, &H, err, errlen) != 0) goto err;
     }
 
