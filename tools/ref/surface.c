@@ -125,6 +125,7 @@ static double surf_nearest(const double *c, double px, double py, double b[3]) {
         return 0;
     }
     double best = INFINITY;
+    b[0] = 1, b[1] = b[2] = 0; /* a corner, should every distance be NaN (a degenerate uv triangle) */
     for (int e = 0; e < 3; e++) {
         int i = e, j = (e + 1) % 3;
         double ax = c[2 * i], ay = c[2 * i + 1], dx = c[2 * j] - ax, dy = c[2 * j + 1] - ay;
@@ -158,6 +159,7 @@ static void surf_scan_cell(const surf_grid *g, int64_t x, int64_t y, double px, 
 /* The triangle holding texel centre (px, py): *outside = 0 when its uv contains the centre,
  * else the nearest. Returns the triangle or LC_NONE (no valid triangle in the grid). */
 static uint32_t surf_find(const surf_grid *g, double px, double py, double b[3], int *outside) {
+    b[0] = 1, b[1] = b[2] = 0;
     uint32_t cx = (uint32_t)(px / SURF_CELL), cy = (uint32_t)(py / SURF_CELL);
     if (cx >= g->gw) cx = g->gw - 1;
     if (cy >= g->gh) cy = g->gh - 1;
