@@ -75,3 +75,70 @@ double lc_sh_cosine_factor(int l) {
     double sign = ((l / 2 - 1) % 2 == 0) ? 1.0 : -1.0;
     return 2.0 * M_PI * sign / ((l + 2) * (l - 1)) * fact_ratio;
 }
+
+/* Gauss-Jordan inverse of a 9x9 (symmetric positive definite here: well conditioned). */
+static void sh_invert9(double a[9][9], double inv[9][9]) {
+    for (int i = 0; i < 9; i++)
+        for (int j = 0; j < 9; j++) inv[i][j] = i == j;
+    for (int c = 0; c < 9; c++) {
+        int piv = c;
+        for (int r = c + 1; r < 9; r++)
+            if (fabs(a[r][c]) > fabs(a[piv][c])) piv = r;
+        for (int k = 0; k < 9; k++) {
+            double t = a[c][k];
+            a[c][k] = a[piv][k];
+            a[piv][k] = t;
+            t = inv[c][k];
+            inv[c][k] = inv[piv][k];
+            inv[piv][k] = t;
+        }
+        double d = a[c][c];
+        for (int k = 0; k < 9; k++) {
+            a[c][k] /= d;
+            inv[c][k] /= d;
+        }
+        for (int r = 0; r < 9; r++) {
+            if (r == c) continue;
+            double f = a[r][c];
+            for (int k = 0; k < 9; k++) {
+                a[r][k] -= f * a[c][k];
+                inv[r][k] -= f * inv[c][k];
+            }
+        }
+    }
+}
+
+void lc_sh_rotation_l2(const float r[9], float out[9][9]) {
+    enum { N = 16 };
+    double y[N][9], yr[N][9];
+    for (int i = 0; i < N; i++) { /* Fibonacci sphere */
+        double z = 1.0 - (2.0 * i + 1.0) / N, s = sqrt(1.0 - z * z), phi = 2.399963229728653 * i;
+        float n[3] = {(float)(s * cos(phi)), (float)(s * sin(phi)), (float)z}, w[3];
+        for (int k = 0; k < 3; k++) w[k] = r[3 * k] * n[0] + r[3 * k + 1] * n[1] + r[3 * k + 2] * n[2];
+        float a[9], b[9];
+        lc_sh_eval(3, n, a);
+        lc_sh_eval(3, w, b);
+        for (int k = 0; k < 9; k++) {
+            y[i][k] = a[k];
+            yr[i][k] = b[k];
+        }
+    }
+    double ata[9][9], inv[9][9];
+    for (int a = 0; a < 9; a++)
+        for (int b = 0; b < 9; b++) {
+            ata[a][b] = 0;
+            for (int i = 0; i < N; i++) ata[a][b] += y[i][a] * y[i][b];
+        }
+    sh_invert9(ata, inv);
+    /* out = inv * Y^T * Yr: column j is the local fit of world basis function j. */
+    for (int a = 0; a < 9; a++)
+        for (int j = 0; j < 9; j++) {
+            double sum = 0;
+            for (int b = 0; b < 9; b++) {
+                double ytyr = 0;
+                for (int i = 0; i < N; i++) ytyr += y[i][b] * yr[i][j];
+                sum += inv[a][b] * ytyr;
+            }
+            out[a][j] = (float)sum;
+        }
+}

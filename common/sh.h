@@ -53,4 +53,11 @@ double lc_sh_cone_ratio(int l, double cos_alpha);
  * irradiance E(n) = sum_lm A_l * L_lm * y_lm(n). */
 double lc_sh_cosine_factor(int l);
 
+/* Rotation of bands 0..2: for a frame whose axes are the columns of the orthogonal matrix r
+ * (row-major; world = r * local; a reflection is allowed), out is the 9x9 matrix taking a
+ * function's world coefficients to its local ones, c_local[i] = sum_j out[i][j] c_world[j],
+ * so that f(r n) = sum c_local[i] y_i(n). Exact (rotations keep bands): a least-squares fit
+ * on 16 fixed directions, in double. */
+void lc_sh_rotation_l2(const float r[9], float out[9][9]);
+
 #endif

@@ -11,6 +11,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "engine/dnrt.h"
 #include "engine/embree_device.h"
 #include "engine/lightmap_filter.h"
 #include "engine/scene_math.h"
@@ -53,6 +54,7 @@ struct lc_engine {
     lc_engine_environment env;
     lc_engine_settings settings;
     int have_state;
+    lc_dnrt *dnrt;         /* placed objects in the indirect light (dnrt.h) */
     lc_lmfilter *lmfilter; /* same-surface 3x3 smoothing of the lightmap (lightmap_filter.h) */
     float *lightmap;       /* W*H*3: the filtered lightmap the frame points at */
     lc_engine_frame frame;
@@ -65,7 +67,9 @@ lc_engine_settings lc_engine_default_settings(const lc_lcb *bake) {
                             .progressive = 1,
                             .chroma_compression = 0,
                             .chroma_bands = v->sh_bands ? v->sh_bands : 3,
-                            .sh_lightmap = 0};
+                            .sh_lightmap = 0,
+                            .dnrt = 1,
+                            .dnrt_blockers = 1};
     return s;
 }
 
@@ -134,6 +138,7 @@ void lc_engine_release(lc_engine *e) {
     free(e->objects);
     free(e->emission);
     lc_lmfilter_release(e->lmfilter);
+    lc_dnrt_release(e->dnrt);
     free(e->lightmap);
     free(e);
 }
@@ -175,6 +180,7 @@ lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int thread
     e->lightmap = malloc(((size_t)v->lightmap_width * v->lightmap_height + 1) * 3 * sizeof(float));
     if (!e->lightmap) goto oom;
     if (!(e->lmfilter = lc_lmfilter_create(v, err, errlen))) goto err;
+    if (!(e->dnrt = lc_dnrt_create(v, err, errlen))) goto err;
 
     /* Backend: AUTO tries EGL on a hardware device only (on llvmpipe the CPU backend is faster;
      * docs/ARCHITECTURE.md, Performance). */
@@ -445,6 +451,39 @@ static int engine_copy_state(lc_engine *e, const lc_engine_state *st) {
     return 0;
 }
 
+/* The objects' ray-tracing instances and SH sample points (each asset's bounds centre,
+ * transformed); the sky transfer must be redone. -1 out of memory. */
+static int engine_place_objects(lc_engine *e, const lc_engine_state *st) {
+    engine_build_top(e, st->objects, st->n_objects);
+    float *pos = realloc(e->object_pos, (st->n_objects ? st->n_objects : 1) * 3 * sizeof(float));
+    if (!pos) return -1;
+    e->object_pos = pos;
+    for (uint32_t i = 0; i < st->n_objects; i++) {
+        const lc_lcb_asset *a = &e->v->assets[st->objects[i].asset];
+        float c[3], m[12];
+        for (int k = 0; k < 3; k++) c[k] = 0.5f * (a->bounds_min[k] + a->bounds_max[k]);
+        lc_sm_object_matrix(&st->objects[i], m);
+        lc_sm_transform_point(m, c, pos + 3 * (size_t)i);
+    }
+    e->sky_valid = 0;
+    return 0;
+}
+
+/* Objects in the indirect light (dnrt.h): their receivers when objects (or the switches)
+ * change, the direct light on them when the lights change too. */
+static int engine_dnrt_update(lc_engine *e, const lc_engine_state *st, int first, int objects_changed,
+                              int lights_changed, char *err, size_t errlen) {
+    int switches_changed =
+        first || st->settings.dnrt != e->settings.dnrt || st->settings.dnrt_blockers != e->settings.dnrt_blockers;
+    if ((objects_changed || switches_changed) &&
+        lc_dnrt_place(e->dnrt, st->objects, st->n_objects, e->object_pos, &st->settings, e->static_scene, e->scene_eps,
+                      err, errlen) != 0)
+        return -1;
+    if (objects_changed || switches_changed || lights_changed)
+        lc_dnrt_direct(e->dnrt, st->lights, st->n_lights, e->top, e->scene_eps, st->objects);
+    return 0;
+}
+
 int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_frame **frame, char *err,
                       size_t errlen) {
     const lc_lcb_view *v = e->v;
@@ -480,25 +519,19 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
         *frame = &e->frame;
         return 0;
     }
-    if (objects_changed) {
-        engine_build_top(e, st->objects, st->n_objects);
-        float *pos = realloc(e->object_pos, (st->n_objects ? st->n_objects : 1) * 3 * sizeof(float));
-        if (!pos) {
-            free(emission);
-            lc_set_err(err, errlen, "out of memory");
-            return -1;
-        }
-        e->object_pos = pos;
-        for (uint32_t i = 0; i < st->n_objects; i++) {
-            /* Sample the grid at the asset's bounds centre, transformed. */
-            const lc_lcb_asset *a = &v->assets[st->objects[i].asset];
-            float c[3], m[12];
-            for (int k = 0; k < 3; k++) c[k] = 0.5f * (a->bounds_min[k] + a->bounds_max[k]);
-            lc_sm_object_matrix(&st->objects[i], m);
-            lc_sm_transform_point(m, c, pos + 3 * (size_t)i);
-        }
-        e->sky_valid = 0;
+    if (objects_changed && engine_place_objects(e, st) != 0) {
+        free(emission);
+        lc_set_err(err, errlen, "out of memory");
+        return -1;
     }
+
+    double td = lc_clock_ms();
+    if (engine_dnrt_update(e, st, first, objects_changed, lights_changed, err, errlen) != 0) {
+        free(emission);
+        return -1;
+    }
+    const lc_dnrt_frame *dnrt = lc_dnrt_frame_get(e->dnrt);
+    double dnrt_ms = lc_clock_ms() - td;
 
     double t1 = lc_clock_ms();
     uint32_t stages_run = 0;
@@ -544,7 +577,8 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
                              .settings = st->settings,
                              .reset_feedback = !st->settings.progressive || first,
                              .object_pos = e->object_pos,
-                             .n_objects = st->n_objects};
+                             .n_objects = st->n_objects,
+                             .dnrt = dnrt->n_objects ? dnrt : NULL};
     lc_engine_frame fr;
     memset(&fr, 0, sizeof fr);
     if (e->ops->run(e->impl, &in, &fr, err, errlen) != 0) {
@@ -578,6 +612,10 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
         (1u << LC_STAGE_LIGHTMAP) | (1u << LC_STAGE_GRID) | (1u << LC_STAGE_OBJECTS);
     if (st->settings.chroma_compression && st->settings.chroma_bands < st->settings.bands)
         stages_run |= 1u << LC_STAGE_CHROMA;
+    fr.stage_ms[LC_STAGE_DNRT] += dnrt_ms;
+    fr.dnrt_objects = dnrt->n_objects;
+    fr.dnrt_receivers = dnrt->n_receivers;
+    if (dnrt->n_objects) stages_run |= 1u << LC_STAGE_DNRT;
     fr.stages_run = stages_run;
     fr.revision = st->revision;
     fr.total_ms = lc_clock_ms() - t0;

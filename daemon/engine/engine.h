@@ -52,6 +52,7 @@ typedef struct lc_engine_object {
     float rotation[4]; /* unit quaternion x, y, z, w */
     float scale[3];
     int visible;
+    int dnrt_off; /* 1: no effect on the indirect light even if the asset has transfer data (engine/dnrt.h) */
 } lc_engine_object;
 
 typedef enum { LC_ENV_NONE = 0, LC_ENV_CONSTANT, LC_ENV_SH } lc_engine_env_kind;
@@ -70,6 +71,8 @@ typedef struct lc_engine_settings {
     int chroma_compression; /* store caches as YCoCg with fewer bands for Co/Cg */
     uint32_t chroma_bands;  /* bands for Co/Cg when compressing, 1..bands */
     int sh_lightmap;        /* also output the per-texel radiance SH lightmap */
+    int dnrt;               /* placed objects shadow and colour the indirect light (engine/dnrt.h) */
+    int dnrt_blockers;      /* ... tested for static geometry between object and receiver with rays */
 } lc_engine_settings;
 
 typedef struct lc_engine_state {
@@ -93,6 +96,7 @@ typedef enum {
     LC_STAGE_GRID,
     LC_STAGE_OBJECTS,
     LC_STAGE_CHROMA,
+    LC_STAGE_DNRT, /* placing objects' receivers, their direct light, and the per-pass sums */
     LC_STAGE_COUNT
 } lc_engine_stage;
 
@@ -114,6 +118,8 @@ typedef struct lc_engine_frame {
     const float *object_sh;        /* n_objects*9*3: L2 irradiance SH at each object's position */
     const float *surfel_radiosity; /* n_surfels*3: final B (W/m^2) per surfel, for tests/debug */
     const float *node_flux;        /* n_nodes*3: pulled flux (W) of the last pass, for tests/debug */
+    uint32_t dnrt_objects;         /* objects with an effect on the indirect light (engine/dnrt.h) */
+    uint32_t dnrt_receivers;       /* caches and objects they change */
     double stage_ms[LC_STAGE_COUNT];
     double total_ms;
     uint32_t stages_run; /* bit per lc_engine_stage that ran (skipped stages: inputs unchanged) */
@@ -145,7 +151,8 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *state, const lc_engin
                       size_t errlen);
 
 /* Default settings: bounces 1 (two passes) with progressive on, so further bounces
- * accumulate over successive relights; bands = the bake's; no chroma compression. */
+ * accumulate over successive relights; bands = the bake's; no chroma compression; DNRT on,
+ * with blocker rays. */
 lc_engine_settings lc_engine_default_settings(const lc_lcb *bake);
 
 #endif

@@ -20,6 +20,7 @@
 #define LC_TRANSPORT_H
 #include <stddef.h>
 
+#include "engine/dnrt.h"
 #include "engine/engine.h"
 
 typedef struct lc_transport_input {
@@ -28,6 +29,7 @@ typedef struct lc_transport_input {
     int reset_feedback;      /* forget the previous relight's indirect light */
     const float *object_pos; /* n_objects*3 world positions to sample the grid at */
     uint32_t n_objects;
+    const lc_dnrt_frame *dnrt; /* objects in the indirect light, applied after each gather; NULL = none */
 } lc_transport_input;
 
 typedef struct lc_transport_ops {

@@ -28,6 +28,8 @@
  *   ASET  lc_lcb_asset         dynamic-object assets
  *   AVRT  lc_lcb_asset_vertex  asset vertices (asset-local, metres)
  *   AIDX  uint32_t[3]          asset triangles (indices relative to the asset's first vertex)
+ *   ATRN  lc_lcb_transfer      optional: per asset with DNRT transfer data, its grid's header
+ *   ATRD  int8_t               the transfer grids' quantised values (ATRN says where each starts)
  */
 #ifndef LC_LCB_H
 #define LC_LCB_H
@@ -149,6 +151,40 @@ typedef struct lc_lcb_asset_vertex {
     float albedo[3];
 } lc_lcb_asset_vertex;
 
+/* An asset's DNRT transfer grid (daemon/engine/dnrt.h uses it; tools/bake/transfer.h makes it):
+ * dims^3 vertices on a cube of half side half_extent about center, in asset-local metres,
+ * vertex (i, j, k) at center - half_extent + 2 half_extent (i, j, k) / (dims - 1), x fastest.
+ * Each vertex holds, for the SH basis y_0..y_{coeffs-1} (lucent convention, util/sh.h),
+ *   T_j (RGB) = int_D rho(s)/pi * y_j(n_s) (w.n_o) dw    light the object reflects, per unit
+ *                                                        of its irradiance SH coefficient j
+ *   K_j       = int_D y_j(w)/pi (w.n_o) dw               light it blocks (A6: L = I(w)/pi)
+ * over D, the directions from the vertex that hit the asset; n_o points from the vertex to
+ * center and s is the hit, n_s its normal facing the vertex. The irradiance change at a
+ * receiver with normal n is (n_o.n)+ [sum_j c_tot_j T_j - sum_j c_j K_j] (c: the object's
+ * incident irradiance SH, c_tot with its direct light, both in the asset's frame).
+ * Stored values are multiplied by g = (max(|p - center|, radius) / radius)^2, which takes the
+ * 1/d^2 falloff out (better use of 8 bits, and the outer volume's falloff is the division),
+ * quantised as value = q / 127 * scale, q in [-127, 127]; vertices inside the asset are
+ * filled from their outside neighbours. A record: coeffs*3 T values (RGB per coefficient),
+ * then coeffs K values. */
+typedef struct lc_lcb_transfer {
+    uint32_t asset;       /* index into ASET; at most one record per asset */
+    uint32_t dims;        /* vertices per axis, 2..64 */
+    uint32_t coeffs;      /* SH coefficients per term: 4 or 9 */
+    uint32_t rays;        /* rays per vertex the bake traced (information) */
+    float center[3];      /* the bounding sphere's centre, asset-local */
+    float radius;         /* its radius (> 0) */
+    float half_extent;    /* the inner volume: the grid's cube, half side (> 0) */
+    float outer_radius;   /* the effect ends at this distance from center (>= half_extent) */
+    float t_scale[27];    /* per coefficient and channel: T = q / 127 * t_scale[3 j + ch] */
+    float k_scale[9];     /* K = q / 127 * k_scale[j] */
+    uint64_t data_offset; /* byte offset of vertex 0 in ATRD */
+} lc_lcb_transfer;
+
+static inline uint64_t lc_lcb_transfer_bytes(const lc_lcb_transfer *t) {
+    return (uint64_t)t->dims * t->dims * t->dims * t->coeffs * 4u;
+}
+
 _Static_assert(sizeof(lc_lcb_header) == 64, "header layout");
 _Static_assert(sizeof(lc_lcb_section) == 48, "section layout");
 _Static_assert(sizeof(lc_lcb_material) == 96, "material layout");
@@ -160,6 +196,7 @@ _Static_assert(sizeof(lc_lcb_cache) == 48, "cache layout");
 _Static_assert(sizeof(lc_lcb_link) == 12, "link layout");
 _Static_assert(sizeof(lc_lcb_asset) == 120, "asset layout");
 _Static_assert(sizeof(lc_lcb_asset_vertex) == 36, "asset vertex layout");
+_Static_assert(sizeof(lc_lcb_transfer) == 192, "transfer layout");
 
 /* --- link direction/cone packing ------------------------------------------------------- */
 
@@ -250,7 +287,18 @@ typedef struct lc_lcb_view {
     uint32_t n_asset_vertices;
     const uint32_t *asset_indices; /* 3 per asset triangle */
     uint32_t n_asset_triangles;
+    const lc_lcb_transfer *transfers; /* NULL when no asset has transfer data */
+    uint32_t n_transfers;
+    const int8_t *transfer_data;
+    uint64_t transfer_data_size;
 } lc_lcb_view;
+
+/* The asset's DNRT transfer grid, or NULL (no data: an older bake, or baked without). */
+static inline const lc_lcb_transfer *lc_lcb_asset_transfer(const lc_lcb_view *v, uint32_t asset) {
+    for (uint32_t i = 0; i < v->n_transfers; i++)
+        if (v->transfers[i].asset == asset) return &v->transfers[i];
+    return NULL;
+}
 
 /* Maps and validates a bake file. Errors name the section and the check that failed, e.g.
  * "LINK: CRC mismatch (file corrupted?)". Returns 0 or -1 with err set; never crashes on

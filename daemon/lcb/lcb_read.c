@@ -64,6 +64,8 @@ enum {
     S_ASET,
     S_AVRT,
     S_AIDX,
+    S_ATRN,
+    S_ATRD,
     S_COUNT
 };
 static const struct {
@@ -87,6 +89,8 @@ static const struct {
     {"ASET", sizeof(lc_lcb_asset), 0, "lc_lcb_asset"},
     {"AVRT", sizeof(lc_lcb_asset_vertex), 0, "lc_lcb_asset_vertex"},
     {"AIDX", 3 * sizeof(uint32_t), 0, "uint32_t[3]"},
+    {"ATRN", sizeof(lc_lcb_transfer), 0, "lc_lcb_transfer"},
+    {"ATRD", 1, 0, "int8_t"},
 };
 
 /* What META says; the sections are checked against it. */
@@ -704,6 +708,41 @@ static int lcb_check_assets(lcb_ctx *c) {
     return 0;
 }
 
+/* DNRT transfer grids: each names a distinct asset, its sizes are in range, its floats
+ * finite and positive where they divide, and its values lie inside ATRD. */
+static int lcb_check_transfers(lcb_ctx *c) {
+    if (!!c->sec[S_ATRN] != !!c->sec[S_ATRD])
+        return lcb_fail(c, "%s: missing (ATRN and ATRD come together)" LCB_INCONSISTENT,
+                        c->sec[S_ATRN] ? "ATRD" : "ATRN");
+    if (!c->sec[S_ATRN]) return 0;
+    const lc_lcb_transfer *t = lcb_data(c, S_ATRN);
+    uint64_t n = lcb_count(c, S_ATRN), n_assets = c->sec[S_ASET] ? lcb_count(c, S_ASET) : 0;
+    uint64_t data = lcb_count(c, S_ATRD);
+    for (uint64_t i = 0; i < n; i++) {
+        unsigned long long ui = (unsigned long long)i;
+        if (t[i].asset >= n_assets)
+            return lcb_fail(c, "ATRN: transfer %llu names asset %u, the bake has %llu" LCB_INCONSISTENT, ui, t[i].asset,
+                            (unsigned long long)n_assets);
+        for (uint64_t k = 0; k < i; k++)
+            if (t[k].asset == t[i].asset)
+                return lcb_fail(c, "ATRN: transfers %llu and %llu both name asset %u" LCB_INCONSISTENT,
+                                (unsigned long long)k, ui, t[i].asset);
+        if (t[i].dims < 2 || t[i].dims > 64 || (t[i].coeffs != 4 && t[i].coeffs != 9))
+            return lcb_fail(c, "ATRN: transfer %llu has dims %u (2..64) or coeffs %u (4 or 9)" LCB_INCONSISTENT, ui,
+                            t[i].dims, t[i].coeffs);
+        if (!lcb_finite(t[i].center, 3) || !lcb_finite(t[i].t_scale, 27) || !lcb_finite(t[i].k_scale, 9) ||
+            !(t[i].radius > 0 && t[i].radius < 1e7f) || !(t[i].half_extent > 0 && t[i].half_extent < 1e7f) ||
+            !(t[i].outer_radius >= t[i].half_extent && t[i].outer_radius < 1e7f))
+            return lcb_fail(c, "ATRN: transfer %llu has a non-finite or non-positive size or scale" LCB_INCONSISTENT,
+                            ui);
+        uint64_t bytes = lc_lcb_transfer_bytes(&t[i]);
+        if (t[i].data_offset > data || bytes > data - t[i].data_offset)
+            return lcb_fail(c, "ATRN: transfer %llu values [%llu, +%llu) exceed ATRD (%llu bytes)" LCB_INCONSISTENT, ui,
+                            (unsigned long long)t[i].data_offset, (unsigned long long)bytes, (unsigned long long)data);
+    }
+    return 0;
+}
+
 /* --- load ------------------------------------------------------------------------------ */
 
 static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
@@ -715,7 +754,7 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     c.errlen = errlen;
     if (lcb_check_header(&c, f) || lcb_check_sections(&c, f) || lcb_find_sections(&c, f) || lcb_check_meta(&c, f) ||
         lcb_check_geometry(&c) || lcb_check_surfels(&c) || lcb_check_levels(&c) || lcb_check_nodes(&c) ||
-        lcb_check_caches(&c) || lcb_check_links(&c) || lcb_check_assets(&c))
+        lcb_check_caches(&c) || lcb_check_links(&c) || lcb_check_assets(&c) || lcb_check_transfers(&c))
         return -1;
 
     lc_lcb_view *v = &f->view;
@@ -755,6 +794,10 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     v->n_asset_vertices = (uint32_t)lcb_count(&c, S_AVRT);
     v->asset_indices = LCB_ARR(S_AIDX);
     v->n_asset_triangles = (uint32_t)lcb_count(&c, S_AIDX);
+    v->transfers = LCB_ARR(S_ATRN);
+    v->n_transfers = (uint32_t)lcb_count(&c, S_ATRN);
+    v->transfer_data = LCB_ARR(S_ATRD);
+    v->transfer_data_size = lcb_count(&c, S_ATRD);
 #undef LCB_ARR
     return 0;
 }

@@ -20,6 +20,7 @@
 #include "bake/scene.h"
 #include "bake/surfels.h"
 #include "bake/texels.h"
+#include "bake/transfer.h"
 #include "bake/uvgen.h"
 #include "lcb/lcb.h"
 #include "lcb/lcb_glb.h"
@@ -116,13 +117,58 @@ typedef struct bake_assets {
     lc_lcb_asset_vertex *vertices;
     uint32_t *indices;
     uint32_t n_assets, n_vertices, n_triangles;
+    lc_lcb_transfer *transfers; /* DNRT transfer grids (ATRN), one per asset with --transfer */
+    int8_t *transfer_data;      /* their values (ATRD) */
+    uint32_t n_transfers;
+    uint64_t transfer_bytes;
 } bake_assets;
 
 static void bake_assets_release(bake_assets *a) {
     free(a->assets);
     free(a->vertices);
     free(a->indices);
+    free(a->transfers);
+    free(a->transfer_data);
     memset(a, 0, sizeof *a);
+}
+
+/* The asset's DNRT transfer grid (bake/transfer.h), appended to out's ATRN/ATRD. */
+static int bake_asset_transfer(const lc_bake_settings *s, const lc_scene *sc, uint32_t asset, bake_assets *out,
+                               char *err, size_t errlen) {
+    lc_transfer_params tp = {.dims = s->transfer_dims,
+                             .coeffs = s->transfer_sh ? 9 : 4,
+                             .rays = s->transfer_rays,
+                             .extent = (float)s->transfer_extent,
+                             .outer = (float)s->transfer_outer,
+                             .threads = s->threads,
+                             .seed = (uint32_t)s->seed};
+    lc_lcb_transfer hdr;
+    int8_t *values = NULL;
+    lc_transfer_stats st;
+    char terr[256];
+    if (lc_transfer_bake(sc, &tp, &hdr, &values, &st, terr, sizeof terr) != 0) {
+        lc_set_err(err, errlen, "--asset %s: %s", s->assets[asset].name, terr);
+        return -1;
+    }
+    hdr.asset = asset;
+    hdr.data_offset = out->transfer_bytes;
+    lc_lcb_transfer *nt = realloc(out->transfers, (out->n_transfers + 1) * sizeof *nt);
+    if (nt) out->transfers = nt;
+    int8_t *nd = nt ? realloc(out->transfer_data, out->transfer_bytes + st.bytes) : NULL;
+    if (!nt || !nd) {
+        free(values);
+        lc_set_err(err, errlen, "out of memory for the transfer grid of asset %s", s->assets[asset].name);
+        return -1;
+    }
+    out->transfer_data = nd;
+    memcpy(nd + out->transfer_bytes, values, st.bytes);
+    free(values);
+    out->transfers[out->n_transfers++] = hdr;
+    out->transfer_bytes += st.bytes;
+    if (!s->quiet)
+        lc_info("bake", "asset %s: DNRT transfer grid %d^3 x %d SH, %.0f KiB, %u vertices inside filled, %.2f s",
+                s->assets[asset].name, tp.dims, tp.coeffs, (double)st.bytes / 1024.0, st.inside_vertices, st.seconds);
+    return 0;
 }
 
 static int bake_assets_import(const lc_bake_settings *s, bake_assets *out, char *err, size_t errlen) {
@@ -182,6 +228,10 @@ static int bake_assets_import(const lc_bake_settings *s, bake_assets *out, char 
             area_sum += area;
         }
         for (int k = 0; k < 3; k++) a->albedo[k] = area_sum > 0 ? (float)(albedo_sum[k] / area_sum) : 0;
+        if (s->transfer && bake_asset_transfer(s, &sc, (uint32_t)i, out, err, errlen) != 0) {
+            lc_scene_release(&sc);
+            goto err;
+        }
         out->n_vertices = (uint32_t)nv;
         out->n_triangles = (uint32_t)nt;
         out->n_assets = (uint32_t)i + 1;
@@ -619,6 +669,17 @@ static void bake_meta_lists(const bake_job *b, cJSON *meta) {
         cJSON_AddNumberToObject(o, "triangles", a->triangle_count);
         cJSON_AddItemToObject(o, "bounds_min", bake_vec3(a->bounds_min));
         cJSON_AddItemToObject(o, "bounds_max", bake_vec3(a->bounds_max));
+        for (uint32_t t = 0; t < b->assets.n_transfers; t++) {
+            const lc_lcb_transfer *tr = &b->assets.transfers[t];
+            if (tr->asset != i) continue;
+            cJSON *jt = cJSON_AddObjectToObject(o, "transfer");
+            cJSON_AddNumberToObject(jt, "dims", tr->dims);
+            cJSON_AddNumberToObject(jt, "coefficients", tr->coeffs);
+            cJSON_AddNumberToObject(jt, "rays", tr->rays);
+            cJSON_AddNumberToObject(jt, "half_extent", tr->half_extent);
+            cJSON_AddNumberToObject(jt, "outer_radius", tr->outer_radius);
+            cJSON_AddNumberToObject(jt, "bytes", (double)lc_lcb_transfer_bytes(tr));
+        }
         cJSON_AddItemToArray(ja, o);
     }
 }
@@ -713,6 +774,10 @@ static int bake_add_sections(bake_job *b, char *err, size_t errlen) {
         add_rc |= lc_lcb_writer_add(w, "ASET", sizeof(lc_lcb_asset), b->assets.assets, b->assets.n_assets);
         add_rc |= lc_lcb_writer_add(w, "AVRT", sizeof(lc_lcb_asset_vertex), b->assets.vertices, b->assets.n_vertices);
         add_rc |= lc_lcb_writer_add(w, "AIDX", 3 * sizeof(uint32_t), b->assets.indices, b->assets.n_triangles);
+        if (b->assets.n_transfers) {
+            add_rc |= lc_lcb_writer_add(w, "ATRN", sizeof(lc_lcb_transfer), b->assets.transfers, b->assets.n_transfers);
+            add_rc |= lc_lcb_writer_add(w, "ATRD", 1, b->assets.transfer_data, b->assets.transfer_bytes);
+        }
     }
     if (add_rc) {
         lc_set_err(err, errlen, "internal error assembling the bake file sections");

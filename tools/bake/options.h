@@ -53,6 +53,12 @@ typedef struct lc_bake_settings {
     int quiet;
     int n_assets;
     lc_bake_asset_arg assets[LC_BAKE_MAX_ASSETS];
+    int transfer;           /* bake each asset's DNRT transfer grid (bake/transfer.h) */
+    int transfer_dims;      /* its vertices per axis */
+    int transfer_sh;        /* 0: 4 SH coefficients, 1: 9 */
+    int transfer_rays;      /* rays per vertex */
+    double transfer_extent; /* inner half side in bounding radii */
+    double transfer_outer;  /* outer radius / inner half side */
 } lc_bake_settings;
 
 /* The option table (NULL-terminated). */

@@ -14,8 +14,8 @@
 #include "lcb/lcb.h"
 #include "util/log.h"
 
-static const char *stage_names[LC_STAGE_COUNT] = {"direct",   "bounce", "pull",    "gather",
-                                                  "lightmap", "grid",   "objects", "chroma"};
+static const char *stage_names[LC_STAGE_COUNT] = {"direct", "bounce",  "pull",   "gather", "lightmap",
+                                                  "grid",   "objects", "chroma", "dnrt"};
 
 static int cmp_double(const void *a, const void *b) {
     double x = *(const double *)a, y = *(const double *)b;

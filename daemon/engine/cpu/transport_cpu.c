@@ -23,6 +23,10 @@ typedef struct tcpu {
     uint32_t *feedback_list;  /* those caches */
     uint32_t n_feedback;
     float *texel_w; /* n_texel_caches*links_per_cache*3: tcpu_texel_weights */
+    float *dnrt_c;  /* DNRT objects' incident SH, 27 each */
+    size_t dnrt_cap;
+    uint32_t *dnrt_list; /* their corner caches outside the feedback list */
+    uint32_t n_dnrt_list, dnrt_list_cap;
     float cone[256][8];
     int threads; /* the parallel-for's workers: the engine's setting */
 } tcpu;
@@ -37,6 +41,8 @@ static void tcpu_release(void *impl) {
     free(t->feedback_cache);
     free(t->feedback_list);
     free(t->texel_w);
+    free(t->dnrt_c);
+    free(t->dnrt_list);
     free(t);
 }
 
@@ -376,35 +382,22 @@ static void tcpu_feedback_range(void *ctx, size_t begin, size_t end, int thread)
     }
 }
 
-/* Trilinear sample of the grid's irradiance SH at p (clamped to the lattice). */
-static void tcpu_grid_sample(const tcpu *t, const float p[3], float out[27]) {
-    const lc_lcb_view *v = t->v;
-    float f[3];
-    int i0[3];
-    for (int k = 0; k < 3; k++) {
-        float g = (p[k] - v->grid_origin[k]) / v->grid_cell;
-        float maxg = (float)(v->grid_dims[k] - 1);
-        if (!(g > 0)) g = 0;
-        if (g > maxg) g = maxg;
-        i0[k] = (int)floorf(g);
-        if (i0[k] > (int)v->grid_dims[k] - 2) i0[k] = (int)v->grid_dims[k] - 2;
-        if (i0[k] < 0) i0[k] = 0;
-        f[k] = v->grid_dims[k] > 1 ? g - (float)i0[k] : 0;
-    }
+/* The grid's L2 irradiance SH at p: trilinear over the corner caches, each cosine-convolved
+ * as the grid output is (tcpu_grid), from the caches as they are now. */
+static void tcpu_grid_sample(const tcpu *t, const uint32_t corner[8], const float w[8], int bands, float out[27]) {
+    static const float a[9] = {(float)M_PI,           (float)(2 * M_PI / 3), (float)(2 * M_PI / 3),
+                               (float)(2 * M_PI / 3), (float)(M_PI / 4),     (float)(M_PI / 4),
+                               (float)(M_PI / 4),     (float)(M_PI / 4),     (float)(M_PI / 4)};
+    int nc9 = bands >= 3 ? 9 : bands * bands;
     memset(out, 0, 27 * sizeof(float));
-    for (int corner = 0; corner < 8; corner++) {
-        int idx[3];
-        float w = 1;
-        for (int k = 0; k < 3; k++) {
-            int bit = (corner >> k) & 1;
-            idx[k] = i0[k] + bit;
-            if (idx[k] >= (int)v->grid_dims[k]) idx[k] = (int)v->grid_dims[k] - 1;
-            w *= bit ? f[k] : 1 - f[k];
-        }
-        if (w == 0) continue;
-        size_t cell = (size_t)idx[0] + v->grid_dims[0] * ((size_t)idx[1] + v->grid_dims[1] * (size_t)idx[2]);
-        const float *src = t->out.grid_sh + cell * 27;
-        for (int j = 0; j < 27; j++) out[j] += w * src[j];
+    for (int c = 0; c < 8; c++) {
+        if (w[c] == 0) continue;
+        const float *sh = t->out.cache_sh + (size_t)corner[c] * t->coeff_cap * 3;
+        for (int j = 0; j < nc9; j++)
+            for (int k = 0; k < 3; k++) {
+                float g = a[j] * sh[3 * j + k];
+                out[3 * j + k] += w[c] * g;
+            }
     }
 }
 
@@ -463,11 +456,69 @@ static void tcpu_grid(tcpu *t, int bands) {
     }
 }
 
-/* Objects: each one's L2 irradiance SH, trilinear in the grid at its position. */
-static int tcpu_objects(tcpu *t, const lc_transport_input *in, char *err, size_t errlen) {
+/* Objects: each one's L2 irradiance SH, trilinear in the grid at its position, from the
+ * caches before any object's change (DNRT adds the other objects' changes after). */
+static int tcpu_objects(tcpu *t, const lc_transport_input *in, int bands, char *err, size_t errlen) {
     if (lc_transport_reserve_objects(&t->out, in->n_objects, "cpu", err, errlen) != 0) return -1;
-    for (uint32_t i = 0; i < in->n_objects; i++)
-        tcpu_grid_sample(t, in->object_pos + 3 * (size_t)i, t->out.object_sh + 27 * (size_t)i);
+    for (uint32_t i = 0; i < in->n_objects; i++) {
+        uint32_t corner[8];
+        float w[8];
+        lc_dnrt_grid_corners(t->v, in->object_pos + 3 * (size_t)i, corner, w);
+        tcpu_grid_sample(t, corner, w, bands, t->out.object_sh + 27 * (size_t)i);
+    }
+    return 0;
+}
+
+/* DNRT after a pass's gather (engine/dnrt.h): each object's incident SH from its corner
+ * caches (gathered in intermediate passes too), then the receivers' sums; in the last pass
+ * the other objects' changes go into the objects' SH. */
+static int tcpu_dnrt(tcpu *t, const lc_transport_input *in, int last, char *err, size_t errlen) {
+    const lc_dnrt_frame *f = in->dnrt;
+    const lc_engine_settings *st = &in->settings;
+    if ((size_t)f->n_objects * 27 > t->dnrt_cap) {
+        float *c = realloc(t->dnrt_c, (size_t)f->n_objects * 27 * sizeof *c);
+        if (!c) {
+            lc_set_err(err, errlen, "cpu transport: out of memory for %u objects' SH", f->n_objects);
+            return -1;
+        }
+        t->dnrt_c = c;
+        t->dnrt_cap = (size_t)f->n_objects * 27;
+    }
+    for (uint32_t i = 0; i < f->n_objects; i++)
+        tcpu_grid_sample(t, f->objects[i].corner, f->objects[i].corner_w, (int)st->bands, t->dnrt_c + 27 * (size_t)i);
+    int tb = lc_transport_texel_bands(st);
+    lc_dnrt_target tg = {.cache_sh = t->out.cache_sh,
+                         .stride = t->coeff_cap,
+                         .n_texel_caches = t->v->n_texel_caches,
+                         .texel_lo = lc_transport_texel_band1(st) ? 1 : 0,
+                         .texel_nc = tb * tb,
+                         .grid_nc = (int)(st->bands * st->bands),
+                         .fresh = last ? NULL : t->feedback_cache,
+                         .object_delta = last ? t->out.object_sh : NULL};
+    lc_dnrt_apply(f, t->dnrt_c, &tg);
+    return 0;
+}
+
+/* The corner caches of the DNRT objects that intermediate passes do not gather anyway. */
+static int tcpu_dnrt_corner_list(tcpu *t, const lc_dnrt_frame *f, char *err, size_t errlen) {
+    uint32_t need = f->n_objects * 8;
+    if (need > t->dnrt_list_cap) {
+        uint32_t *l = realloc(t->dnrt_list, need * sizeof *l);
+        if (!l) {
+            lc_set_err(err, errlen, "cpu transport: out of memory for %u objects", f->n_objects);
+            return -1;
+        }
+        t->dnrt_list = l;
+        t->dnrt_list_cap = need;
+    }
+    t->n_dnrt_list = 0;
+    for (uint32_t i = 0; i < f->n_objects; i++)
+        for (int k = 0; k < 8; k++) {
+            uint32_t c = f->objects[i].corner[k];
+            int seen = t->feedback_cache[c];
+            for (uint32_t j = 0; j < t->n_dnrt_list && !seen; j++) seen = t->dnrt_list[j] == c;
+            if (!seen) t->dnrt_list[t->n_dnrt_list++] = c;
+        }
     return 0;
 }
 
@@ -482,7 +533,8 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     if (lc_transport_check_settings(st, err, errlen) != 0) return -1;
     double t1;
     if (in->reset_feedback) memset(t->e_ind, 0, (size_t)v->n_surfels * 3 * sizeof(float));
-    double ms_pull = 0, ms_gather = 0, ms_bounce = 0;
+    double ms_pull = 0, ms_gather = 0, ms_bounce = 0, ms_dnrt = 0;
+    if (in->dnrt && tcpu_dnrt_corner_list(t, in->dnrt, err, errlen) != 0) return -1;
 
     for (uint32_t pass = 0; pass <= st->bounces; pass++) {
         int last = pass == st->bounces;
@@ -505,6 +557,22 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
         lc_parallel_for(t->threads, last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
         double t4 = lc_clock_ms();
         ms_gather += t4 - t3;
+        if (last) { /* the objects' SH before any object changes the caches */
+            if (tcpu_objects(t, in, bands, err, errlen) != 0) return -1;
+            double t5 = lc_clock_ms();
+            fr->stage_ms[LC_STAGE_OBJECTS] = t5 - t4;
+            t4 = t5;
+        }
+        if (in->dnrt) {
+            if (!last && t->n_dnrt_list) {
+                job.list = t->dnrt_list;
+                lc_parallel_for(t->threads, t->n_dnrt_list, 64, tcpu_gather_range, &job);
+            }
+            if (tcpu_dnrt(t, in, last, err, errlen) != 0) return -1;
+            double t5 = lc_clock_ms();
+            ms_dnrt += t5 - t4;
+            t4 = t5;
+        }
         /* Feedback for the next pass (and, progressive, for the next relight). */
         tcpu_feedback_job fj = {t, bands};
         lc_parallel_for(t->threads, v->n_surfels, 1024, tcpu_feedback_range, &fj);
@@ -520,10 +588,8 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     double t2 = lc_clock_ms();
     fr->stage_ms[LC_STAGE_LIGHTMAP] = t2 - t1;
     tcpu_grid(t, bands);
-    double t3 = lc_clock_ms();
-    fr->stage_ms[LC_STAGE_GRID] = t3 - t2;
-    if (tcpu_objects(t, in, err, errlen) != 0) return -1;
-    fr->stage_ms[LC_STAGE_OBJECTS] = lc_clock_ms() - t3;
+    fr->stage_ms[LC_STAGE_GRID] = lc_clock_ms() - t2;
+    fr->stage_ms[LC_STAGE_DNRT] = ms_dnrt;
     lc_transport_publish(&t->out, st, fr);
     return 0;
 }

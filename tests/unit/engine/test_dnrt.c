@@ -1,0 +1,172 @@
+/* DNRT (engine/dnrt.h) against closed forms, CPU backend.
+ *
+ * D1: a sphere of radius R and albedo rho over the floor of a closed box whose walls all emit
+ * L_e with albedo 0 (a uniform radiance field). A floor point at distance d from the
+ * centre, which sees the whole sphere above its horizon at angle beta from the normal,
+ * loses the sphere's solid angle of L_e and gains rho L_e over it:
+ *   dE = pi L_e (rho - 1) (R/d)^2 cos(beta).
+ * DNRT is exact here up to the grid's interpolation, 8-bit quantisation and sampling.
+ * D7: removing the object restores the lightmap bit for bit; switching DNRT off (globally or
+ * per object) gives the lightmap without it. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "engine_fixture.h"
+
+/* A UV sphere of radius r at the origin, outward faces, one material. */
+static int write_sphere(const char *dir, float r, float rho, char *path, size_t cap) {
+    char mtl[160];
+    snprintf(mtl, sizeof mtl, "%s/ball.mtl", dir);
+    FILE *fp = fopen(mtl, "w");
+    if (!fp) return -1;
+    fprintf(fp, "newmtl ball\nKd %g %g %g\n", rho, rho, rho);
+    fclose(fp);
+    snprintf(path, cap, "%s/ball.obj", dir);
+    fp = fopen(path, "w");
+    if (!fp) return -1;
+    fprintf(fp, "mtllib ball.mtl\nusemtl ball\n");
+    const int nu = 64, nv = 32;
+    for (int j = 0; j <= nv; j++)
+        for (int i = 0; i < nu; i++) {
+            double th = M_PI * j / nv, ph = 2 * M_PI * i / nu;
+            fprintf(fp, "v %.6f %.6f %.6f\nvn %.6f %.6f %.6f\n", r * sin(th) * cos(ph), r * cos(th),
+                    r * sin(th) * sin(ph), sin(th) * cos(ph), cos(th), sin(th) * sin(ph));
+        }
+    for (int j = 0; j < nv; j++)
+        for (int i = 0; i < nu; i++) {
+            int a = j * nu + i + 1, b = j * nu + (i + 1) % nu + 1, c = a + nu, d = b + nu;
+            if (j > 0) fprintf(fp, "f %d//%d %d//%d %d//%d\n", a, a, b, b, c, c);
+            if (j < nv - 1) fprintf(fp, "f %d//%d %d//%d %d//%d\n", b, b, d, d, c, c);
+        }
+    fclose(fp);
+    return 0;
+}
+
+typedef struct {
+    fixture f;
+    char tmp[64], asset[200];
+} dnrt_scene;
+
+/* The 4 m emitting box (albedo 0, L_e = 1) with the sphere asset "ball". */
+static int dnrt_scene_bake(dnrt_scene *s, float radius, float rho, const char *sh) {
+    static char obj[1 << 17];
+    obj[0] = 0;
+    fixture_inward_box(obj, sizeof obj, 4.0f, 8, "wall", 1);
+    snprintf(s->tmp, sizeof s->tmp, "/tmp/lc_dnrt_XXXXXX");
+    if (!mkdtemp(s->tmp) || write_sphere(s->tmp, radius, rho, s->asset + 5, sizeof s->asset - 5) != 0) return -1;
+    memcpy(s->asset, "ball=", 5);
+    const char *flags[] = {"--surfels",
+                           "4096",
+                           "--links",
+                           "128",
+                           "--atlas-size",
+                           "64",
+                           "--min-texel-density",
+                           "0",
+                           "--grid-max-dim",
+                           "9",
+                           "--asset",
+                           s->asset,
+                           "--transfer-sh",
+                           sh,
+                           NULL};
+    return fixture_bake(&s->f, obj, "newmtl wall\nKd 0 0 0\nKe 1 1 1\n", flags);
+}
+
+static void dnrt_scene_release(dnrt_scene *s) {
+    fixture_release(&s->f);
+    char p[160];
+    snprintf(p, sizeof p, "%s/ball.obj", s->tmp);
+    unlink(p);
+    snprintf(p, sizeof p, "%s/ball.mtl", s->tmp);
+    unlink(p);
+    rmdir(s->tmp);
+}
+
+static float *lightmap_copy(const lc_engine_frame *fr) {
+    size_t n = (size_t)fr->lightmap_width * fr->lightmap_height * 3;
+    float *c = malloc(n * sizeof *c);
+    if (c) memcpy(c, fr->lightmap, n * sizeof *c);
+    return c;
+}
+
+static void test_sphere_over_floor(const char *sh) {
+    const float R = 0.5f, rho = 0.5f, cy = 1.5f;
+    dnrt_scene s;
+    if (dnrt_scene_bake(&s, R, rho, sh) != 0) {
+        CHECK(0, "DNRT scene bake failed");
+        return;
+    }
+    const lc_lcb_view *v = s.f.v;
+    CHECK(v->n_transfers == 1 && v->transfers[0].coeffs == (uint32_t)atoi(sh), "the bake has the ball's transfer");
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(s.f.bake);
+    st.settings.bounces = 0;
+    st.settings.progressive = 0;
+    const lc_engine_frame *fr;
+    char err[256];
+    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    float *base = lightmap_copy(fr);
+    lc_engine_object ball = {
+        .id = "b", .asset = 0, .translation = {2, cy, 2}, .rotation = {0, 0, 0, 1}, .scale = {1, 1, 1}, .visible = 1};
+    st.objects = &ball;
+    st.n_objects = 1;
+    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight with the ball: %s", err);
+    CHECK(fr->dnrt_objects == 1 && fr->dnrt_receivers > 100, "the ball has receivers (%u)", fr->dnrt_receivers);
+    double sum_err = 0, sum_ref = 0, worst = 0, sum_eng = 0;
+    int n = 0;
+    for (uint32_t c = 0; c < v->n_texel_caches; c++) {
+        const lc_lcb_cache *cc = &v->caches[c];
+        if (cc->normal[1] < 0.99f || cc->position[1] > 0.05f) continue; /* floor texels */
+        float dx = cc->position[0] - 2, dy = cc->position[1] - cy, dz = cc->position[2] - 2;
+        double d = sqrt(dx * dx + dy * dy + dz * dz);
+        if (d > 2.2) continue; /* inside the untapered outer volume (2.4 m) */
+        double expect = M_PI * 1.0 * (rho - 1) * (R / d) * (R / d) * (-dy / d);
+        size_t t = (size_t)cc->index;
+        double got = fr->lightmap[3 * t + 1] - base[3 * t + 1];
+        double e = fabs(got - expect) / fabs(expect);
+        worst = fmax(worst, e);
+        sum_err += fabs(got - expect);
+        sum_ref += fabs(expect);
+        sum_eng += got;
+        n++;
+    }
+    double mean = sum_ref > 0 ? sum_err / sum_ref : 1;
+    fprintf(stderr,
+            "D1 sphere over floor (%s SH): %d floor texels, |dE| error %.2f%% of |dE| (worst %.2f%%), sum "
+            "dE engine/exact %.4f\n",
+            sh, n, 100 * mean, 100 * worst, sum_ref > 0 ? -sum_eng / sum_ref : 0);
+    CHECK(n > 50, "enough floor texels under the ball (%d)", n);
+    CHECK(mean < 0.03, "D1: mean |dE| error %.2f%% (tolerance 3%%)", 100 * mean);
+    CHECK(worst < 0.08, "D1: worst texel %.2f%% (tolerance 8%%)", 100 * worst);
+
+    /* D7: removing it restores the lightmap exactly; the switches turn it off. */
+    float *with = lightmap_copy(fr);
+    st.n_objects = 0;
+    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    size_t nf = (size_t)fr->lightmap_width * fr->lightmap_height * 3;
+    CHECK(memcmp(fr->lightmap, base, nf * sizeof(float)) == 0, "D7: removing the ball restores the lightmap");
+    st.n_objects = 1;
+    st.settings.dnrt = 0;
+    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    CHECK(fr->dnrt_objects == 0 && memcmp(fr->lightmap, base, nf * sizeof(float)) == 0,
+          "settings.dnrt off: the lightmap without the ball's indirect effect");
+    st.settings.dnrt = 1;
+    ball.dnrt_off = 1;
+    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    CHECK(fr->dnrt_objects == 0 && memcmp(fr->lightmap, base, nf * sizeof(float)) == 0, "object dnrt_off: the same");
+    ball.dnrt_off = 0;
+    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    CHECK(memcmp(fr->lightmap, with, nf * sizeof(float)) == 0, "back on: the same lightmap as before");
+    free(with);
+    free(base);
+    dnrt_scene_release(&s);
+}
+
+int main(void) {
+    test_sphere_over_floor("4");
+    test_sphere_over_floor("9");
+    CHECK_DONE();
+}
