@@ -164,8 +164,123 @@ done:
     return rc;
 }
 
+/* --- DNRT: what placed objects cost (engine/dnrt.h) ---------------------------------------- */
+
+typedef struct {
+    char file[512], backend[16];
+    int objects, blockers;
+    double size_m;
+    double light_ms;   /* DNRT stage of a relight after a light change (objects resting) */
+    double move_ms;    /* ... after one object moved (its receivers found again) */
+    double relight_ms; /* whole relight after a light change with the objects */
+    double receivers;  /* per object */
+    double grid_kib;   /* transfer grid of the asset */
+} bench_dnrt_row;
+
+/* n objects of the first asset with a transfer grid, scaled to size_m (largest extent), on
+ * upward-facing texel caches spread through the cache list. 0 placed, -1 none possible. */
+static int bench_place_objects(const lc_lcb_view *v, int n, double size_m, lc_engine_object *objs) {
+    if (!v->n_transfers) return -1;
+    const lc_lcb_transfer *t = &v->transfers[0];
+    const lc_lcb_asset *a = &v->assets[t->asset];
+    float ext = 0;
+    for (int k = 0; k < 3; k++) ext = fmaxf(ext, a->bounds_max[k] - a->bounds_min[k]);
+    uint32_t up = 0;
+    for (uint32_t c = 0; c < v->n_texel_caches; c++) up += v->caches[c].normal[1] > 0.9f;
+    if (up < (uint32_t)n || !(ext > 0)) return -1;
+    uint32_t stride = up / (uint32_t)n, seen = 0;
+    int placed = 0;
+    for (uint32_t c = 0; c < v->n_texel_caches && placed < n; c++) {
+        if (!(v->caches[c].normal[1] > 0.9f) || seen++ % stride != stride / 2) continue;
+        lc_engine_object *o = &objs[placed];
+        memset(o, 0, sizeof *o);
+        snprintf(o->id, sizeof o->id, "bench%d", placed);
+        o->asset = t->asset;
+        memcpy(o->translation, v->caches[c].position, sizeof o->translation);
+        o->translation[1] -= a->bounds_min[1] * (float)(size_m / ext);
+        o->rotation[3] = 1;
+        o->scale[0] = o->scale[1] = o->scale[2] = (float)(size_m / ext);
+        o->visible = 1;
+        placed++;
+    }
+    return placed == n ? 0 : -1;
+}
+
+static int bench_dnrt(const char *path, lc_backend_kind kind, int runs, int n_objects, double size_m, int blockers,
+                      bench_dnrt_row *row) {
+    char err[512];
+    lc_lcb *bake = NULL;
+    lc_engine *e = NULL;
+    lc_engine_object objs[64];
+    double *ms = calloc((size_t)runs * 3, sizeof *ms);
+    int rc = 1;
+    if (!ms || lc_lcb_open(path, &bake, err, sizeof err) != 0 ||
+        !(e = lc_engine_create(bake, kind, 0, err, sizeof err)))
+        goto done;
+    const lc_lcb_view *v = lc_lcb_get(bake);
+    if (bench_place_objects(v, n_objects, size_m, objs) != 0) {
+        rc = 4; /* no asset with a transfer grid, or no floor */
+        goto done;
+    }
+    lc_engine_settings settings = lc_engine_default_settings(bake);
+    settings.dnrt_blockers = blockers;
+    lc_engine_light light;
+    lc_engine_state st;
+    const lc_engine_frame *fr;
+    memset(row, 0, sizeof *row);
+    for (int r = 0; r <= runs; r++) { /* run 0 warms up */
+        bench_state(v, r, &light, &st, &settings);
+        st.objects = objs;
+        st.n_objects = (uint32_t)n_objects;
+        if (lc_engine_relight(e, &st, &fr, err, sizeof err) != 0) goto done;
+        if (r) ms[r - 1] = fr->stage_ms[LC_STAGE_DNRT], ms[runs + r - 1] = fr->total_ms;
+        row->receivers = (double)fr->dnrt_receivers / n_objects;
+        objs[0].translation[0] += (r & 1) ? 0.01f : -0.01f; /* the next relight: one object moved */
+        if (lc_engine_relight(e, &st, &fr, err, sizeof err) != 0) goto done;
+        if (r) ms[2 * runs + r - 1] = fr->stage_ms[LC_STAGE_DNRT];
+        fprintf(stderr, "\r%s %s: %d objects, run %d/%d", path, lc_engine_backend_name(e), n_objects, r, runs);
+    }
+    fprintf(stderr, "\n");
+    for (int k = 0; k < 3; k++) qsort(ms + (size_t)k * runs, (size_t)runs, sizeof *ms, cmp_double);
+    snprintf(row->file, sizeof row->file, "%s", path);
+    snprintf(row->backend, sizeof row->backend, "%s", lc_engine_backend_name(e));
+    row->objects = n_objects;
+    row->blockers = blockers;
+    row->size_m = size_m;
+    row->light_ms = ms[runs / 2];
+    row->relight_ms = ms[runs + runs / 2];
+    row->move_ms = ms[2 * runs + runs / 2];
+    row->grid_kib = (double)lc_lcb_transfer_bytes(&v->transfers[0]) / 1024.0;
+    rc = 0;
+done:
+    if (rc == 1) fprintf(stderr, "lucent-bench: %s: %s\n", path, err);
+    lc_engine_release(e);
+    lc_lcb_close(bake);
+    free(ms);
+    return rc;
+}
+
+static void bench_dnrt_print(const bench_dnrt_row *rows, int n) {
+    if (!n) return;
+    printf("\nDNRT: placed objects in the indirect light (objects resting: a light change; move: one object moved), "
+           "median ms\n");
+    printf("%-28s %-4s %7s %6s %8s %9s %10s %10s %9s %10s %8s\n", "bake", "bk", "objects", "size", "blockers",
+           "recv/obj", "light", "per obj", "move", "relight", "grid KiB");
+    for (int i = 0; i < n; i++) {
+        const char *base = strrchr(rows[i].file, '/');
+        printf("%-28.28s %-4s %7d %5.2fm %8s %9.0f %10.3f %10.4f %9.3f %10.2f %8.0f\n", base ? base + 1 : rows[i].file,
+               rows[i].backend, rows[i].objects, rows[i].size_m, rows[i].blockers ? "rays" : "off", rows[i].receivers,
+               rows[i].light_ms, rows[i].light_ms / rows[i].objects, rows[i].move_ms, rows[i].relight_ms,
+               rows[i].grid_kib);
+    }
+    printf("paper (DNRT, 32^3 x 4 SH, screen space, per object): GTX 970 0.077 ms (1 object), 0.800 ms (10); "
+           "HD 4600 2.708 / 29.712 ms\n"
+           "targets here (CPU backend): <= 0.2 ms per object per relight, 10 objects <= 2 ms\n");
+}
+
 int main(int argc, char **argv) {
-    int runs = 15, bounces = 1;
+    int runs = 15, bounces = 1, dnrt = 1;
+    double object_size = 1.0;
     const char *json = NULL, *backend = "both";
     const char *files[64];
     int nfiles = 0;
@@ -174,15 +289,20 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--bounces") && i + 1 < argc) bounces = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--json") && i + 1 < argc) json = argv[++i];
         else if (!strcmp(argv[i], "--backend") && i + 1 < argc) backend = argv[++i];
+        else if (!strcmp(argv[i], "--object-size") && i + 1 < argc) object_size = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--no-dnrt")) dnrt = 0;
         else if (!strcmp(argv[i], "--help")) {
-            printf("usage: lucent-bench [--runs N] [--bounces N] [--backend cpu|egl|both] [--json FILE] BAKE.lcb...\n");
+            printf("usage: lucent-bench [--runs N] [--bounces N] [--backend cpu|egl|both] [--json FILE]\n"
+                   "                    [--object-size METRES] [--no-dnrt] BAKE.lcb...\n"
+                   "  bakes with an asset transfer grid also get the DNRT rows: 1 and 10 objects of --object-size\n"
+                   "  (default 1 m) on the floor, with and without blocker rays\n");
             return 0;
         } else if (argv[i][0] == '-') {
             fprintf(stderr, "lucent-bench: unknown option %s (see --help)\n", argv[i]);
             return 2;
         } else if (nfiles < 64) files[nfiles++] = argv[i];
     }
-    if (nfiles == 0 || runs < 1 || runs > 10000 || bounces < 0 || bounces > 16 ||
+    if (nfiles == 0 || runs < 1 || runs > 10000 || bounces < 0 || bounces > 16 || !(object_size > 0) ||
         (strcmp(backend, "cpu") && strcmp(backend, "egl") && strcmp(backend, "both"))) {
         fprintf(stderr, "lucent-bench: need BAKE files; --runs 1..10000, --bounces 0..16, --backend cpu|egl|both\n");
         return 2;
@@ -200,6 +320,22 @@ int main(int argc, char **argv) {
             else if (!(rc == 3 && !strcmp(backend, "both"))) failed = 1; /* an absent EGL is not a failure in "both" */
         }
     }
+    bench_dnrt_row drows[128];
+    int ndrows = 0;
+    for (int f = 0; f < nfiles && dnrt; f++) {
+        static const int counts[2] = {1, 10};
+        for (int k = 0; k < 2; k++) {
+            if (k == 0 && !strcmp(backend, "egl")) continue;
+            if (k == 1 && !strcmp(backend, "cpu")) continue;
+            for (int c = 0; c < 2; c++)
+                for (int b = 1; b >= 0; b--) {
+                    int rc = bench_dnrt(files[f], k ? LC_BACKEND_EGL : LC_BACKEND_CPU, runs, counts[c], object_size, b,
+                                        &drows[ndrows]);
+                    if (rc == 0 && ndrows < 127) ndrows++;
+                    else if (rc == 1) failed = 1;
+                }
+        }
+    }
     printf("\nrelight after one light change, median of %d runs, %d feedback bounce(s), ms\n", runs, bounces);
     printf("%-28s %-4s %7s %7s %5s", "bake", "bk", "surfels", "caches", "links");
     for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8s", stage_names[s]);
@@ -211,6 +347,7 @@ int main(int argc, char **argv) {
         for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8.2f", rows[i].stage_ms[s]);
         printf(" %8.2f %8.0f\n", rows[i].total_ms, rows[i].peak_mib);
     }
+    bench_dnrt_print(drows, ndrows);
     double bw = bench_copy_bandwidth();
     printf("\nwhere the time goes (this machine: memcpy %.1f GB/s read+write):\n", bw);
     printf("%-28s %-4s %12s %10s %10s %10s %10s\n", "bake", "bk", "links/relight", "gather MB", "GB/s", "GFLOP/s",
@@ -247,6 +384,15 @@ int main(int argc, char **argv) {
                     rows[i].total_ms, rows[i].peak_mib, rows[i].gather_links, rows[i].gather_bytes,
                     rows[i].gather_flops, rows[i].pull_bytes);
         }
+        fprintf(out, "\n], \"dnrt\": [");
+        for (int i = 0; i < ndrows; i++)
+            fprintf(out,
+                    "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
+                    "\"blockers\": %s, \"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, "
+                    "\"per_object_ms\": %.5f, \"move_ms\": %.4f, \"relight_ms\": %.4f, \"grid_kib\": %.1f}",
+                    i ? "," : "", drows[i].file, drows[i].backend, drows[i].objects, drows[i].size_m,
+                    drows[i].blockers ? "true" : "false", drows[i].receivers, drows[i].light_ms,
+                    drows[i].light_ms / drows[i].objects, drows[i].move_ms, drows[i].relight_ms, drows[i].grid_kib);
         fprintf(out, "\n]}\n");
         fclose(out);
     }

@@ -385,6 +385,32 @@ int lc_ref_write_heatmap_uv(const char *path, const float *err_image, const uint
 /* JSON object text for stats (malloc'd). */
 char *lc_ref_errstats_json(const lc_ref_errstats *s);
 
+/* --- the change an object makes (delta.c, `lucent-ref delta`) ------------------------------------ */
+
+/* dY = Y(with) - Y(without) per texel owning its cache in both references, over texels whose
+ * reference change exceeds k_sigma x its standard error (both renders' errors combined) and
+ * floor_frac x the mean reference luminance. */
+typedef struct lc_ref_delta_stats {
+    uint32_t n, n_neg, n_pos;         /* compared; of them darker / brighter in the reference */
+    double error;                     /* sum |dY_a - dY_r| / sum |dY_r| */
+    double bias;                      /* sum (dY_a - dY_r) / sum |dY_r| */
+    double sign_agree;                /* share of compared texels whose change has the reference's sign */
+    double neg_ratio;                 /* sum dY_a / sum dY_r over the darker texels (1 = the right shadow) */
+    double pos_ratio;                 /* ... over the brighter texels (the bounced light) */
+    double rgb_approx[3], rgb_ref[3]; /* summed dRGB over the compared set: the colour of the change */
+    double ref_noise;                 /* sum sigma / sum |dY_r| */
+    double mean_abs_ref;              /* mean |dY_r| */
+    double max_rel_change;            /* largest |dY_r| / Y_r(without) */
+    double floor;                     /* the absolute floor used */
+} lc_ref_delta_stats;
+
+/* a0/a1: the approximation's lightmaps without/with (W*H*3, the references' size); r0/r1 the
+ * references. delta_img (W*H*3 or NULL): dY_r, dY_a, dY_a - dY_r per compared texel, NAN
+ * elsewhere. -1 when nothing is compared. */
+int lc_ref_delta_lightmap(const float *a0, const float *a1, const lc_ref_result *r0, const lc_ref_result *r1,
+                          double k_sigma, double floor_frac, lc_ref_delta_stats *out, float *delta_img);
+char *lc_ref_delta_json(const lc_ref_delta_stats *s);
+
 /* --- the engine side of a fidelity run --------------------------------------------------------- */
 
 typedef struct lc_ref_engine_run {

@@ -30,6 +30,8 @@ enum { EXIT_OK = 0, EXIT_FAIL = 1, EXIT_USAGE = 2 };
 
 typedef struct ref_opts {
     char state[REF_PATH_MAX], out[REF_PATH_MAX], reference[REF_PATH_MAX], lightmap[REF_PATH_MAX], grid[REF_PATH_MAX];
+    char reference_with[REF_PATH_MAX], lightmap_with[REF_PATH_MAX];
+    double k_sigma, delta_floor;
     int spp, batch, max_bounces, rr_depth, seed, threads, texels, grid_on, quiet;
     double target_stderr, floor_frac, threshold, max_err, tol;
     int zoom, max_relights, backend, bounce_limit, bound_rays, texel_at;
@@ -110,6 +112,14 @@ static const lc_opt ref_options[] = {
      "[compare] lightmap to judge: an image (EXR...) or raw float32 RGB W*H (.f32/.bin)", "PATH", NULL},
     {"grid", LC_OPT_STRING, OFF(grid), 0, REF_PATH_MAX, NULL, NULL,
      "[compare] SH grid to judge: raw float32, cells x 9 x RGB irradiance SH", "PATH", NULL},
+    {"reference-with", LC_OPT_STRING, OFF(reference_with), 0, REF_PATH_MAX, NULL, NULL,
+     "[delta] reference of the same bake with the object placed (--reference: without it)", "DIR", NULL},
+    {"lightmap-with", LC_OPT_STRING, OFF(lightmap_with), 0, REF_PATH_MAX, NULL, NULL,
+     "[delta] the approximation's lightmap with the object (--lightmap: without it)", "PATH", NULL},
+    {"k-sigma", LC_OPT_FLOAT, OFF(k_sigma), 0, 100, "3", NULL,
+     "[delta] compare texels whose reference change exceeds this many standard errors", "K", NULL},
+    {"delta-floor", LC_OPT_FLOAT, OFF(delta_floor), 0, 1, "0.005", NULL,
+     "[delta] ... and this fraction of the mean reference luminance", "F", NULL},
     {"threshold", LC_OPT_FLOAT, OFF(threshold), 0, 1, "0.01", NULL,
      "[compare, fidelity] compare texels/cells brighter than this fraction of the brightest", "F", NULL},
     {"max-err", LC_OPT_FLOAT, OFF(max_err), 0.001, 100, "0.5", NULL, "[compare, fidelity] heat map: red at this error",
@@ -163,6 +173,8 @@ static void usage(FILE *out) {
         "         relative error of a lightmap / SH grid against a reference\n"
         "       lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--out DIR]\n"
         "         relight with the engine to convergence and compare (renders the reference if absent)\n"
+        "       lucent-ref delta --reference DIR --reference-with DIR --lightmap A --lightmap-with B [--out DIR]\n"
+        "         the change an object makes, dE = E(with) - E(without) per texel, against the references'\n"
         "       lucent-ref camera BAKE.lcb [--state STATE.json] --eye X,Y,Z --target X,Y,Z [--up 0,1,0] [--fov 50]\n"
         "                         [--width 640] [--height 480] [--spp 64] [--max-depth 8] [--exposure 1]\n"
         "                         [--tonemap none|neutral] [--exr OUT.exr] [--png OUT.png] [--seed 1] [--threads 0]\n"
@@ -552,6 +564,81 @@ done:
     return rc;
 }
 
+/* `delta`: the object's change against the references' (delta.c). */
+static int cmd_delta(int argc, char **argv) {
+    static ref_opts o;
+    char *pos[2];
+    char err[1024] = "";
+    int n = parse(&o, argc, argv, pos, 2);
+    if (n < 0) return EXIT_USAGE;
+    if (n != 0 || !o.reference[0] || !o.reference_with[0] || !o.lightmap[0] || !o.lightmap_with[0]) {
+        fprintf(stderr,
+                "lucent-ref: delta needs --reference, --reference-with, --lightmap and --lightmap-with (see "
+                "--help)\n");
+        return EXIT_USAGE;
+    }
+    lc_ref_result r0, r1;
+    memset(&r1, 0, sizeof r1);
+    float *a0 = NULL, *a1 = NULL, *img = NULL;
+    char *json = NULL;
+    int rc = EXIT_FAIL;
+    if (lc_ref_read(o.reference, &r0, err, sizeof err) != 0) {
+        memset(&r0, 0, sizeof r0);
+        goto done;
+    }
+    if (lc_ref_read(o.reference_with, &r1, err, sizeof err) != 0) {
+        memset(&r1, 0, sizeof r1);
+        goto done;
+    }
+    if (r0.cache_crc != r1.cache_crc || r0.width != r1.width || r0.height != r1.height) {
+        lc_set_err(err, sizeof err, "%s and %s are references of different bakes", o.reference, o.reference_with);
+        goto done;
+    }
+    if (!(a0 = load_lightmap(o.lightmap, r0.width, r0.height, err, sizeof err)) ||
+        !(a1 = load_lightmap(o.lightmap_with, r0.width, r0.height, err, sizeof err)))
+        goto done;
+    img = malloc((size_t)r0.width * r0.height * 3 * sizeof *img + 1);
+    lc_ref_delta_stats ds;
+    if (!img || lc_ref_delta_lightmap(a0, a1, &r0, &r1, o.k_sigma, o.delta_floor, &ds, img) != 0) {
+        lc_set_err(err, sizeof err, img ? "no texel changes by more than the references' noise" : "out of memory");
+        goto done;
+    }
+    printf("delta      %u texels (%u darker, %u brighter): error %.2f%% of |dE|, bias %+.2f%%, sign right %.1f%%, "
+           "darker sum ratio %.3f, brighter %.3f, reference noise %.2f%%, largest change %.1f%% of E\n",
+           ds.n, ds.n_neg, ds.n_pos, 100 * ds.error, 100 * ds.bias, 100 * ds.sign_agree, ds.neg_ratio, ds.pos_ratio,
+           100 * ds.ref_noise, 100 * ds.max_rel_change);
+    printf("colour     sum dRGB approx (%.4g, %.4g, %.4g), reference (%.4g, %.4g, %.4g)\n", ds.rgb_approx[0],
+           ds.rgb_approx[1], ds.rgb_approx[2], ds.rgb_ref[0], ds.rgb_ref[1], ds.rgb_ref[2]);
+    if (o.out[0]) {
+        char path[REF_PATH_MAX + 64];
+        mkdir(o.out, 0755);
+        snprintf(path, sizeof path, "%s/delta_lightmap.exr", o.out);
+        for (size_t i = 0; i < (size_t)r0.width * r0.height * 3; i++)
+            if (isnan(img[i])) img[i] = 0;
+        if (lc_image_write_float(path, r0.width, r0.height, 3, img, err, sizeof err) != 0) goto done;
+        if (!(json = lc_ref_delta_json(&ds))) {
+            lc_set_err(err, sizeof err, "out of memory");
+            goto done;
+        }
+        snprintf(path, sizeof path, "%s/delta.json", o.out);
+        if (lc_fs_write_atomic(path, json, strlen(json), err, sizeof err) != 0) goto done;
+        fprintf(stderr,
+                "lucent-ref: wrote %s and delta_lightmap.exr (R = dE reference, G = dE approx, B = their "
+                "difference)\n",
+                path);
+    }
+    rc = EXIT_OK;
+done:
+    if (rc != EXIT_OK) fprintf(stderr, "lucent-ref: %s\n", err);
+    lc_ref_result_free(&r0);
+    lc_ref_result_free(&r1);
+    free(a0);
+    free(a1);
+    free(img);
+    free(json);
+    return rc;
+}
+
 /* The gather bound of the engine's solution: writes DIR/bound_lightmap.exr and, when any texel
  * is compared, its error statistics (*have = 1). Returns 0 or -1 with err set. */
 static int fidelity_bound(const lc_lcb *bake, const lc_ref_engine_run *run, const lc_ref_result *ref, const ref_opts *o,
@@ -846,6 +933,7 @@ int main(int argc, char **argv) {
     }
     if (!strcmp(argv[1], "render")) return cmd_render(argc, argv);
     if (!strcmp(argv[1], "compare")) return cmd_compare(argc, argv);
+    if (!strcmp(argv[1], "delta")) return cmd_delta(argc, argv);
     if (!strcmp(argv[1], "fidelity")) return cmd_fidelity(argc, argv);
     if (!strcmp(argv[1], "camera")) return cmd_camera(argc, argv);
     fprintf(stderr, "lucent-ref: unknown command '%s' (render, compare, fidelity, camera; see --help)\n", argv[1]);
