@@ -19,6 +19,51 @@
 #define DNRT_AREA_SAMPLES 16
 #define DNRT_VALUES 36 /* per receiver: T 9 x RGB, K 9 */
 
+typedef struct {
+    uint32_t *targets;
+    float *dirs, *values;
+    uint32_t n, cap;
+} dnrt_list;
+
+typedef struct {
+    lc_engine_object key; /* the object as its receivers were found (valid = 1) */
+    int blockers, valid, used;
+    dnrt_list caches;
+} dnrt_slot;
+
+static void dnrt_list_free(dnrt_list *l) {
+    free(l->targets);
+    free(l->dirs);
+    free(l->values);
+    memset(l, 0, sizeof *l);
+}
+
+static int dnrt_list_reserve(dnrt_list *l, uint32_t n) {
+    if (n <= l->cap) return 0;
+    uint32_t cap = l->cap ? l->cap : 256;
+    while (cap < n) cap *= 2;
+    uint32_t *t = realloc(l->targets, (size_t)cap * sizeof *t);
+    if (t) l->targets = t;
+    float *dr = t ? realloc(l->dirs, (size_t)cap * 3 * sizeof *dr) : NULL;
+    if (dr) l->dirs = dr;
+    float *va = dr ? realloc(l->values, (size_t)cap * DNRT_VALUES * sizeof *va) : NULL;
+    if (va) l->values = va;
+    if (!va) return -1;
+    l->cap = cap;
+    return 0;
+}
+
+/* Appends src[first, first + n) to l. */
+static int dnrt_list_append(dnrt_list *l, const dnrt_list *src, uint32_t first, uint32_t n) {
+    if (dnrt_list_reserve(l, l->n + n) != 0) return -1;
+    memcpy(l->targets + l->n, src->targets + first, (size_t)n * sizeof *l->targets);
+    memcpy(l->dirs + 3 * (size_t)l->n, src->dirs + 3 * (size_t)first, (size_t)n * 3 * sizeof *l->dirs);
+    memcpy(l->values + (size_t)l->n * DNRT_VALUES, src->values + (size_t)first * DNRT_VALUES,
+           (size_t)n * DNRT_VALUES * sizeof *l->values);
+    l->n += n;
+    return 0;
+}
+
 struct lc_dnrt {
     const lc_lcb_view *v;
     /* Spatial index: caches by bin (CSR), bins of `bin` metres from `origin`. */
@@ -26,12 +71,14 @@ struct lc_dnrt {
     uint32_t bdims[3];
     uint32_t *bin_start; /* bdims product + 1 */
     uint32_t *bin_cache;
-    /* The placement. */
+    /* The placement: every object's receivers, the frame's arrays. */
     lc_dnrt_object *objects;
     uint32_t n_objects, cap_objects;
-    uint32_t *targets;
-    float *dirs, *values;
-    uint32_t n_receivers, cap_receivers;
+    dnrt_list all;
+    /* Each placed object's cache receivers by id, kept while it does not move: moving one
+     * object of many finds only its receivers again. */
+    dnrt_slot *slots;
+    uint32_t n_slots, cap_slots;
     lc_dnrt_frame frame;
 };
 
@@ -42,9 +89,9 @@ void lc_dnrt_release(lc_dnrt *d) {
     free(d->bin_start);
     free(d->bin_cache);
     free(d->objects);
-    free(d->targets);
-    free(d->dirs);
-    free(d->values);
+    dnrt_list_free(&d->all);
+    for (uint32_t i = 0; i < d->n_slots; i++) dnrt_list_free(&d->slots[i].caches);
+    free(d->slots);
     free(d);
 }
 
@@ -189,21 +236,6 @@ static float dnrt_unblocked(RTCScene sc, const float p[3], const float center[3]
     return (float)open / DNRT_BLOCKER_RAYS;
 }
 
-static int dnrt_reserve(lc_dnrt *d, uint32_t n) {
-    if (n <= d->cap_receivers) return 0;
-    uint32_t cap = d->cap_receivers ? d->cap_receivers : 1024;
-    while (cap < n) cap *= 2;
-    uint32_t *t = realloc(d->targets, (size_t)cap * sizeof *t);
-    if (t) d->targets = t;
-    float *dr = t ? realloc(d->dirs, (size_t)cap * 3 * sizeof *dr) : NULL;
-    if (dr) d->dirs = dr;
-    float *va = dr ? realloc(d->values, (size_t)cap * DNRT_VALUES * sizeof *va) : NULL;
-    if (va) d->values = va;
-    if (!va) return -1;
-    d->cap_receivers = cap;
-    return 0;
-}
-
 typedef struct {
     const lc_lcb_transfer *t;
     float m[12], inv[9];            /* placement and the inverse of its linear part */
@@ -213,8 +245,9 @@ typedef struct {
     float eps;
 } dnrt_placing;
 
-/* One receiver at world point p (normal n, or NULL for the full sphere) into the list. */
-static int dnrt_add_receiver(lc_dnrt *d, const dnrt_placing *pl, uint32_t target, const float p[3], const float *n) {
+/* One receiver at world point p (normal n, or NULL for the full sphere) into l. */
+static int dnrt_add_receiver(const lc_dnrt *d, const dnrt_placing *pl, dnrt_list *l, uint32_t target, const float p[3],
+                             const float *n) {
     float dir[3] = {pl->center[0] - p[0], pl->center[1] - p[1], pl->center[2] - p[2]};
     float dist = lc_sm_len(dir);
     if (!(dist > 1e-6f)) return 0;
@@ -232,11 +265,11 @@ static int dnrt_add_receiver(lc_dnrt *d, const dnrt_placing *pl, uint32_t target
         if (vis == 0) return 0;
         for (int c = 0; c < DNRT_VALUES; c++) val[c] *= vis;
     }
-    if (dnrt_reserve(d, d->n_receivers + 1) != 0) return -1;
-    uint32_t r = d->n_receivers++;
-    d->targets[r] = target;
-    memcpy(d->dirs + 3 * (size_t)r, dir, sizeof dir);
-    memcpy(d->values + (size_t)r * DNRT_VALUES, val, sizeof val);
+    if (dnrt_list_reserve(l, l->n + 1) != 0) return -1;
+    uint32_t r = l->n++;
+    l->targets[r] = target;
+    memcpy(l->dirs + 3 * (size_t)r, dir, sizeof dir);
+    memcpy(l->values + (size_t)r * DNRT_VALUES, val, sizeof val);
     return 0;
 }
 
@@ -263,9 +296,8 @@ void lc_dnrt_grid_corners(const lc_lcb_view *v, const float p[3], uint32_t corne
     }
 }
 
-/* Receivers of one object: caches in its outer volume, then the other objects. */
-static int dnrt_place_one(lc_dnrt *d, const dnrt_placing *pl, const lc_engine_object *objects, uint32_t n,
-                          const float *object_pos, uint32_t self) {
+/* The caches in one object's outer volume that it changes, into l. */
+static int dnrt_find_caches(const lc_dnrt *d, const dnrt_placing *pl, dnrt_list *l) {
     const lc_lcb_view *v = d->v;
     uint32_t lo[3], hi[3];
     for (int k = 0; k < 3; k++) {
@@ -288,13 +320,89 @@ static int dnrt_place_one(lc_dnrt *d, const dnrt_placing *pl, const lc_engine_ob
                           dz = cc->position[2] - pl->center[2];
                     if (dx * dx + dy * dy + dz * dz >= r2) continue;
                     int texel = (cc->flags & LC_CACHE_TEXEL) != 0;
-                    if (dnrt_add_receiver(d, pl, c, cc->position, texel ? cc->normal : NULL) != 0) return -1;
+                    if (dnrt_add_receiver(d, pl, l, c, cc->position, texel ? cc->normal : NULL) != 0) return -1;
                 }
             }
-    for (uint32_t j = 0; j < n; j++) {
-        if (j == self || !objects[j].visible) continue;
-        if (dnrt_add_receiver(d, pl, LC_DNRT_OBJECT_RECEIVER | j, object_pos + 3 * (size_t)j, NULL) != 0) return -1;
+    return 0;
+}
+
+/* The slot of object o (by id), kept or new; NULL out of memory. hint: its index last time. */
+static dnrt_slot *dnrt_slot_of(lc_dnrt *d, const lc_engine_object *o, uint32_t hint) {
+    if (hint < d->n_slots && !strcmp(d->slots[hint].key.id, o->id)) return &d->slots[hint];
+    for (uint32_t i = 0; i < d->n_slots; i++)
+        if (!strcmp(d->slots[i].key.id, o->id)) return &d->slots[i];
+    if (d->n_slots == d->cap_slots) {
+        uint32_t cap = d->cap_slots ? 2 * d->cap_slots : 16;
+        dnrt_slot *ns = realloc(d->slots, cap * sizeof *ns);
+        if (!ns) return NULL;
+        d->slots = ns;
+        d->cap_slots = cap;
     }
+    dnrt_slot *sl = &d->slots[d->n_slots++];
+    memset(sl, 0, sizeof *sl);
+    memcpy(sl->key.id, o->id, sizeof sl->key.id);
+    return sl;
+}
+
+/* Slots of objects no longer placed go. */
+static void dnrt_slots_sweep(lc_dnrt *d) {
+    uint32_t k = 0;
+    for (uint32_t i = 0; i < d->n_slots; i++) {
+        if (!d->slots[i].used) {
+            dnrt_list_free(&d->slots[i].caches);
+            continue;
+        }
+        d->slots[i].used = 0;
+        d->slots[k++] = d->slots[i];
+    }
+    d->n_slots = k;
+}
+
+/* Object i's placement record and receivers: its caches (found again only when it moved),
+ * then the other objects' SH points. */
+static int dnrt_place_one(lc_dnrt *d, const lc_engine_object *objects, uint32_t n, const float *object_pos, uint32_t i,
+                          const lc_engine_settings *st, RTCScene sc, float eps) {
+    const lc_engine_object *o = &objects[i];
+    const lc_lcb_transfer *t = lc_lcb_asset_transfer(d->v, o->asset);
+    dnrt_placing pl = {.t = t, .blockers = st->dnrt_blockers, .sc = sc, .eps = eps};
+    lc_sm_object_matrix(o, pl.m);
+    dnrt_invert3(pl.m, pl.inv);
+    lc_sm_transform_point(pl.m, t->center, pl.center);
+    float smax = fmaxf(fmaxf(fabsf(o->scale[0]), fabsf(o->scale[1])), fabsf(o->scale[2]));
+    pl.radius = t->radius * smax;
+    pl.outer = t->outer_radius * smax;
+    lc_dnrt_object *dob = &d->objects[d->n_objects];
+    memset(dob, 0, sizeof *dob);
+    dob->object = i;
+    dob->coeffs = t->coeffs;
+    memcpy(dob->center, pl.center, sizeof dob->center);
+    float r[9]; /* the rotation (with any reflection) of the placement, row-major */
+    for (int col = 0; col < 3; col++) {
+        float l = lc_sm_len(pl.m + 3 * col);
+        for (int row = 0; row < 3; row++) r[3 * row + col] = pl.m[3 * col + row] / l;
+    }
+    lc_sh_rotation_l2(r, dob->to_local);
+    lc_dnrt_grid_corners(d->v, object_pos + 3 * (size_t)i, dob->corner, dob->corner_w);
+    dnrt_slot *sl = dnrt_slot_of(d, o, d->n_objects);
+    if (!sl) return -1;
+    sl->used = 1;
+    if (!sl->valid || sl->blockers != st->dnrt_blockers || memcmp(&sl->key, o, sizeof *o) != 0) {
+        sl->valid = 0;
+        sl->caches.n = 0;
+        if (dnrt_find_caches(d, &pl, &sl->caches) != 0) return -1;
+        sl->key = *o;
+        sl->blockers = st->dnrt_blockers;
+        sl->valid = 1;
+    }
+    dob->first = d->all.n;
+    if (dnrt_list_append(&d->all, &sl->caches, 0, sl->caches.n) != 0) return -1;
+    for (uint32_t j = 0; j < n; j++) {
+        if (j == i || !objects[j].visible) continue;
+        if (dnrt_add_receiver(d, &pl, &d->all, LC_DNRT_OBJECT_RECEIVER | j, object_pos + 3 * (size_t)j, NULL) != 0)
+            return -1;
+    }
+    dob->count = d->all.n - dob->first;
+    d->n_objects++;
     return 0;
 }
 
@@ -302,12 +410,11 @@ int lc_dnrt_place(lc_dnrt *d, const lc_engine_object *objects, uint32_t n, const
                   const lc_engine_settings *st, RTCScene static_scene, float eps, char *err, size_t errlen) {
     const lc_lcb_view *v = d->v;
     d->n_objects = 0;
-    d->n_receivers = 0;
+    d->all.n = 0;
     if (st->dnrt && v->n_transfers && v->n_caches) {
         for (uint32_t i = 0; i < n; i++) {
             const lc_engine_object *o = &objects[i];
-            const lc_lcb_transfer *t = lc_lcb_asset_transfer(v, o->asset);
-            if (!t || !o->visible || o->dnrt_off) continue;
+            if (!lc_lcb_asset_transfer(v, o->asset) || !o->visible || o->dnrt_off) continue;
             if (d->n_objects == d->cap_objects) {
                 uint32_t cap = d->cap_objects ? 2 * d->cap_objects : 16;
                 lc_dnrt_object *no = realloc(d->objects, cap * sizeof *no);
@@ -315,41 +422,22 @@ int lc_dnrt_place(lc_dnrt *d, const lc_engine_object *objects, uint32_t n, const
                 d->objects = no;
                 d->cap_objects = cap;
             }
-            dnrt_placing pl = {.t = t, .blockers = st->dnrt_blockers, .sc = static_scene, .eps = eps};
-            lc_sm_object_matrix(o, pl.m);
-            dnrt_invert3(pl.m, pl.inv);
-            lc_sm_transform_point(pl.m, t->center, pl.center);
-            float smax = fmaxf(fmaxf(fabsf(o->scale[0]), fabsf(o->scale[1])), fabsf(o->scale[2]));
-            pl.radius = t->radius * smax;
-            pl.outer = t->outer_radius * smax;
-            lc_dnrt_object *dob = &d->objects[d->n_objects];
-            memset(dob, 0, sizeof *dob);
-            dob->object = i;
-            dob->coeffs = t->coeffs;
-            memcpy(dob->center, pl.center, sizeof dob->center);
-            float r[9]; /* the rotation (with any reflection) of the placement, row-major */
-            for (int col = 0; col < 3; col++) {
-                float l = lc_sm_len(pl.m + 3 * col);
-                for (int row = 0; row < 3; row++) r[3 * row + col] = pl.m[3 * col + row] / l;
-            }
-            lc_sh_rotation_l2(r, dob->to_local);
-            lc_dnrt_grid_corners(v, object_pos + 3 * (size_t)i, dob->corner, dob->corner_w);
-            dob->first = d->n_receivers;
-            if (dnrt_place_one(d, &pl, objects, n, object_pos, i) != 0) goto oom;
-            dob->count = d->n_receivers - dob->first;
-            d->n_objects++;
+            if (dnrt_place_one(d, objects, n, object_pos, i, st, static_scene, eps) != 0) goto oom;
         }
     }
+    dnrt_slots_sweep(d);
     d->frame = (lc_dnrt_frame){.objects = d->objects,
                                .n_objects = d->n_objects,
-                               .targets = d->targets,
-                               .dirs = d->dirs,
-                               .values = d->values,
-                               .n_receivers = d->n_receivers,
+                               .targets = d->all.targets,
+                               .dirs = d->all.dirs,
+                               .values = d->all.values,
+                               .n_receivers = d->all.n,
                                .generation = d->frame.generation + 1};
     return 0;
 oom:
-    d->n_objects = d->n_receivers = 0;
+    d->n_objects = d->all.n = 0;
+    for (uint32_t i = 0; i < d->n_slots; i++) d->slots[i].used = d->slots[i].valid ? 1 : 0;
+    dnrt_slots_sweep(d);
     d->frame = (lc_dnrt_frame){.generation = d->frame.generation + 1};
     lc_set_err(err, errlen, "out of memory placing objects for DNRT");
     return -1;
