@@ -15,8 +15,47 @@ static void fib_dir(int i, int n, float d[3]) {
     d[2] = (float)z;
 }
 
+/* lc_sh_rotation_l2: for random rotations (and a reflection) and random coefficients,
+ * f(r n) = sum c_local y(n) at random directions n. */
+static void test_rotation_l2(void) {
+    lc_rng rng = lc_rng_seed(42, 7);
+    double worst = 0;
+    for (int trial = 0; trial < 20; trial++) {
+        float q[4], n2 = 0;
+        for (int k = 0; k < 4; k++) {
+            q[k] = lc_rng_float(&rng) * 2 - 1;
+            n2 += q[k] * q[k];
+        }
+        float l = sqrtf(n2), x = q[0] / l, y = q[1] / l, z = q[2] / l, w = q[3] / l;
+        float r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - z * w),     2 * (x * z + y * w),
+                      2 * (x * y + z * w),     1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+                      2 * (x * z - y * w),     2 * (y * z + x * w),     1 - 2 * (x * x + y * y)};
+        if (trial == 19) /* a mirror: negate the first column */
+            for (int row = 0; row < 3; row++) r[3 * row] = -r[3 * row];
+        float m[9][9], cw[9], cl[9];
+        lc_sh_rotation_l2(r, m);
+        for (int j = 0; j < 9; j++) cw[j] = lc_rng_float(&rng) * 2 - 1;
+        for (int i = 0; i < 9; i++) {
+            cl[i] = 0;
+            for (int j = 0; j < 9; j++) cl[i] += m[i][j] * cw[j];
+        }
+        for (int s = 0; s < 50; s++) {
+            float n[3], wn[3], yl[9], yw[9];
+            fib_dir(s * 7 + trial, 400, n);
+            for (int k = 0; k < 3; k++) wn[k] = r[3 * k] * n[0] + r[3 * k + 1] * n[1] + r[3 * k + 2] * n[2];
+            lc_sh_eval(3, n, yl);
+            lc_sh_eval(3, wn, yw);
+            double fw = 0, fl = 0;
+            for (int j = 0; j < 9; j++) fw += cw[j] * yw[j], fl += cl[j] * yl[j];
+            worst = fmax(worst, fabs(fw - fl));
+        }
+    }
+    CHECK(worst < 1e-4, "lc_sh_rotation_l2: f(r n) vs rotated coefficients, worst %g", worst);
+}
+
 int main(void) {
     enum { N = 200000, B = 8, C = B * B };
+    test_rotation_l2();
     /* Orthonormality: int y_i y_j dw = delta_ij. */
     static double gram[C][C];
     float y[C];
