@@ -3,8 +3,16 @@
  *
  *   per pass: radiosity.comp (B = B0 + albedo E_ind), pull.comp once per BFS level bottom-up,
  *             chroma.comp (RGB -> YCoCg at the nodes, when compressing), gather.comp (cache
- *             SH; compiled per band count), feedback.comp (E_ind per surfel)
+ *             SH; compiled per band count), dnrt.comp (placed objects, engine/dnrt.h: prep,
+ *             then apply once per object), feedback.comp (E_ind per surfel)
  *   then:     lightmap.comp, grid.comp, objects.comp
+ *
+ * DNRT, as tcpu_run: intermediate passes also gather the objects' corner caches that no
+ * surfel reads and change only the caches some surfel reads; the last pass samples the
+ * objects' SH (grid.comp + objects.comp) before DNRT changes the caches, then adds the other
+ * objects' changes to it. The frame's objects and receivers are uploaded when its generation
+ * changes (placement or lights); receivers are bound per object as a window, so only one
+ * object's receivers need fit a binding.
  *
  * The static bake data is uploaded once at create; B0 and the object positions each run.
  * E_ind stays on the GPU across runs (progressive mode). Outputs are read back into host
@@ -36,7 +44,7 @@
 
 #define TGL_LOCAL 64 /* local_size_x of every shader */
 #define TGL_CAP LC_SH_MAX_COEFFS
-#define TGL_MAX_STAMPS 160 /* 5 per pass x 17 passes + 4 */
+#define TGL_MAX_STAMPS 160 /* 6 per pass x 17 passes, 2 more in the last, + 4 */
 #define TGL_MAX_BOUNCES 16
 
 /* std430 mirrors of the shader structs (see shaders/<name>.comp). */
@@ -49,9 +57,19 @@ typedef struct {
 } tgl_node;
 typedef struct {
     float normal[3];
-    uint32_t flags, link_count, pad[3];
+    uint32_t flags, link_count, fresh, pad[2]; /* fresh: some surfel reads it (intermediate passes gather it) */
 } tgl_cache;
-_Static_assert(sizeof(tgl_surfel) == 32 && sizeof(tgl_node) == 16 && sizeof(tgl_cache) == 32, "std430 layout");
+typedef struct { /* dnrt.comp's Obj */
+    uint32_t coeffs, pad[3];
+    uint32_t corner[8];
+    float corner_w[8];
+    float to_local[81];
+    float c_dir[27];
+} tgl_dnrt_object;
+#define TGL_DNRT_RECORD 40 /* floats per receiver: target bits, direction, T (27), K (9) */
+_Static_assert(sizeof(tgl_surfel) == 32 && sizeof(tgl_node) == 16 && sizeof(tgl_cache) == 32 &&
+                   sizeof(tgl_dnrt_object) == 512,
+               "std430 layout");
 _Static_assert(sizeof(lc_lcb_link) == 12, "links are uploaded as mapped");
 
 enum { TGL_RADIOSITY, TGL_PULL, TGL_CHROMA, TGL_FEEDBACK, TGL_LIGHTMAP, TGL_GRID, TGL_OBJECTS, TGL_N_PROGS };
@@ -64,8 +82,11 @@ typedef struct tgl {
     int lost;            /* a run saw a lost context: every later run fails fast */
     uint32_t cells;
     size_t texels;
-    uint32_t chunk; /* caches per gather window */
+    uint32_t chunk;    /* caches per gather window */
+    size_t bind_limit; /* bytes one SSBO binding may span */
+    size_t ssbo_align; /* binding offset alignment */
     GLuint prog[TGL_N_PROGS];
+    GLuint dnrt_prep, dnrt_apply;                            /* dnrt.comp, both stages */
     GLuint gather[LC_SH_MAX_BANDS + 1][LC_SH_MAX_BANDS + 1]; /* [bands][Co/Cg bands], compiled on first use */
     /* Static (create): */
     GLuint b_surfels, b_nodes, b_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
@@ -74,6 +95,15 @@ typedef struct tgl {
     GLuint b_b0, b_radiosity, b_e_ind, b_flux, b_cache_sh, b_sh9, b_lightmap, b_grid_sh, b_obj_pos, b_obj_sh;
     uint32_t gpu_object_cap;
     GLuint queries[TGL_MAX_STAMPS];
+    /* DNRT (engine/dnrt.h), uploaded when the frame changes: */
+    uint8_t *feedback_cache; /* per cache: some surfel reads it */
+    GLuint b_dn_obj, b_dn_inc, b_dn_rec, b_dn_list;
+    size_t dn_obj_bytes, dn_inc_bytes, dn_rec_bytes, dn_list_bytes; /* their sizes */
+    uint32_t n_dn_list;                                             /* corner caches no surfel reads */
+    const lc_dnrt_frame *dn_frame; /* what the buffers hold: this frame at dn_generation */
+    uint64_t dn_generation;
+    void *dn_stage; /* host staging for the uploads */
+    size_t dn_stage_cap;
     /* Host outputs (owned; the frame points here until the next run): */
     lc_transport_outputs out;
     float *cache_tmp; /* the cache SH as read back, at the GPU's stride of bands^2 */
@@ -89,16 +119,20 @@ static void tgl_release(void *impl) {
         for (int b = 0; b <= LC_SH_MAX_BANDS; b++)
             for (int c = 0; c <= LC_SH_MAX_BANDS; c++)
                 if (t->gather[b][c]) glDeleteProgram(t->gather[b][c]);
-        GLuint bufs[] = {t->b_surfels,    t->b_nodes,   t->b_links,   t->b_caches,   t->b_lm_index,
-                         t->b_grid_index, t->b_cone,    t->b_shk,     t->b_list,     t->b_b0,
-                         t->b_radiosity,  t->b_e_ind,   t->b_flux,    t->b_cache_sh, t->b_sh9,
-                         t->b_lightmap,   t->b_grid_sh, t->b_obj_pos, t->b_obj_sh};
+        if (t->dnrt_prep) glDeleteProgram(t->dnrt_prep);
+        if (t->dnrt_apply) glDeleteProgram(t->dnrt_apply);
+        GLuint bufs[] = {t->b_surfels, t->b_nodes,    t->b_links,  t->b_caches,   t->b_lm_index,  t->b_grid_index,
+                         t->b_cone,    t->b_shk,      t->b_list,   t->b_b0,       t->b_radiosity, t->b_e_ind,
+                         t->b_flux,    t->b_cache_sh, t->b_sh9,    t->b_lightmap, t->b_grid_sh,   t->b_obj_pos,
+                         t->b_obj_sh,  t->b_dn_obj,   t->b_dn_inc, t->b_dn_rec,   t->b_dn_list};
         glDeleteBuffers((GLsizei)(sizeof bufs / sizeof bufs[0]), bufs); /* 0 names are ignored */
         if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
     }
     lc_egl_release(t->egl);
     lc_transport_outputs_release(&t->out);
     free(t->cache_tmp);
+    free(t->feedback_cache);
+    free(t->dn_stage);
     free(t);
 }
 
@@ -169,6 +203,8 @@ static int tgl_fit_limits(tgl *t, char *err, size_t errlen) {
         return -1;
     }
     t->chunk = chunk > v->n_caches ? (v->n_caches ? v->n_caches : 1) : (uint32_t)chunk;
+    t->bind_limit = limit;
+    t->ssbo_align = align > 0 ? (size_t)align : 1;
     return 0;
 }
 
@@ -179,6 +215,11 @@ static int tgl_compile(tgl *t, int def_bands, char *err, size_t errlen) {
         t->prog[i] = lc_gl_compile_program(tgl_prog_names[i], lc_gl_shader_source(tgl_prog_names[i]), err, errlen);
         if (!t->prog[i]) return -1;
     }
+    const char *dnrt = lc_gl_shader_source("dnrt");
+    if (!(t->dnrt_prep = lc_gl_compile_program_defs("dnrt.comp (prep)", dnrt, "#define DNRT_PREP 1\n", err, errlen)))
+        return -1;
+    if (!(t->dnrt_apply = lc_gl_compile_program_defs("dnrt.comp (apply)", dnrt, "#define DNRT_PREP 0\n", err, errlen)))
+        return -1;
     return tgl_gather_program(t, def_bands, def_bands, err, errlen) ? 0 : -1;
 }
 
@@ -218,6 +259,7 @@ static int tgl_upload_structs(tgl *t, char *err, size_t errlen) {
         memcpy(cc[c].normal, v->caches[c].normal, sizeof cc[c].normal);
         cc[c].flags = v->caches[c].flags;
         cc[c].link_count = v->caches[c].link_count;
+        cc[c].fresh = t->feedback_cache[c];
     }
     if (!(t->b_caches = lc_gl_buffer((size_t)v->n_caches * sizeof *cc, cc, "caches", err, errlen))) goto err;
     rc = 0;
@@ -226,10 +268,11 @@ err:
     return rc;
 }
 
-/* Which caches some surfel reads: the only ones intermediate passes need. */
+/* Which caches some surfel reads (t->feedback_cache, and their list): the only ones
+ * intermediate passes need. */
 static int tgl_upload_feedback_list(tgl *t, char *err, size_t errlen) {
     const lc_lcb_view *v = t->v;
-    uint8_t *used = calloc(v->n_caches ? v->n_caches : 1, 1);
+    uint8_t *used = t->feedback_cache = calloc(v->n_caches ? v->n_caches : 1, 1);
     uint32_t *list = calloc(v->n_caches ? v->n_caches : 1, sizeof *list);
     int rc = -1;
     if (!used || !list) {
@@ -243,7 +286,6 @@ static int tgl_upload_feedback_list(tgl *t, char *err, size_t errlen) {
     if (!(t->b_list = lc_gl_buffer((size_t)t->n_feedback * 4, list, "feedback cache list", err, errlen))) goto err;
     rc = 0;
 err:
-    free(used);
     free(list);
     return rc;
 }
@@ -317,10 +359,12 @@ static void *tgl_create(const lc_lcb_view *v, int threads, char *err, size_t err
     if (tgl_fit_limits(t, err, errlen) != 0) goto err;
     int def_bands = v->sh_bands >= 1 && v->sh_bands <= LC_SH_MAX_BANDS ? (int)v->sh_bands : 3;
     if (tgl_compile(t, def_bands, err, errlen) != 0) goto err;
-    if (tgl_upload_structs(t, err, errlen) != 0 || tgl_upload_feedback_list(t, err, errlen) != 0 ||
+    if (tgl_upload_feedback_list(t, err, errlen) != 0 || tgl_upload_structs(t, err, errlen) != 0 ||
         tgl_upload_tables(t, err, errlen) != 0)
         goto err;
     for (int i = 0; i < TGL_N_PROGS; i++) tgl_warm_up(t, t->prog[i]);
+    tgl_warm_up(t, t->dnrt_prep);
+    tgl_warm_up(t, t->dnrt_apply);
     tgl_warm_up(t, t->gather[def_bands][def_bands]);
     if (tgl_upload_sh_norm(t, err, errlen) != 0 || tgl_create_run_buffers(t, err, errlen) != 0) goto err;
     if (lc_gl_check("egl transport: create", err, errlen) != 0) goto err;
@@ -418,11 +462,15 @@ static void tgl_to_ycocg(tgl *t) {
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
 }
 
-/* Cache SH from the links (gather.comp). One window (the usual case) lets an intermediate
- * pass gather only the caches some surfel reads; else every window of `chunk` caches. */
-static void tgl_gather(tgl *t, GLuint gather, const lc_engine_settings *st, int last) {
+/* Whether an intermediate pass gathers only the caches some surfel reads: with one window
+ * (the usual case) and some caches no surfel reads. */
+static int tgl_gather_uses_list(const tgl *t, int last) {
+    return !last && t->chunk >= t->v->n_caches && t->n_feedback < t->v->n_caches;
+}
+
+/* The gather's bindings and uniforms but the windows and the list (gather.comp). */
+static void tgl_gather_setup(tgl *t, GLuint gather, const lc_engine_settings *st) {
     const lc_lcb_view *v = t->v;
-    const int nc = (int)(st->bands * st->bands);
     glUseProgram(gather);
     lc_gl_bind(1, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
     lc_gl_bind(2, t->b_flux, 0, (size_t)v->n_nodes * 12);
@@ -433,15 +481,29 @@ static void tgl_gather(tgl *t, GLuint gather, const lc_engine_settings *st, int 
     glProgramUniform1ui(gather, 2, v->links_per_cache);
     glProgramUniform1i(gather, 4, lc_transport_texel_bands(st) * lc_transport_texel_bands(st));
     glProgramUniform1i(gather, 5, lc_transport_texel_band1(st));
+}
+
+/* The caches in `list` (n of them; one window only). */
+static void tgl_gather_list(tgl *t, GLuint gather, const lc_engine_settings *st, GLuint list, uint32_t n) {
+    const lc_lcb_view *v = t->v;
+    lc_gl_bind(0, t->b_links, 0, (size_t)v->n_caches * v->links_per_cache * sizeof(lc_lcb_link));
+    lc_gl_bind(4, t->b_cache_sh, 0, (size_t)v->n_caches * st->bands * st->bands * 12);
+    lc_gl_bind(6, list, 0, (size_t)n * 4);
+    glProgramUniform1ui(gather, 1, 0);
+    glProgramUniform1ui(gather, 3, 1);
+    tgl_uniform_count(gather, n);
+    lc_gl_dispatch_1d(n, TGL_LOCAL);
+}
+
+/* Cache SH from the links (gather.comp). One window (the usual case) lets an intermediate
+ * pass gather only the caches some surfel reads; else every window of `chunk` caches. */
+static void tgl_gather(tgl *t, GLuint gather, const lc_engine_settings *st, int last) {
+    const lc_lcb_view *v = t->v;
+    const int nc = (int)(st->bands * st->bands);
+    tgl_gather_setup(t, gather, st);
     const size_t link_bytes = (size_t)v->links_per_cache * sizeof(lc_lcb_link), sh_bytes = (size_t)nc * 12;
-    int single_window = t->chunk >= v->n_caches;
-    if (!last && single_window && t->n_feedback < v->n_caches) {
-        lc_gl_bind(0, t->b_links, 0, (size_t)v->n_caches * link_bytes);
-        lc_gl_bind(4, t->b_cache_sh, 0, (size_t)v->n_caches * sh_bytes);
-        glProgramUniform1ui(gather, 1, 0);
-        glProgramUniform1ui(gather, 3, 1);
-        tgl_uniform_count(gather, t->n_feedback);
-        lc_gl_dispatch_1d(t->n_feedback, TGL_LOCAL);
+    if (tgl_gather_uses_list(t, last)) {
+        tgl_gather_list(t, gather, st, t->b_list, t->n_feedback);
     } else {
         glProgramUniform1ui(gather, 3, 0);
         for (uint32_t c0 = 0; c0 < v->n_caches; c0 += t->chunk) {
@@ -528,6 +590,186 @@ static int tgl_objects(tgl *t, const lc_transport_input *in, char *err, size_t e
     return 0;
 }
 
+/* --- DNRT (engine/dnrt.h; the CPU's tcpu_dnrt) ------------------------------------------------ */
+
+/* *buf holds at least `bytes` (a new, larger buffer when not; contents lost). -1 with err. */
+static int tgl_ensure(GLuint *buf, size_t *have, size_t bytes, const char *what, char *err, size_t errlen) {
+    if (*buf && bytes <= *have) return 0;
+    size_t cap = *have > 4096 ? *have : 4096;
+    while (cap < bytes) cap *= 2;
+    if (*buf) glDeleteBuffers(1, buf);
+    *buf = 0;
+    *have = 0;
+    if (!(*buf = lc_gl_buffer(cap, NULL, what, err, errlen))) return -1;
+    *have = cap;
+    return 0;
+}
+
+/* Receiver records per aligned binding start: a window over one object's receivers starts
+ * at a multiple of this. */
+static size_t tgl_dnrt_step(const tgl *t) {
+    size_t a = t->ssbo_align, b = TGL_DNRT_RECORD * 4;
+    while (b) {
+        size_t r = a % b;
+        a = b;
+        b = r;
+    }
+    return t->ssbo_align / a;
+}
+
+/* The objects' corner caches no surfel reads, once each (tcpu_dnrt_corner_list), into list
+ * (8 per object at most); returns their count. */
+static uint32_t tgl_dnrt_corner_list(const tgl *t, const lc_dnrt_frame *f, uint32_t *list) {
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < f->n_objects; i++)
+        for (int k = 0; k < 8; k++) {
+            uint32_t c = f->objects[i].corner[k];
+            int seen = t->feedback_cache[c];
+            for (uint32_t j = 0; j < n && !seen; j++) seen = list[j] == c;
+            if (!seen) list[n++] = c;
+        }
+    return n;
+}
+
+/* Host staging of at least `bytes`, or NULL with err. */
+static void *tgl_dnrt_staging(tgl *t, size_t bytes, char *err, size_t errlen) {
+    if (bytes <= t->dn_stage_cap) return t->dn_stage;
+    void *p = realloc(t->dn_stage, bytes);
+    if (!p) {
+        lc_set_err(err, errlen, "egl transport: out of memory for %zu bytes of DNRT uploads", bytes);
+        return NULL;
+    }
+    t->dn_stage = p;
+    t->dn_stage_cap = bytes;
+    return p;
+}
+
+/* The objects (dnrt.comp's Obj) and their corner list into their buffers. */
+static int tgl_dnrt_upload_objects(tgl *t, const lc_dnrt_frame *f, char *err, size_t errlen) {
+    size_t bytes = (size_t)f->n_objects * sizeof(tgl_dnrt_object);
+    tgl_dnrt_object *o = tgl_dnrt_staging(t, bytes, err, errlen);
+    if (!o) return -1;
+    for (uint32_t i = 0; i < f->n_objects; i++) {
+        const lc_dnrt_object *d = &f->objects[i];
+        memset(&o[i], 0, sizeof o[i]);
+        o[i].coeffs = d->coeffs;
+        memcpy(o[i].corner, d->corner, sizeof o[i].corner);
+        memcpy(o[i].corner_w, d->corner_w, sizeof o[i].corner_w);
+        memcpy(o[i].to_local, d->to_local, sizeof o[i].to_local);
+        memcpy(o[i].c_dir, d->c_dir, sizeof o[i].c_dir);
+    }
+    if (tgl_ensure(&t->b_dn_obj, &t->dn_obj_bytes, bytes, "DNRT objects", err, errlen) != 0 ||
+        tgl_ensure(&t->b_dn_inc, &t->dn_inc_bytes, (size_t)f->n_objects * 54 * 4, "DNRT incident SH", err, errlen) != 0)
+        return -1;
+    glNamedBufferSubData(t->b_dn_obj, 0, (GLsizeiptr)bytes, o);
+    uint32_t *list = tgl_dnrt_staging(t, (size_t)f->n_objects * 8 * 4, err, errlen);
+    if (!list) return -1;
+    t->n_dn_list = tgl_dnrt_corner_list(t, f, list);
+    if (tgl_ensure(&t->b_dn_list, &t->dn_list_bytes, (size_t)t->n_dn_list * 4, "DNRT corner list", err, errlen) != 0)
+        return -1;
+    glNamedBufferSubData(t->b_dn_list, 0, (GLsizeiptr)((size_t)t->n_dn_list * 4), list);
+    return 0;
+}
+
+/* The frame into the GPU buffers when it changed since the last upload (its generation):
+ * objects, corner list, and receivers as records of TGL_DNRT_RECORD floats. -1 with err
+ * when one object's receivers do not fit a binding or out of memory. */
+static int tgl_dnrt_upload(tgl *t, const lc_dnrt_frame *f, char *err, size_t errlen) {
+    if (f == t->dn_frame && f->generation == t->dn_generation) return 0;
+    t->dn_frame = NULL;
+    const size_t rec = TGL_DNRT_RECORD * 4, step = tgl_dnrt_step(t);
+    for (uint32_t i = 0; i < f->n_objects; i++)
+        if (((size_t)f->objects[i].count + step) * rec > t->bind_limit) {
+            lc_set_err(err, errlen, "dnrt: object %u has %u receivers (%zu MiB), over the %zu MiB storage block limit",
+                       f->objects[i].object, f->objects[i].count, ((size_t)f->objects[i].count * rec) >> 20,
+                       t->bind_limit >> 20);
+            return -1;
+        }
+    if (tgl_dnrt_upload_objects(t, f, err, errlen) != 0) return -1;
+    size_t bytes = (size_t)f->n_receivers * rec;
+    float *r = tgl_dnrt_staging(t, bytes, err, errlen);
+    if (!r) return -1;
+    for (uint32_t i = 0; i < f->n_receivers; i++) {
+        float *o = r + (size_t)i * TGL_DNRT_RECORD;
+        memcpy(&o[0], &f->targets[i], 4);
+        memcpy(&o[1], f->dirs + 3 * (size_t)i, 3 * sizeof(float));
+        memcpy(&o[4], f->values + 36 * (size_t)i, 36 * sizeof(float));
+    }
+    if (tgl_ensure(&t->b_dn_rec, &t->dn_rec_bytes, bytes, "DNRT receivers", err, errlen) != 0) return -1;
+    glNamedBufferSubData(t->b_dn_rec, 0, (GLsizeiptr)bytes, r);
+    t->dn_frame = f;
+    t->dn_generation = f->generation;
+    return 0;
+}
+
+/* Each object's incident SH from its corner caches, rotated (dnrt.comp, prep). */
+static void tgl_dnrt_prep(tgl *t, const lc_dnrt_frame *f, int bands) {
+    GLuint p = t->dnrt_prep;
+    glUseProgram(p);
+    lc_gl_bind(0, t->b_dn_obj, 0, (size_t)f->n_objects * sizeof(tgl_dnrt_object));
+    lc_gl_bind(1, t->b_dn_inc, 0, (size_t)f->n_objects * 54 * 4);
+    lc_gl_bind(2, t->b_sh9, 0, (size_t)t->v->n_caches * 108);
+    tgl_uniform_count(p, f->n_objects);
+    glProgramUniform1i(p, 1, bands);
+    lc_gl_dispatch_1d(f->n_objects, TGL_LOCAL);
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+}
+
+/* The receivers' sums (dnrt.comp, apply): per cache SH window, one dispatch per object in
+ * frame order with a barrier after each (no two invocations of a dispatch share a target:
+ * an object lists each cache and each other object once). */
+static void tgl_dnrt_apply(tgl *t, const lc_dnrt_frame *f, const lc_engine_settings *st, int last) {
+    const lc_lcb_view *v = t->v;
+    const GLuint p = t->dnrt_apply;
+    const int tb = lc_transport_texel_bands(st), nc = (int)(st->bands * st->bands);
+    const size_t rec = TGL_DNRT_RECORD * 4, step = tgl_dnrt_step(t), sh_bytes = (size_t)nc * 12;
+    glUseProgram(p);
+    lc_gl_bind(0, t->b_dn_obj, 0, (size_t)f->n_objects * sizeof(tgl_dnrt_object));
+    lc_gl_bind(1, t->b_dn_inc, 0, (size_t)f->n_objects * 54 * 4);
+    lc_gl_bind(3, t->b_caches, 0, (size_t)v->n_caches * sizeof(tgl_cache));
+    lc_gl_bind(5, t->b_sh9, 0, (size_t)v->n_caches * 108);
+    lc_gl_bind(6, t->b_obj_sh ? t->b_obj_sh : t->b_dn_inc, 0, (size_t)t->gpu_object_cap * 108);
+    lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
+    glProgramUniform1ui(p, 5, (GLuint)nc);
+    glProgramUniform1ui(p, 6, v->n_texel_caches);
+    glProgramUniform1i(p, 7, lc_transport_texel_band1(st) ? 1 : 0);
+    glProgramUniform1i(p, 8, tb * tb);
+    glProgramUniform1i(p, 9, nc);
+    glProgramUniform1i(p, 10, (int)st->bands);
+    glProgramUniform1i(p, 11, last);
+    for (uint32_t c0 = 0; c0 < v->n_caches; c0 += t->chunk) {
+        uint32_t cnt = v->n_caches - c0 < t->chunk ? v->n_caches - c0 : t->chunk;
+        lc_gl_bind(4, t->b_cache_sh, c0 * sh_bytes, cnt * sh_bytes);
+        glProgramUniform1ui(p, 3, c0);
+        glProgramUniform1ui(p, 4, cnt);
+        glProgramUniform1i(p, 12, last && c0 == 0); /* the objects' SH: once */
+        for (uint32_t i = 0; i < f->n_objects; i++) {
+            const lc_dnrt_object *o = &f->objects[i];
+            if (!o->count) continue;
+            size_t base = o->first - o->first % step; /* an aligned window over its receivers */
+            lc_gl_bind(2, t->b_dn_rec, base * rec, (o->first + o->count - base) * rec);
+            glProgramUniform1ui(p, 1, (GLuint)(o->first - base));
+            glProgramUniform1ui(p, 2, i);
+            tgl_uniform_count(p, o->count);
+            lc_gl_dispatch_1d(o->count, TGL_LOCAL);
+            glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+        }
+    }
+}
+
+/* DNRT after a pass's gather, as tcpu_dnrt: intermediate passes first gather the corner
+ * caches the list skipped; then the objects' incident SH and the receivers' sums. */
+static void tgl_dnrt(tgl *t, GLuint gather, const lc_transport_input *in, int last) {
+    const lc_engine_settings *st = &in->settings;
+    if (tgl_gather_uses_list(t, last) && t->n_dn_list) {
+        tgl_gather_setup(t, gather, st);
+        tgl_gather_list(t, gather, st, t->b_dn_list, t->n_dn_list);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    }
+    tgl_dnrt_prep(t, in->dnrt, (int)st->bands);
+    tgl_dnrt_apply(t, in->dnrt, st, last);
+}
+
 /* Reads every output back into the host arrays, each read timed into its stage's rb[]; the
  * cache SH goes from the GPU's stride of bands^2 to the frame's LC_SH_MAX_COEFFS (as the CPU
  * backend's). -1 with err out of memory for the SH lightmap. */
@@ -562,7 +804,36 @@ static void tgl_stage_times(tgl *t, const tgl_stamps *ts, const double rb[LC_STA
         if (i > 0 && now >= prev) ms[ts->stage[i]] += (double)(now - prev) * 1e-6;
         prev = now;
     }
-    for (int s = LC_STAGE_BOUNCE; s <= LC_STAGE_CHROMA; s++) fr->stage_ms[s] = ms[s] + rb[s];
+    for (int s = LC_STAGE_BOUNCE; s <= LC_STAGE_DNRT; s++) fr->stage_ms[s] = ms[s] + rb[s];
+}
+
+/* One transport pass (tcpu_run's loop body): with DNRT the last one samples the objects' SH
+ * (grid + objects) before DNRT changes the caches. -1 with err out of memory. */
+static int tgl_pass(tgl *t, GLuint gather, const lc_transport_input *in, int last, tgl_stamps *ts, char *err,
+                    size_t errlen) {
+    const lc_engine_settings *st = &in->settings;
+    tgl_radiosity(t);
+    tgl_stamp(t, ts, LC_STAGE_BOUNCE);
+    tgl_pull(t);
+    tgl_stamp(t, ts, LC_STAGE_PULL);
+    if (lc_transport_chroma(st)) tgl_to_ycocg(t);
+    tgl_stamp(t, ts, LC_STAGE_CHROMA);
+    tgl_gather(t, gather, st, last);
+    tgl_stamp(t, ts, LC_STAGE_GATHER);
+    if (in->dnrt) {
+        if (last) { /* the objects' SH before any object changes the caches */
+            tgl_grid(t, (int)st->bands);
+            tgl_stamp(t, ts, LC_STAGE_GRID);
+            if (tgl_objects(t, in, err, errlen) != 0) return -1;
+            glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+            tgl_stamp(t, ts, LC_STAGE_OBJECTS);
+        }
+        tgl_dnrt(t, gather, in, last);
+        tgl_stamp(t, ts, LC_STAGE_DNRT);
+    }
+    tgl_feedback(t, (int)st->bands);
+    tgl_stamp(t, ts, LC_STAGE_BOUNCE);
+    return 0;
 }
 
 /* Runs on the compute thread: the passes of transport.h in the CPU backend's order, one
@@ -575,33 +846,31 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
     if (!gather) return -1;
     tgl_stamps ts = {0};
     int rc = 0;
+    double rb[LC_STAGE_COUNT] = {0};
+    if (in->dnrt) {
+        double t0 = lc_clock_ms();
+        if (tgl_dnrt_upload(t, in->dnrt, err, errlen) != 0) return -1;
+        rb[LC_STAGE_DNRT] += lc_clock_ms() - t0;
+    }
     tgl_stamp(t, &ts, 0);
 
     glNamedBufferSubData(t->b_b0, 0, (GLsizeiptr)((size_t)v->n_surfels * 12), in->b0);
     if (in->reset_feedback) glClearNamedBufferData(t->b_e_ind, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
     for (uint32_t pass = 0; pass <= st->bounces; pass++) {
-        tgl_radiosity(t);
-        tgl_stamp(t, &ts, LC_STAGE_BOUNCE);
-        tgl_pull(t);
-        tgl_stamp(t, &ts, LC_STAGE_PULL);
-        if (lc_transport_chroma(st)) tgl_to_ycocg(t);
-        tgl_stamp(t, &ts, LC_STAGE_CHROMA);
-        tgl_gather(t, gather, st, pass == st->bounces);
-        tgl_stamp(t, &ts, LC_STAGE_GATHER);
-        tgl_feedback(t, (int)st->bands);
-        tgl_stamp(t, &ts, LC_STAGE_BOUNCE);
+        if (tgl_pass(t, gather, in, pass == st->bounces, &ts, err, errlen) != 0) return -1;
         if ((rc = lc_gl_check("egl transport: bounce pass", err, errlen)) != 0) goto gl_err;
     }
     tgl_lightmap(t, (int)st->bands);
     tgl_stamp(t, &ts, LC_STAGE_LIGHTMAP);
     tgl_grid(t, (int)st->bands);
     tgl_stamp(t, &ts, LC_STAGE_GRID);
-    if (tgl_objects(t, in, err, errlen) != 0) return -1;
-    tgl_stamp(t, &ts, LC_STAGE_OBJECTS);
+    if (!in->dnrt) { /* else sampled in the last pass */
+        if (tgl_objects(t, in, err, errlen) != 0) return -1;
+        tgl_stamp(t, &ts, LC_STAGE_OBJECTS);
+    }
     glUseProgram(0);
     if ((rc = lc_gl_check("egl transport: outputs", err, errlen)) != 0) goto gl_err;
 
-    double rb[LC_STAGE_COUNT] = {0};
     if (tgl_read_back(t, in, rb, err, errlen) != 0) return -1;
     if ((rc = lc_gl_check("egl transport: read-back", err, errlen)) != 0) goto gl_err;
     tgl_stage_times(t, &ts, rb, fr);

@@ -4,6 +4,11 @@
  * must pick the CPU backend on a software rasterizer; a broken shader must fail to compile
  * with its info log in the error. Skips (77) only when no EGL display exists at all.
  *
+ * DNRT (engine/dnrt.h) is on in the random states (blockers random, objects scaled, rotated,
+ * some with dnrt_off) and in bands 6..8; on the Cornell box two cubes (one on the floor, one
+ * above it) must agree too, and the EGL lightmap under the floor cube must differ from the one
+ * with DNRT off by more than the tolerance (so the agreement cannot come from both lacking it).
+ *
  * Agreement metric, per output array (b = CPU, a = EGL):
  *   max_i |a_i - b_i| / max(|b_i|, 1e-3 * max_i |b_i|)  <=  1e-3
  * i.e. relative where values are not tiny next to the array's largest, absolute (1e-6 of the
@@ -90,21 +95,32 @@ static void print_stages(const char *label, const lc_engine_frame *fr) {
     fprintf(stderr, " | total %.2f ms\n", fr->total_ms);
 }
 
-/* Relights both engines with st and compares; optionally prints timings. */
-static double relight_both(lc_engine *gpu, lc_engine *cpu, const lc_lcb_view *v, const lc_engine_state *st,
-                           const char *label, int timings) {
+/* Relights both engines with st and compares; optionally prints timings and returns the
+ * EGL frame (*gpu_frame, when not NULL; NULL if a relight failed). */
+static double relight_both_frame(lc_engine *gpu, lc_engine *cpu, const lc_lcb_view *v, const lc_engine_state *st,
+                                 const char *label, int timings, const lc_engine_frame **gpu_frame) {
     const lc_engine_frame *fg, *fc;
     char err[512];
+    if (gpu_frame) *gpu_frame = NULL;
     int rg = lc_engine_relight(gpu, st, &fg, err, sizeof err);
     CHECK(rg == 0, "%s: egl relight: %s", label, err);
     int rc = lc_engine_relight(cpu, st, &fc, err, sizeof err);
     CHECK(rc == 0, "%s: cpu relight: %s", label, err);
     if (rg || rc) return INFINITY;
+    CHECK(fg->dnrt_objects == fc->dnrt_objects && fg->dnrt_receivers == fc->dnrt_receivers,
+          "%s: DNRT placements differ (egl %u objects %u receivers, cpu %u/%u)", label, fg->dnrt_objects,
+          fg->dnrt_receivers, fc->dnrt_objects, fc->dnrt_receivers);
+    if (gpu_frame) *gpu_frame = fg;
     if (timings) {
         print_stages("cpu", fc);
         print_stages("egl", fg);
     }
     return compare_frames(fg, fc, v, label);
+}
+
+static double relight_both(lc_engine *gpu, lc_engine *cpu, const lc_lcb_view *v, const lc_engine_state *st,
+                           const char *label, int timings) {
+    return relight_both_frame(gpu, cpu, v, st, label, timings, NULL);
 }
 
 /* Reads a whole file (NUL-terminated, caller frees) or NULL. */
@@ -124,6 +140,103 @@ static char *slurp(const char *path) {
     return s;
 }
 
+/* The lightmap texels whose cache is on the floor (normal up) within `radius` of (x, z) in
+ * plan: their indices into idx (cap entries); returns the count. */
+static size_t floor_texels(const lc_lcb_view *v, float x, float z, float radius, size_t *idx, size_t cap) {
+    size_t n = 0, texels = (size_t)v->lightmap_width * v->lightmap_height;
+    for (size_t i = 0; i < texels && n < cap; i++) {
+        uint32_t c = v->lightmap[i];
+        if (c == LC_NONE) continue;
+        const lc_lcb_cache *cc = &v->caches[c];
+        float dx = cc->position[0] - x, dz = cc->position[2] - z;
+        if (cc->normal[1] > 0.9f && cc->position[1] < 0.01f && dx * dx + dz * dz < radius * radius) idx[n++] = i;
+    }
+    return n;
+}
+
+/* Two cubes in the Cornell box, DNRT on (bounces 2: intermediate passes too): one on the
+ * floor in the free corner by the short block, scaled 1.5, one above it (an object receiver
+ * of the first). EGL must match CPU within TOL (lightmap, cache, grid and object SH), and
+ * the EGL lightmap under the floor cube must differ from EGL with DNRT off by more than TOL;
+ * then the floor cube moves and both must agree again (the re-placed frame re-uploaded). */
+static void test_cornell_dnrt(lc_engine *gpu, const fixture *f, const char *quality) {
+    const lc_lcb_view *v = f->v;
+    CHECK(v->n_assets == 1 && v->n_transfers == 1, "cornell %s: the cube asset with transfer data (%u assets, %u)",
+          quality, v->n_assets, v->n_transfers);
+    if (v->n_transfers != 1) return;
+    lc_engine_object cubes[2] = {{.id = "floor",
+                                  .translation = {0.12f, 0, 0.45f},
+                                  .rotation = {0, 0.2588190f, 0, 0.9659258f},
+                                  .scale = {1.5f, 1.5f, 1.5f},
+                                  .visible = 1},
+                                 {.id = "above",
+                                  .translation = {0.14f, 0.2f, 0.43f},
+                                  .rotation = {0, 0, 0, 1},
+                                  .scale = {1, 1, 1},
+                                  .visible = 1}};
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f->bake);
+    st.settings.bounces = 2;
+    st.settings.bands = 3;
+    st.settings.progressive = 0;
+    st.objects = cubes;
+    st.n_objects = 2;
+    char label[96], err[512];
+    /* Without DNRT first (EGL only): the reference the effect must stand out from. */
+    st.settings.dnrt = 0;
+    const lc_engine_frame *fr;
+    int rc = lc_engine_relight(gpu, &st, &fr, err, sizeof err);
+    CHECK(rc == 0, "cornell %s: egl relight without DNRT: %s", quality, err);
+    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
+    float *off = malloc(texels * 3 * sizeof *off), *on = malloc(texels * 3 * sizeof *on);
+    size_t *idx = malloc(texels * sizeof *idx);
+    CHECK(off && on && idx, "out of memory");
+    if (rc != 0 || !off || !on || !idx) goto done;
+    CHECK(fr->dnrt_objects == 0, "cornell %s: DNRT off, yet %u objects", quality, fr->dnrt_objects);
+    memcpy(off, fr->lightmap, texels * 3 * sizeof *off);
+    st.settings.dnrt = 1;
+    snprintf(label, sizeof label, "cornell %s DNRT", quality);
+    double m = relight_both_frame(gpu, f->engine, v, &st, label, 1, &fr);
+    if (!fr) goto done;
+    CHECK(fr->dnrt_objects == 2 && fr->dnrt_receivers > 20, "cornell %s: DNRT has %u objects, %u receivers", quality,
+          fr->dnrt_objects, fr->dnrt_receivers);
+    memcpy(on, fr->lightmap, texels * 3 * sizeof *on);
+    /* Under the floor cube: its footprint and a little around (the outer volume is ~0.26 m). */
+    size_t n = floor_texels(v, 0.12f, 0.45f, 0.15f, idx, texels);
+    float *a = malloc((n ? n : 1) * 6 * sizeof *a);
+    CHECK(a != NULL, "out of memory");
+    if (!a) goto done;
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) {
+            a[3 * i + k] = on[3 * idx[i] + k];
+            a[3 * (n + i) + k] = off[3 * idx[i] + k];
+        }
+    size_t w;
+    double effect = compare(a, a + 3 * n, n, 3, 3, &w);
+    fprintf(stderr,
+            "cornell %s DNRT: %u receivers, EGL/CPU worst %.3g; %zu floor texels under the cube, EGL with/without "
+            "DNRT %.3g (at %zu: %.6g vs %.6g)\n",
+            quality, fr->dnrt_receivers, m, n, effect, w, (double)a[w], (double)a[3 * n + w]);
+    CHECK(n >= 4, "cornell %s: %zu floor texels under the cube", quality, n);
+    CHECK(effect > TOL, "cornell %s: DNRT changes the EGL lightmap under the cube by %.3g only (tol %g)", quality,
+          effect, TOL);
+    free(a);
+    /* Again, progressive (nothing re-placed: the dnrt stage is the transport's own). */
+    st.settings.progressive = 1;
+    snprintf(label, sizeof label, "cornell %s DNRT progressive", quality);
+    relight_both(gpu, f->engine, v, &st, label, 1);
+    st.settings.progressive = 0;
+    /* Moved: re-placed receivers. */
+    cubes[0].translation[0] = 0.42f;
+    cubes[0].translation[2] = 0.12f;
+    snprintf(label, sizeof label, "cornell %s DNRT moved", quality);
+    relight_both(gpu, f->engine, v, &st, label, 0);
+done:
+    free(off);
+    free(on);
+    free(idx);
+}
+
 /* Bakes scenes/cornell-box with the given quality and compares EGL with CPU (bounces 2,
  * bands 3), printing per-stage times of a few relights. */
 static void test_cornell(const char *quality, int runs) {
@@ -138,7 +251,10 @@ static void test_cornell(const char *quality, int runs) {
     }
     /* The fixture writes its own mtllib line: blank out the scene's. */
     for (char *p = strstr(obj, "mtllib"); p && *p && *p != '\n'; p++) *p = ' ';
-    const char *flags[] = {"--quality", quality, NULL};
+    /* The cube asset with its DNRT transfer grid (the bake's default --transfer). */
+    char cube_arg[600];
+    snprintf(cube_arg, sizeof cube_arg, "cube=%s", check_source_path("scenes/cornell-box/cube.obj", path, sizeof path));
+    const char *flags[] = {"--quality", quality, "--asset", cube_arg, NULL};
     fixture f;
     int rc = fixture_bake(&f, obj, mtl, flags);
     free(obj);
@@ -174,6 +290,7 @@ static void test_cornell(const char *quality, int runs) {
             CHECK(sum > 0, "cornell %s: the lightmap is black", quality);
         }
         fprintf(stderr, "cornell %s: worst EGL/CPU difference %.3g\n", quality, worst);
+        test_cornell_dnrt(gpu, &f, quality);
         lc_engine_release(gpu);
     }
     fixture_release(&f);
@@ -239,8 +356,10 @@ static void test_fuzz(void) {
     }
     fprintf(stderr, "fuzz scene: %u surfels, %u caches, %u assets, grid %ux%ux%u\n", f.v->n_surfels, f.v->n_caches,
             f.v->n_assets, f.v->grid_dims[0], f.v->grid_dims[1], f.v->grid_dims[2]);
+    CHECK(f.v->n_transfers == 1, "fuzz scene: the cube's transfer grid (%u)", f.v->n_transfers);
     lc_rng rng = lc_rng_seed(20240611u, 7);
     double worst = 0;
+    int dnrt_states = 0;
     for (int it = 0; it < 20; it++) {
         lc_engine_light lights[4];
         memset(lights, 0, sizeof lights);
@@ -272,16 +391,22 @@ static void test_fuzz(void) {
         }
         lc_engine_object objs[3];
         memset(objs, 0, sizeof objs);
-        int no = (int)(lc_rng_float(&rng) * 3) % 3;
+        int no = (int)(lc_rng_float(&rng) * 4) % 4;
         for (int i = 0; i < no; i++) {
             snprintf(objs[i].id, sizeof objs[i].id, "o%d", i);
             objs[i].asset = 0;
+            float sc = frand(&rng, 1.0f, 3.0f); /* outer volumes up to ~0.5 m: caches and each other */
             for (int k = 0; k < 3; k++) {
                 objs[i].translation[k] = frand(&rng, -0.1f, 1.0f); /* some outside the grid: clamped */
-                objs[i].scale[k] = 1;
+                objs[i].scale[k] = sc;
             }
-            objs[i].rotation[3] = 1;
+            if (lc_rng_float(&rng) < 0.5f) objs[i].translation[1] = frand(&rng, 0.0f, 0.1f); /* near the floor */
+            random_unit(&rng, objs[i].rotation);                                             /* axis */
+            float ang = frand(&rng, 0.0f, 3.14159265f), sn = sinf(0.5f * ang);
+            for (int k = 0; k < 3; k++) objs[i].rotation[k] *= sn;
+            objs[i].rotation[3] = cosf(0.5f * ang);
             objs[i].visible = 1;
+            objs[i].dnrt_off = lc_rng_float(&rng) < 0.15f;
         }
         lc_engine_state st = {0};
         st.lights = lights;
@@ -294,6 +419,8 @@ static void test_fuzz(void) {
         st.settings.chroma_bands = 1 + (uint32_t)((int)(lc_rng_float(&rng) * st.settings.bands) % st.settings.bands);
         st.settings.progressive = lc_rng_float(&rng) < 0.5f;
         st.settings.sh_lightmap = lc_rng_float(&rng) < 0.5f;
+        st.settings.dnrt = 1;
+        st.settings.dnrt_blockers = lc_rng_float(&rng) < 0.5f;
         if (lc_rng_float(&rng) < 0.3f) {
             st.environment.kind = LC_ENV_CONSTANT;
             st.environment.intensity = 1;
@@ -302,21 +429,33 @@ static void test_fuzz(void) {
         st.revision = (uint64_t)it;
         char label[160];
         snprintf(label, sizeof label,
-                 "fuzz %d (%d lights, %d objects, bounces %u, bands %u, chroma %d/%u, progressive %d, sh_lightmap %d)",
+                 "fuzz %d (%d lights, %d objects, bounces %u, bands %u, chroma %d/%u, progressive %d, sh_lightmap %d, "
+                 "blockers %d)",
                  it, nl, (int)st.n_objects, st.settings.bounces, st.settings.bands, st.settings.chroma_compression,
-                 st.settings.chroma_bands, st.settings.progressive, st.settings.sh_lightmap);
+                 st.settings.chroma_bands, st.settings.progressive, st.settings.sh_lightmap, st.settings.dnrt_blockers);
         CHECK(lc_engine_validate_state(f.engine, &st, err, sizeof err) == 0, "%s: invalid state: %s", label, err);
-        double m = relight_both(gpu, f.engine, f.v, &st, label, 0);
-        fprintf(stderr, "%s: worst %.3g\n", label, m);
+        const lc_engine_frame *fg;
+        double m = relight_both_frame(gpu, f.engine, f.v, &st, label, 0, &fg);
+        uint32_t nr = fg ? fg->dnrt_receivers : 0;
+        fprintf(stderr, "%s: DNRT %u objects %u receivers, worst %.3g\n", label, fg ? fg->dnrt_objects : 0, nr, m);
+        dnrt_states += nr > 0;
         worst = fmax(worst, m);
     }
+    CHECK(dnrt_states >= 8, "fuzz: only %d of 20 states have DNRT receivers", dnrt_states);
     /* Bands above 5 (generic SH recurrence in the shader) once each. */
     for (uint32_t b = 6; b <= LC_SH_MAX_BANDS; b++) {
         lc_engine_light l = {
             .type = LC_ENGINE_LIGHT_POINT, .color = {1, 0.8f, 0.6f}, .intensity = 5, .position = {0.5f, 0.8f, 0.5f}};
+        lc_engine_object ob = {.id = "o",
+                               .translation = {0.75f, 0, 0.7f},
+                               .rotation = {0, 0, 0, 1},
+                               .scale = {2.5f, 2.5f, 2.5f},
+                               .visible = 1};
         lc_engine_state st = {0};
         st.lights = &l;
         st.n_lights = 1;
+        st.objects = &ob; /* DNRT into caches of 6..8 bands */
+        st.n_objects = 1;
         st.settings = lc_engine_default_settings(f.bake);
         st.settings.bands = b;
         st.settings.chroma_compression = b == 7;
@@ -325,8 +464,10 @@ static void test_fuzz(void) {
         st.settings.progressive = 0;
         char label[64];
         snprintf(label, sizeof label, "bands %u", b);
-        double m = relight_both(gpu, f.engine, f.v, &st, label, 0);
-        fprintf(stderr, "%s: worst %.3g\n", label, m);
+        const lc_engine_frame *fg;
+        double m = relight_both_frame(gpu, f.engine, f.v, &st, label, 0, &fg);
+        CHECK(fg && fg->dnrt_receivers > 0, "%s: the object has DNRT receivers", label);
+        fprintf(stderr, "%s: DNRT %u receivers, worst %.3g\n", label, fg ? fg->dnrt_receivers : 0, m);
         worst = fmax(worst, m);
     }
     fprintf(stderr, "fuzz: worst EGL/CPU difference %.3g\n", worst);
