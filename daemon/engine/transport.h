@@ -9,6 +9,7 @@
  *     L_c,lm  = sum over the cache's used links of
  *               flux[node] * factor * h_l(cos alpha) * y_lm(dir)   (gather; radiance SH)
  *     E_ind[s]= irradiance at surfel s's cache for the cache normal (feedback)
+ *   (after each gather, placed objects change the caches around them: engine/dnrt.h)
  *   lightmap texel = irradiance of its cache; grid = L2 irradiance SH; objects = trilinear grid
  *
  * Irradiance from a cache's radiance SH for normal n:
@@ -38,7 +39,7 @@ typedef struct lc_transport_ops {
     void *(*create)(const lc_lcb_view *v, int threads, char *err, size_t errlen);
     void (*release)(void *impl);
     /* Fills the frame's output array pointers (owned by impl, valid until the next run;
-     * records are LC_SH_MAX_COEFFS coefficients wide) and the stage timings BOUNCE..CHROMA.
+     * records are LC_SH_MAX_COEFFS coefficients wide) and the stage timings BOUNCE..DNRT.
      * The engine fills the dimensions. */
     int (*run)(void *impl, const lc_transport_input *in, lc_engine_frame *frame, char *err, size_t errlen);
 } lc_transport_ops;

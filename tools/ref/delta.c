@@ -37,7 +37,7 @@ int lc_ref_delta_lightmap(const float *a0, const float *a1, const lc_ref_result 
         sum_err += da - dr;
         sum_abs_ref += fabs(dr);
         sum_sigma += sigma;
-        agree += (da > 0) == (dr > 0);
+        agree += da != 0 && (da > 0) == (dr > 0);
         double *acc = dr < 0 ? neg : pos;
         acc[0] += da;
         acc[1] += dr;

@@ -394,7 +394,7 @@ typedef struct lc_ref_delta_stats {
     uint32_t n, n_neg, n_pos;         /* compared; of them darker / brighter in the reference */
     double error;                     /* sum |dY_a - dY_r| / sum |dY_r| */
     double bias;                      /* sum (dY_a - dY_r) / sum |dY_r| */
-    double sign_agree;                /* share of compared texels whose change has the reference's sign */
+    double sign_agree;                /* share of compared texels whose change is non-zero with the reference's sign */
     double neg_ratio;                 /* sum dY_a / sum dY_r over the darker texels (1 = the right shadow) */
     double pos_ratio;                 /* ... over the brighter texels (the bounced light) */
     double rgb_approx[3], rgb_ref[3]; /* summed dRGB over the compared set: the colour of the change */
