@@ -227,6 +227,8 @@ static const ctl_flag ctl_object_flags[] = {
     {"--scale", "scale", CTL_FLAG_LIST, (1ul << 1) | (1ul << 3), 1, NULL, "s|x,y,z",
      "uniform or per axis, each |s| in [1e-6, 1e4] (default 1)"},
     {"--visible", "visible", CTL_FLAG_BOOL, 0, 0, NULL, "true|false", "default true"},
+    {"--dnrt", "dnrt", CTL_FLAG_BOOL, 0, 0, NULL, "true|false",
+     "shadow and colour the indirect light if its asset has transfer data (default true)"},
     {NULL, NULL, 0, 0, 0, NULL, NULL, NULL},
 };
 
@@ -472,6 +474,10 @@ static const ctl_flag ctl_settings_flags[] = {
     {"--chroma-compression", "chroma_compression", CTL_FLAG_BOOL, 0, 0, NULL, "true|false",
      "fewer SH bands for chroma than for luma"},
     {"--chroma-bands", "chroma_bands", CTL_FLAG_INT, 0, 0, NULL, "N", "SH bands for chroma, 1..bands"},
+    {"--dnrt", "dnrt", CTL_FLAG_BOOL, 0, 0, NULL, "true|false",
+     "placed objects shadow and colour the indirect light (default true)"},
+    {"--dnrt-blockers", "dnrt_blockers", CTL_FLAG_BOOL, 0, 0, NULL, "true|false",
+     "ray-test static geometry between an object and what it shades (default true)"},
     {NULL, NULL, 0, 0, 0, NULL, NULL, NULL},
 };
 

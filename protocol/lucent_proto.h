@@ -76,6 +76,7 @@ typedef struct lc_proto_object {
     char asset[LC_PROTO_ID_MAX + 1];
     float translation[3], rotation[4], scale[3]; /* rotation normalised by the parser */
     int visible;
+    int dnrt; /* 1 (default): the object affects the indirect light when its asset has transfer data */
 } lc_proto_object;
 
 typedef struct lc_proto_environment {
@@ -86,11 +87,23 @@ typedef struct lc_proto_environment {
 } lc_proto_environment;
 
 /* settings.set: `present` has bit (1 << field) for each field given. */
-enum { LC_SET_BOUNCES = 0, LC_SET_BANDS, LC_SET_PROGRESSIVE, LC_SET_CHROMA, LC_SET_CHROMA_BANDS };
+enum {
+    LC_SET_BOUNCES = 0,
+    LC_SET_BANDS,
+    LC_SET_PROGRESSIVE,
+    LC_SET_CHROMA,
+    LC_SET_CHROMA_BANDS,
+    LC_SET_DNRT,
+    LC_SET_DNRT_BLOCKERS,
+    LC_SET_COUNT
+};
+#define LC_SET_ALL ((1u << LC_SET_COUNT) - 1u)
 typedef struct lc_proto_settings {
     uint32_t present;
     uint32_t bounces, bands, chroma_bands;
     int progressive, chroma_compression;
+    int dnrt;          /* placed objects with transfer data affect the indirect light (default 1) */
+    int dnrt_blockers; /* static geometry between object and receiver is tested with rays (default 1) */
 } lc_proto_settings;
 
 /* One change. For removes, `target` holds the id; for material.set, `target` the name. */
@@ -170,6 +183,14 @@ void lc_proto_request_release(lc_proto_request *r);
 
 /* --- server messages ------------------------------------------------------------------------ */
 
+/* welcome.scene.asset_info: per asset, its DNRT transfer grid (§3.4). */
+typedef struct lc_proto_asset_info {
+    int has_transfer; /* 0: the asset has none (an older bake): sent as {} */
+    uint32_t dims, coefficients;
+    uint64_t bytes;     /* the grid's quantised values */
+    float outer_radius; /* metres (asset-local), where the effect ends */
+} lc_proto_asset_info;
+
 typedef struct lc_proto_welcome {
     const char *server; /* "lucentd/0.1.0" */
     const char *role;   /* "viewer" | "controller" */
@@ -180,9 +201,10 @@ typedef struct lc_proto_welcome {
     uint32_t bands;
     const char *const *assets;
     uint32_t n_assets;
-    const char *bake_id;               /* NULL: not sent */
-    const char *geometry;              /* path of the scene's glTF, e.g. "/scene.glb"; NULL: not sent */
-    const char *const *asset_geometry; /* per asset its glTF's path; NULL: not sent */
+    const char *bake_id;                   /* NULL: not sent */
+    const char *geometry;                  /* path of the scene's glTF, e.g. "/scene.glb"; NULL: not sent */
+    const char *const *asset_geometry;     /* per asset its glTF's path; NULL: not sent */
+    const lc_proto_asset_info *asset_info; /* per asset (n_assets); NULL: not sent */
     const char *const *materials;
     uint32_t n_materials;
     lc_proto_limits limits;

@@ -185,6 +185,7 @@ static cJSON *proto_object_json(proto_b *b, const lc_proto_object *O) {
     proto_add_floats(b, o, "rotation", O->rotation, 4);
     proto_add_floats(b, o, "scale", O->scale, 3);
     proto_add_bool(b, o, "visible", O->visible);
+    proto_add_bool(b, o, "dnrt", O->dnrt);
     return o;
 }
 
@@ -205,6 +206,8 @@ static cJSON *proto_settings_json(proto_b *b, const lc_proto_settings *S) {
     if (S->present & (1u << LC_SET_PROGRESSIVE)) proto_add_bool(b, o, "progressive", S->progressive);
     if (S->present & (1u << LC_SET_CHROMA)) proto_add_bool(b, o, "chroma_compression", S->chroma_compression);
     if (S->present & (1u << LC_SET_CHROMA_BANDS)) proto_add_u64(b, o, "chroma_bands", S->chroma_bands);
+    if (S->present & (1u << LC_SET_DNRT)) proto_add_bool(b, o, "dnrt", S->dnrt);
+    if (S->present & (1u << LC_SET_DNRT_BLOCKERS)) proto_add_bool(b, o, "dnrt_blockers", S->dnrt_blockers);
     return o;
 }
 
@@ -247,6 +250,29 @@ char *lc_proto_build_op(const lc_proto_op *op) {
     return proto_finish(&b, m);
 }
 
+/* welcome.scene.asset_info (§3.4): per asset name {"transfer": {...}} or {} without transfer data. */
+static cJSON *proto_asset_info_json(proto_b *b, const lc_proto_welcome *w) {
+    cJSON *all = proto_chk(b, cJSON_CreateObject());
+    for (uint32_t i = 0; all && i < w->n_assets; i++) {
+        const lc_proto_asset_info *ai = &w->asset_info[i];
+        cJSON *o = proto_chk(b, cJSON_CreateObject());
+        if (ai->has_transfer) {
+            cJSON *t = proto_chk(b, cJSON_CreateObject());
+            proto_add_u64(b, t, "dims", ai->dims);
+            proto_add_u64(b, t, "coefficients", ai->coefficients);
+            proto_add_u64(b, t, "bytes", ai->bytes);
+            proto_add_float(b, t, "outer_radius", ai->outer_radius);
+            proto_add(b, o, "transfer", t);
+        }
+        /* the name as a JSON key: valid UTF-8 like every string the builders write */
+        char key[LC_PROTO_ID_MAX * 3 + 1];
+        const char *name = w->assets && w->assets[i] ? w->assets[i] : "";
+        lc_proto_utf8_sanitize(key, sizeof key, name, strnlen(name, LC_PROTO_ID_MAX), 0);
+        proto_add(b, all, key, o);
+    }
+    return all;
+}
+
 char *lc_proto_build_welcome(const lc_proto_id *id, const lc_proto_welcome *w) {
     proto_b b = {0};
     if (!w) return NULL;
@@ -278,6 +304,7 @@ char *lc_proto_build_welcome(const lc_proto_id *id, const lc_proto_welcome *w) {
         for (uint32_t i = 0; i < w->n_assets; i++) proto_add_str(&b, ag, w->assets[i], w->asset_geometry[i]);
         proto_add(&b, scene, "asset_geometry", ag);
     }
+    if (w->asset_info) proto_add(&b, scene, "asset_info", proto_asset_info_json(&b, w));
     proto_add_strs(&b, scene, "materials", w->materials, w->n_materials);
     proto_add(&b, m, "scene", scene);
     cJSON *lim = proto_chk(&b, cJSON_CreateObject());

@@ -601,6 +601,8 @@ static int proto_parse_object(const cJSON *o, const char *p, lc_proto_object *O,
     }
     O->visible = 1;
     if (proto_bool(o, "visible", p, 0, &O->visible, err) < 0) return -1;
+    O->dnrt = 1;
+    if (proto_bool(o, "dnrt", p, 0, &O->dnrt, err) < 0) return -1;
     return 0;
 }
 
@@ -638,6 +640,10 @@ static int proto_parse_settings(const cJSON *o, const char *p, lc_proto_settings
     uint32_t hi = (S->present & (1u << LC_SET_BANDS)) ? S->bands : 8; /* else the server checks */
     if ((r = proto_uint(o, "chroma_bands", p, 0, 1, hi, &S->chroma_bands, err)) < 0) return -1;
     if (r) S->present |= 1u << LC_SET_CHROMA_BANDS;
+    if ((r = proto_bool(o, "dnrt", p, 0, &S->dnrt, err)) < 0) return -1;
+    if (r) S->present |= 1u << LC_SET_DNRT;
+    if ((r = proto_bool(o, "dnrt_blockers", p, 0, &S->dnrt_blockers, err)) < 0) return -1;
+    if (r) S->present |= 1u << LC_SET_DNRT_BLOCKERS;
     return 0;
 }
 

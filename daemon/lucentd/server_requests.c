@@ -45,9 +45,27 @@ static void session_take_latest(lc_server *s, lc_session *ss) {
     ss->frame_seq = seq;
 }
 
+/* welcome.scene.asset_info: per asset, its DNRT transfer grid from the bake (lcb.h ATRN), or
+ * none. malloc'd (caller frees; {} without assets); NULL without memory (the field is then
+ * not sent: it is optional). */
+static lc_proto_asset_info *server_asset_info(const lc_lcb_view *v) {
+    lc_proto_asset_info *info = calloc(v->n_assets ? v->n_assets : 1, sizeof *info);
+    for (uint32_t a = 0; info && a < v->n_assets; a++) {
+        const lc_lcb_transfer *t = lc_lcb_asset_transfer(v, a);
+        if (!t) continue;
+        info[a].has_transfer = 1;
+        info[a].dims = t->dims;
+        info[a].coefficients = t->coeffs;
+        info[a].bytes = lc_lcb_transfer_bytes(t);
+        info[a].outer_radius = t->outer_radius;
+    }
+    return info;
+}
+
 static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) {
     lc_proto_welcome w;
     memset(&w, 0, sizeof w);
+    lc_proto_asset_info *info = server_asset_info(s->v);
     w.server = "lucentd/" LUCENTD_VERSION;
     w.role = ss->controller ? "controller" : "viewer";
     w.revision = s->state.revision;
@@ -63,6 +81,7 @@ static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) 
     w.bake_id = s->bake_id;
     w.geometry = s->n_glbs ? s->glbs[0].path : NULL;
     w.asset_geometry = s->n_glbs ? s->asset_paths : NULL;
+    w.asset_info = info;
     w.materials = s->material_names;
     w.n_materials = s->v->n_materials;
     w.limits = s->limits;
@@ -70,6 +89,7 @@ static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) 
     w.max_objects = (uint32_t)s->cfg->max_objects;
     w.rate = (uint32_t)s->cfg->rate;
     session_send(ss, lc_proto_build_welcome(id, &w));
+    free(info);
 }
 
 static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *req) {

@@ -28,13 +28,14 @@ int lc_state_init(lc_state *s, const lc_lcb *bake, const lc_state_limits *limits
     if (!s->emission) return -1;
     for (uint32_t m = 0; m < nm; m++) memcpy(s->emission[m], s->scene->materials[m].emission, sizeof s->emission[m]);
     lc_engine_settings d = lc_engine_default_settings(bake);
-    s->settings.present = (1u << LC_SET_BOUNCES) | (1u << LC_SET_BANDS) | (1u << LC_SET_PROGRESSIVE) |
-        (1u << LC_SET_CHROMA) | (1u << LC_SET_CHROMA_BANDS);
+    s->settings.present = LC_SET_ALL;
     s->settings.bounces = d.bounces;
     s->settings.bands = d.bands;
     s->settings.progressive = d.progressive;
     s->settings.chroma_compression = d.chroma_compression;
     s->settings.chroma_bands = d.chroma_bands;
+    s->settings.dnrt = d.dnrt;
+    s->settings.dnrt_blockers = d.dnrt_blockers;
     s->environment.kind = 0;
     s->environment.intensity = 1;
     return 0;
@@ -117,6 +118,20 @@ static long state_material(const lc_lcb_view *v, const char *name) {
     return -1;
 }
 
+/* The fields of `n` that it has (present bits) over `cur`: settings.set and a snapshot's
+ * settings (an older snapshot lacks the newer fields; they keep their defaults). */
+static lc_proto_settings state_merge_settings(lc_proto_settings cur, const lc_proto_settings *n) {
+    if (n->present & (1u << LC_SET_BOUNCES)) cur.bounces = n->bounces;
+    if (n->present & (1u << LC_SET_BANDS)) cur.bands = n->bands;
+    if (n->present & (1u << LC_SET_PROGRESSIVE)) cur.progressive = n->progressive;
+    if (n->present & (1u << LC_SET_CHROMA)) cur.chroma_compression = n->chroma_compression;
+    if (n->present & (1u << LC_SET_CHROMA_BANDS)) cur.chroma_bands = n->chroma_bands;
+    if (n->present & (1u << LC_SET_DNRT)) cur.dnrt = n->dnrt;
+    if (n->present & (1u << LC_SET_DNRT_BLOCKERS)) cur.dnrt_blockers = n->dnrt_blockers;
+    cur.present = LC_SET_ALL;
+    return cur;
+}
+
 /* Applies one op to s (which has spare capacity for one more light and object). */
 static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32_t i, lc_proto_error *err) {
     switch (op->type) {
@@ -172,12 +187,7 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
     case LC_REQ_ENVIRONMENT_SET: s->environment = op->environment; return 0;
     case LC_REQ_SETTINGS_SET: {
         const lc_proto_settings *n = &op->settings;
-        lc_proto_settings next = s->settings;
-        if (n->present & (1u << LC_SET_BOUNCES)) next.bounces = n->bounces;
-        if (n->present & (1u << LC_SET_BANDS)) next.bands = n->bands;
-        if (n->present & (1u << LC_SET_PROGRESSIVE)) next.progressive = n->progressive;
-        if (n->present & (1u << LC_SET_CHROMA)) next.chroma_compression = n->chroma_compression;
-        if (n->present & (1u << LC_SET_CHROMA_BANDS)) next.chroma_bands = n->chroma_bands;
+        lc_proto_settings next = state_merge_settings(s->settings, n);
         if (!(n->present & (1u << LC_SET_CHROMA_BANDS)) && next.chroma_bands > next.bands)
             next.chroma_bands = next.bands; /* follow a band reduction */
         if (next.chroma_bands < 1 || next.chroma_bands > next.bands) {
@@ -350,13 +360,7 @@ int lc_state_restore(lc_state *s, const lc_proto_parsed_state *p, lc_proto_error
         else lc_warn("state", "snapshot material '%s' is not in the bake; ignored", p->material_names[i]);
     }
     next.environment = p->environment;
-    lc_proto_settings st = next.settings;
-    const lc_proto_settings *ps = &p->settings;
-    if (ps->present & (1u << LC_SET_BOUNCES)) st.bounces = ps->bounces;
-    if (ps->present & (1u << LC_SET_BANDS)) st.bands = ps->bands;
-    if (ps->present & (1u << LC_SET_PROGRESSIVE)) st.progressive = ps->progressive;
-    if (ps->present & (1u << LC_SET_CHROMA)) st.chroma_compression = ps->chroma_compression;
-    if (ps->present & (1u << LC_SET_CHROMA_BANDS)) st.chroma_bands = ps->chroma_bands;
+    lc_proto_settings st = state_merge_settings(next.settings, &p->settings);
     if (st.chroma_bands > st.bands) st.chroma_bands = st.bands;
     next.settings = st;
     next.revision = p->revision;
@@ -432,6 +436,7 @@ int lc_state_to_engine(const lc_state *s, lc_engine_state *out, lc_engine_light 
         memcpy(o->rotation, p->rotation, sizeof o->rotation);
         memcpy(o->scale, p->scale, sizeof o->scale);
         o->visible = p->visible;
+        o->dnrt_off = !p->dnrt;
     }
     memcpy(*emission, s->emission, (size_t)v->n_materials * 3 * sizeof **emission);
     memset(out, 0, sizeof *out);
@@ -450,6 +455,8 @@ int lc_state_to_engine(const lc_state *s, lc_engine_state *out, lc_engine_light 
     out->settings.chroma_compression = s->settings.chroma_compression;
     out->settings.chroma_bands = s->settings.chroma_bands;
     out->settings.sh_lightmap = 0;
+    out->settings.dnrt = s->settings.dnrt;
+    out->settings.dnrt_blockers = s->settings.dnrt_blockers;
     out->revision = s->revision;
     return 0;
 }

@@ -63,6 +63,9 @@ if [ -z "$PORT" ]; then
   exit 1
 fi
 
+# lucent-bake's defaults give the cube asset a DNRT transfer grid of 32^3 vertices, 4 SH
+# coefficients: welcome.scene.asset_info must say so (test_messages.test_welcome_asset_info).
+LUCENT_CONF_EXPECT_TRANSFER="cube=32x4" \
 /usr/bin/python3 "$HERE/lucent-conformance" "ws://127.0.0.1:$PORT/" --token "$CTL" \
   --controller-token "$CTL" --viewer-token "$VIEW" "$@"
 RC=$?

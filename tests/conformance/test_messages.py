@@ -1,6 +1,11 @@
-"""Client messages, valid and invalid forms: §1.2, §1.3, §2.2, §2.5, §4, §5.1, §5.2."""
+"""Client messages, valid and invalid forms: §1.2, §1.3, §2.2, §2.5, §3.4, §4, §5.1, §5.2.
+
+LUCENT_CONF_EXPECT_TRANSFER (optional, e.g. "cube=32x4"): assets the scene under test has
+transfer data for, NAME=DIMSxCOEFFICIENTS separated by spaces; welcome.scene.asset_info must
+then name each with those figures (run_local.sh sets it for its Cornell bake)."""
 import asyncio
 import json
+import os
 
 import pytest
 import websockets
@@ -265,6 +270,10 @@ INVALID = [
      ["/settings/bounces"]),
     ("settings-progressive-wrong-type", "4.9", {"type": "settings.set", "settings": {"progressive": 1}}, "invalid",
      ["/settings/progressive"]),
+    ("settings-dnrt-wrong-type", "4.9", {"type": "settings.set", "settings": {"dnrt": 1}}, "invalid",
+     ["/settings/dnrt"]),
+    ("settings-dnrt-blockers-wrong-type", "4.9", {"type": "settings.set", "settings": {"dnrt_blockers": "yes"}},
+     "invalid", ["/settings/dnrt_blockers"]),
     ("settings-chroma-bands-over-bands", "4.9", {"type": "settings.set", "settings": {"bands": 2, "chroma_bands": 3}},
      "out_of_range", ["/settings/chroma_bands"]),
     ("subscribe-unknown-stream", "4.1", {"type": "subscribe", "stream": "video"}, "invalid", ["/stream"]),
@@ -398,5 +407,118 @@ async def test_fragmented_text(cfg):
         await c.ws.send(iter(['{"type":"ping",', '"t":7,', '"id":"frag"}']))
         r = await c.recv_json(pred=lambda m: m.get("id") == "frag")
         assert r["type"] == "pong" and r["t"] == 7, r
+    finally:
+        await c.close()
+
+
+# --------------------------------------------------------------------------- DNRT (issue 17)
+
+@section("4.9")
+@aio
+async def test_settings_dnrt(cfg):
+    """settings.set dnrt / dnrt_blockers -> ok; state.get reports the new values (§5.4: every
+    settings field) and leaves the other settings as they were. The settings are restored."""
+    c = await controller(cfg)
+    st0 = await c.request({"type": "state.get"})
+    s0 = st0["settings"]
+    try:
+        assert isinstance(s0.get("dnrt"), bool) and isinstance(s0.get("dnrt_blockers"), bool), (
+            "§5.4 state.settings must report dnrt and dnrt_blockers: %r" % s0)
+        for dnrt, blockers in ((not s0["dnrt"], s0["dnrt_blockers"]), (s0["dnrt"], not s0["dnrt_blockers"]),
+                               (not s0["dnrt"], not s0["dnrt_blockers"])):
+            ok = await c.expect_ok({"type": "settings.set", "settings": {"dnrt": dnrt, "dnrt_blockers": blockers}})
+            st = await c.request({"type": "state.get"})
+            assert st["revision"] == ok["revision"], (st["revision"], ok["revision"])
+            got = st["settings"]
+            assert got["dnrt"] is dnrt and got["dnrt_blockers"] is blockers, (
+                "settings.set dnrt=%r dnrt_blockers=%r, state says %r" % (dnrt, blockers, got))
+            rest = {k: v for k, v in got.items() if k not in ("dnrt", "dnrt_blockers")}
+            assert rest == {k: v for k, v in s0.items() if k not in ("dnrt", "dnrt_blockers")}, (
+                "settings.set of the dnrt fields changed other settings: %r -> %r" % (s0, got))
+        # one field alone changes only that field
+        await c.expect_ok({"type": "settings.set", "settings": {"dnrt": s0["dnrt"]}})
+        got = (await c.request({"type": "state.get"}))["settings"]
+        assert got["dnrt"] is s0["dnrt"] and got["dnrt_blockers"] is (not s0["dnrt_blockers"]), got
+    finally:
+        await c.request({"type": "settings.set", "settings": {"dnrt": s0.get("dnrt", True),
+                                                              "dnrt_blockers": s0.get("dnrt_blockers", True)}})
+        await c.close()
+
+
+@section("4.5")
+@aio
+async def test_object_dnrt(cfg):
+    """object.set dnrt: default true, false kept, reported in state (§5.4); "dnrt": 5 -> invalid
+    naming /object/dnrt (also inside a batch), nothing applied."""
+    c = await controller(cfg)
+    p = cfg.uid("dnrt")
+    try:
+        asset = _asset(c.welcome)
+        await c.expect_ok({"type": "batch", "ops": [
+            {"type": "object.set", "object": {"id": p + "-a", "asset": asset}},
+            {"type": "object.set", "object": {"id": p + "-b", "asset": asset, "dnrt": False}}]})
+        st = await c.request({"type": "state.get"})
+        mine = {o["id"]: o for o in st["objects"] if o["id"].startswith(p)}
+        assert mine[p + "-a"].get("dnrt") is True, "§4.5 dnrt defaults to true: %r" % mine[p + "-a"]
+        assert mine[p + "-b"].get("dnrt") is False, "dnrt false not kept: %r" % mine[p + "-b"]
+        r0 = st["revision"]
+        await c.expect_error({"type": "object.set", "object": {"id": p + "-c", "asset": asset, "dnrt": 5}},
+                             "invalid", "/object/dnrt")
+        await c.expect_error({"type": "batch", "ops": [
+            {"type": "object.set", "object": {"id": p + "-c", "asset": asset}},
+            {"type": "object.set", "object": {"id": p + "-a", "asset": asset, "dnrt": "off"}}]},
+            "invalid", "/ops/1/object/dnrt")
+        st = await c.request({"type": "state.get"})
+        assert st["revision"] == r0 and not [o for o in st["objects"] if o["id"] == p + "-c"], (
+            "a refused object.set changed the state")
+        await c.ping_ok()
+    finally:
+        st = await c.request({"type": "state.get"})
+        ops = [{"type": "object.remove", "object_id": o["id"]} for o in st["objects"] if o["id"].startswith(p)]
+        if ops:
+            await c.request({"type": "batch", "ops": ops})
+        await c.close()
+
+
+def _expected_transfer():
+    out = {}
+    for item in os.environ.get("LUCENT_CONF_EXPECT_TRANSFER", "").split():
+        name, _, dims = item.partition("=")
+        d, _, k = dims.partition("x")
+        out[name] = (int(d), int(k))
+    return out
+
+
+@section("3.4")
+@aio
+async def test_welcome_asset_info(cfg):
+    """welcome.scene.asset_info (optional): schema-valid, one entry per asset of scene.assets,
+    each {} or {"transfer": {dims, coefficients, bytes, outer_radius}}; with
+    LUCENT_CONF_EXPECT_TRANSFER, the named assets have transfer data of those dims and
+    coefficients."""
+    c = await controller(cfg)
+    try:
+        sc = c.welcome["scene"]
+        expect = _expected_transfer()
+        info = sc.get("asset_info")
+        if info is None:
+            assert not expect, "LUCENT_CONF_EXPECT_TRANSFER names %r but welcome has no scene.asset_info" % expect
+            pytest.skip("the server sends no welcome.scene.asset_info (optional, §3.4)")
+        errs = list(VALIDATORS["welcome"].iter_errors(c.welcome))
+        assert not errs, "welcome with asset_info fails its schema: %s" % "; ".join(e.message for e in errs[:3])
+        assert sorted(info) == sorted(sc["assets"]), "asset_info keys %r, scene.assets %r" % (
+            sorted(info), sorted(sc["assets"]))
+        for name, ai in info.items():
+            t = ai.get("transfer")
+            if t is not None:
+                assert t["bytes"] >= t["dims"] ** 3, "%s: %d bytes for %d^3 vertices" % (name, t["bytes"], t["dims"])
+                assert t["outer_radius"] > 0, (name, t)
+        for name, (dims, coeffs) in expect.items():
+            assert name in info, "asset %r is not in asset_info %r" % (name, sorted(info))
+            t = info[name].get("transfer")
+            assert t, "asset %r has no transfer data: %r" % (name, info[name])
+            assert t["dims"] == dims and t["coefficients"] == coeffs, (
+                "asset %r: transfer dims %r coefficients %r, expected %d and %d" % (
+                    name, t["dims"], t["coefficients"], dims, coeffs))
     finally:
         await c.close()

@@ -1,5 +1,6 @@
 # lucentctl against a live lucentd: object (the baked `cube` asset), material, env and
-# settings, each with --help, usage errors and a server refusal; the state they leave.
+# settings, each with --help, usage errors and a server refusal; the state they leave
+# (object and settings --dnrt / --dnrt-blockers: issue 17).
 . "$(dirname "$0")/lib.sh"
 lucentctl_setup
 T="timeout 20"
@@ -9,7 +10,7 @@ state() { $T "$CTL" state --json >"$TMP/state.json" 2>"$TMP/state.err" || fail "
 
 # --- object -------------------------------------------------------------------------------
 expect_exit 0 "" $T "$CTL" object set box1 --asset cube --position 0.4,0,0.15 --rotation 0,0.3826834,0,0.9238795 \
-  --scale 0.5 --visible false
+  --scale 0.5 --visible false --dnrt false
 grep -qE "^ok: object 'box1' set \(revision [0-9]+\)$" "$TMP/out" || fail "object set printed: $(head -c 200 "$TMP/out")"
 expect_exit 0 "" $T "$CTL" object set box2 --asset cube --scale 1,2,1
 state
@@ -17,6 +18,13 @@ json_check "$TMP/state.json" '[o["id"] for o in j["objects"]] == ["box1", "box2"
 json_check "$TMP/state.json" 'j["objects"][0]["asset"] == "cube" and j["objects"][0]["translation"] == [0.4, 0, 0.15]'
 json_check "$TMP/state.json" 'j["objects"][0]["scale"] == [0.5, 0.5, 0.5] and j["objects"][0]["visible"] is False'
 json_check "$TMP/state.json" 'abs(j["objects"][0]["rotation"][1] - 0.3826834) < 1e-5 and j["objects"][1]["scale"] == [1, 2, 1]'
+json_check "$TMP/state.json" 'j["objects"][0]["dnrt"] is False and j["objects"][1]["dnrt"] is True'
+expect_exit 0 "" $T "$CTL" object set box2 --asset cube --scale 1,2,1 --dnrt false
+state
+json_check "$TMP/state.json" 'j["objects"][1]["id"] == "box2" and j["objects"][1]["dnrt"] is False'
+expect_exit 0 "" $T "$CTL" object set box2 --asset cube --scale 1,2,1 --dnrt true
+state
+json_check "$TMP/state.json" 'j["objects"][1]["dnrt"] is True'
 expect_exit 1 "unknown_asset at /object/asset: .*scene.assets" $T "$CTL" object set box3 --asset sphere
 expect_exit 1 "out_of_range at /object/rotation" $T "$CTL" object set box3 --asset cube --rotation 0,0,0,0
 expect_exit 0 "" $T "$CTL" object rm box1
@@ -34,6 +42,9 @@ expect_exit 2 "object: expected a subcommand" $T "$CTL" object
 expect_exit 2 "object set: --asset is required" $T "$CTL" object set box3 --position 0,0,0
 expect_exit 2 "object set: --scale '1,2': expected 1 or 3" $T "$CTL" object set box3 --asset cube --scale 1,2
 expect_exit 2 "object set: --visible 'maybe': expected true or false" $T "$CTL" object set box3 --asset cube --visible maybe
+expect_exit 2 "object set: --dnrt '5': expected true or false" $T "$CTL" object set box3 --asset cube --dnrt 5
+expect_exit 0 "" $T "$CTL" object set --help
+grep -q -- "--dnrt true|false" "$TMP/out" || fail "object set --help lacks --dnrt"
 expect_exit 2 "object set: --rotation '0,0,1': expected 4" $T "$CTL" object set box3 --asset cube --rotation 0,0,1
 expect_exit 2 "object rm: expected exactly one ID" $T "$CTL" object rm a b
 
@@ -79,13 +90,27 @@ expect_exit 2 "env: expected a subcommand" $T "$CTL" env
 expect_exit 0 "" $T "$CTL" settings set --bounces 1 --bands 3 --progressive false --chroma-compression true --chroma-bands 2
 grep -qE "^ok: settings set \(revision [0-9]+\)$" "$TMP/out" || fail "settings set printed: $(head -c 200 "$TMP/out")"
 state
-json_check "$TMP/state.json" 'j["settings"] == {"bounces": 1, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2}'
+json_check "$TMP/state.json" 'j["settings"] == {"bounces": 1, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2, "dnrt": True, "dnrt_blockers": True}'
 expect_exit 0 "" $T "$CTL" settings set --bounces 2   # only the given field changes
 state
-json_check "$TMP/state.json" 'j["settings"] == {"bounces": 2, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2}'
+json_check "$TMP/state.json" 'j["settings"] == {"bounces": 2, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2, "dnrt": True, "dnrt_blockers": True}'
+expect_exit 0 "" $T "$CTL" settings set --dnrt false --dnrt-blockers false
+grep -qE "^ok: settings set \(revision [0-9]+\)$" "$TMP/out" || fail "settings set --dnrt printed: $(head -c 200 "$TMP/out")"
+state
+json_check "$TMP/state.json" 'j["settings"] == {"bounces": 2, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2, "dnrt": False, "dnrt_blockers": False}'
+expect_exit 0 "" $T "$CTL" settings set --dnrt true
+state
+json_check "$TMP/state.json" 'j["settings"]["dnrt"] is True and j["settings"]["dnrt_blockers"] is False'
+expect_exit 0 "" $T "$CTL" settings set --dnrt-blockers true --json
+json_check "$TMP/out" 'j["type"] == "ok"'
+state
+json_check "$TMP/state.json" 'j["settings"]["dnrt"] is True and j["settings"]["dnrt_blockers"] is True'
+expect_exit 2 "settings set: --dnrt-blockers 'sometimes': expected true or false" $T "$CTL" settings set --dnrt-blockers sometimes
 expect_exit 1 "out_of_range at /settings/bounces" $T "$CTL" settings set --bounces 99
 expect_exit 0 "" $T "$CTL" settings set --help
 grep -q -- "--chroma-compression true|false" "$TMP/out" || fail "settings set --help lacks --chroma-compression"
+grep -q -- "--dnrt true|false" "$TMP/out" || fail "settings set --help lacks --dnrt"
+grep -q -- "--dnrt-blockers true|false" "$TMP/out" || fail "settings set --help lacks --dnrt-blockers"
 expect_exit 0 "" $T "$CTL" settings --help
 expect_exit 2 "settings set: give at least one option" $T "$CTL" settings set
 expect_exit 2 "settings set: --bands '2.5': expected an integer" $T "$CTL" settings set --bands 2.5

@@ -33,6 +33,140 @@ static int same_state(const lc_state *a, const lc_state *b) {
     return a->settings.bounces == b->settings.bounces && a->environment.kind == b->environment.kind;
 }
 
+/* One change as a client sends it (parser defaults and all); 0 or -1. */
+static int parse_op(const char *json, lc_proto_op *op) {
+    lc_proto_request r;
+    lc_proto_error e;
+    if (lc_proto_parse_request(json, strlen(json), NULL, &r, &e) != 0 || r.n_ops != 1) {
+        fprintf(stderr, "parse_op %s: %s %s %s\n", json, e.code, e.pointer, e.message);
+        lc_proto_request_release(&r);
+        return -1;
+    }
+    *op = r.ops[0];
+    lc_proto_request_release(&r);
+    return 0;
+}
+
+static void write_file(const char *dir, const char *name, const char *text) {
+    char path[256];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    FILE *fp = fopen(path, "w");
+    CHECK(fp && fputs(text, fp) >= 0, "write %s", path);
+    if (fp) fclose(fp);
+}
+
+static void remove_state_dir(const char *dir) {
+    char path[256];
+    snprintf(path, sizeof path, "%s/journal.log", dir);
+    unlink(path);
+    snprintf(path, sizeof path, "%s/snapshot.json", dir);
+    unlink(path);
+    rmdir(dir);
+}
+
+/* The state's object `id`, or NULL. */
+static const lc_proto_object *find_object(const lc_state *s, const char *id) {
+    for (uint32_t i = 0; i < s->n_objects; i++)
+        if (!strcmp(s->objects[i].id, id)) return &s->objects[i];
+    return NULL;
+}
+
+/* Issue 17: settings dnrt / dnrt_blockers and object dnrt — engine defaults, applied, mapped
+ * to the engine (dnrt_off = !dnrt), journaled and snapshotted; records and snapshots from
+ * before these fields load with the defaults (on). */
+static void test_dnrt(const fixture *f) {
+    lc_state_limits lim = {.max_lights = 3, .max_objects = 2};
+    lc_engine_settings d = lc_engine_default_settings(f->bake);
+    lc_state s;
+    lc_proto_error e;
+    char err[256];
+    CHECK(lc_state_init(&s, f->bake, &lim) == 0, "init");
+    CHECK(d.dnrt == 1 && d.dnrt_blockers == 1, "engine defaults on");
+    CHECK(s.settings.present == LC_SET_ALL && s.settings.dnrt == d.dnrt && s.settings.dnrt_blockers == d.dnrt_blockers,
+          "initial settings: the engine defaults (present %x)", s.settings.present);
+    lc_proto_op set_off, obj_off, obj_on, blk_off;
+    CHECK(parse_op("{\"type\":\"settings.set\",\"settings\":{\"dnrt\":false}}", &set_off) == 0 &&
+              parse_op("{\"type\":\"settings.set\",\"settings\":{\"dnrt_blockers\":false}}", &blk_off) == 0 &&
+              parse_op("{\"type\":\"object.set\",\"object\":{\"id\":\"a\",\"asset\":\"cube\",\"dnrt\":false}}",
+                       &obj_off) == 0 &&
+              parse_op("{\"type\":\"object.set\",\"object\":{\"id\":\"b\",\"asset\":\"cube\"}}", &obj_on) == 0,
+          "ops parse");
+    lc_proto_op objs[2] = {obj_off, obj_on};
+    CHECK(lc_state_apply(&s, objs, 2, 1, &e) == 0 && s.n_objects == 2, "objects: %s", e.message);
+    CHECK(lc_state_apply(&s, &set_off, 1, 0, &e) == 0 && s.settings.dnrt == 0 && s.settings.dnrt_blockers == 1 &&
+              s.settings.bounces == d.bounces,
+          "settings.set dnrt false changes only dnrt");
+    lc_engine_state es;
+    lc_engine_light *el;
+    lc_engine_object *eo;
+    float *em;
+    CHECK(lc_state_to_engine(&s, &es, &el, &eo, &em) == 0, "to_engine");
+    CHECK(es.settings.dnrt == 0 && es.settings.dnrt_blockers == 1, "engine settings follow the state");
+    CHECK(es.n_objects == 2 && !strcmp(eo[0].id, "a") && eo[0].dnrt_off == 1 && eo[1].dnrt_off == 0,
+          "object dnrt false -> dnrt_off 1, default -> 0");
+    free(el);
+    free(eo);
+    free(em);
+
+    /* journal, then snapshot: both keep the three fields */
+    char dir[] = "/tmp/lc_dnrt_XXXXXX";
+    CHECK(mkdtemp(dir) != NULL, "mkdtemp");
+    lc_state s1, s2, s3;
+    lc_state_init(&s1, f->bake, &lim);
+    lc_journal *j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s1, err, sizeof err);
+    CHECK(j != NULL, "open: %s", err);
+    CHECK(lc_state_apply(&s1, objs, 2, 1, &e) == 0 && lc_journal_append(j, objs, 2, s1.revision, err, sizeof err) == 0,
+          "append objects");
+    CHECK(lc_state_apply(&s1, &blk_off, 1, 0, &e) == 0 &&
+              lc_journal_append(j, &blk_off, 1, s1.revision, err, sizeof err) == 0,
+          "append settings");
+    lc_journal_close(j);
+    lc_state_init(&s2, f->bake, &lim);
+    j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s2, err, sizeof err);
+    const lc_proto_object *a = find_object(&s2, "a"), *b = find_object(&s2, "b");
+    CHECK(j && a && b && a->dnrt == 0 && b->dnrt == 1 && s2.settings.dnrt_blockers == 0 && s2.settings.dnrt == 1,
+          "journal replay keeps object and settings dnrt: %s", err);
+    CHECK(j && lc_journal_compact(j, &s2, err, sizeof err) == 0, "compact: %s", err);
+    lc_journal_close(j);
+    lc_state_init(&s3, f->bake, &lim);
+    j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s3, err, sizeof err);
+    a = find_object(&s3, "a");
+    b = find_object(&s3, "b");
+    CHECK(j && a && b && a->dnrt == 0 && b->dnrt == 1 && s3.settings.dnrt_blockers == 0 && s3.settings.dnrt == 1 &&
+              s3.revision == s1.revision,
+          "snapshot keeps object and settings dnrt: %s", err);
+    lc_journal_close(j);
+    remove_state_dir(dir);
+    lc_state_release(&s1);
+    lc_state_release(&s2);
+    lc_state_release(&s3);
+
+    /* a state dir written before issue 17: a snapshot and a journal record without the fields */
+    char old[] = "/tmp/lc_dnrt_old_XXXXXX";
+    CHECK(mkdtemp(old) != NULL, "mkdtemp");
+    write_file(old, "snapshot.json",
+               "{\"type\":\"state\",\"revision\":3,\"lights\":[],\"objects\":[{\"id\":\"p\",\"asset\":\"cube\","
+               "\"translation\":[0,0,0],\"rotation\":[0,0,0,1],\"scale\":[1,1,1],\"visible\":true}],\"materials\":[],"
+               "\"environment\":{\"type\":\"none\",\"color\":[1,1,1],\"intensity\":1},\"settings\":{\"bounces\":2,"
+               "\"bands\":3,\"progressive\":true,\"chroma_compression\":false,\"chroma_bands\":3}}");
+    write_file(old, "journal.log",
+               "{\"type\":\"batch\",\"revision\":4,\"ops\":[{\"type\":\"object.set\",\"object\":{\"id\":\"q\","
+               "\"asset\":\"cube\",\"translation\":[0,0,0],\"rotation\":[0,0,0,1],\"scale\":[1,1,1],\"visible\":true}},"
+               "{\"type\":\"settings.set\",\"settings\":{\"bounces\":3}}]}\n");
+    lc_state s4;
+    lc_state_init(&s4, f->bake, &lim);
+    j = lc_journal_open(old, LC_FSYNC_ALWAYS, &s4, err, sizeof err);
+    const lc_proto_object *p = find_object(&s4, "p"), *q = find_object(&s4, "q");
+    CHECK(j && s4.revision == 4 && p && q && p->dnrt == 1 && q->dnrt == 1, "old records: objects dnrt on: %s", err);
+    CHECK(j && s4.settings.bounces == 3 && s4.settings.dnrt == 1 && s4.settings.dnrt_blockers == 1 &&
+              s4.settings.present == LC_SET_ALL,
+          "old records: settings dnrt and dnrt_blockers on");
+    if (j) lc_journal_close(j);
+    remove_state_dir(old);
+    lc_state_release(&s4);
+    lc_state_release(&s);
+}
+
 int main(void) {
     char obj_path[256];
     check_source_path("scenes/cornell-box/cornell-box.obj", obj_path, sizeof obj_path);
@@ -199,6 +333,7 @@ int main(void) {
     lc_state_release(&s3);
     lc_state_release(&s4);
     lc_state_release(&s5);
+    test_dnrt(&f);
     fixture_release(&f);
     CHECK_DONE();
 }

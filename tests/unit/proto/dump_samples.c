@@ -82,6 +82,7 @@ int main(int argc, char **argv) {
     client(1,
            "{\"type\":\"object.set\",\"object\":{\"id\":\"chair-1\",\"asset\":\"chair\",\"translation\":[1,0,2],"
            "\"rotation\":[0,0.7071068,0,0.7071068],\"scale\":[1,1,-1],\"visible\":true}}");
+    client(1, "{\"type\":\"object.set\",\"object\":{\"id\":\"chair-2\",\"asset\":\"chair\",\"dnrt\":false}}");
     client(1, "{\"type\":\"object.remove\",\"object_id\":\"chair-1\"}");
     client(1, "{\"type\":\"material.set\",\"material\":\"light\",\"emission\":[17,12,4]}");
     client(
@@ -93,6 +94,7 @@ int main(int argc, char **argv) {
     client(
         1,
         "{\"type\":\"settings.set\",\"settings\":{\"bounces\":2,\"bands\":3,\"progressive\":true,\"chroma_compression\":true,\"chroma_bands\":2}}");
+    client(1, "{\"type\":\"settings.set\",\"settings\":{\"dnrt\":false,\"dnrt_blockers\":true}}");
     client(
         1,
         "{\"type\":\"batch\",\"id\":\"b1\",\"ops\":[{\"type\":\"light.set\",\"light\":" L_POINT "},"
@@ -129,6 +131,9 @@ int main(int argc, char **argv) {
     client(0, "{\"type\":\"environment.set\",\"environment\":{\"type\":\"sh\"}}");
     client(0, "{\"type\":\"settings.set\",\"settings\":{\"bounces\":17}}");
     client(0, "{\"type\":\"settings.set\",\"settings\":{\"bands\":2.5}}");
+    client(0, "{\"type\":\"settings.set\",\"settings\":{\"dnrt\":\"yes\"}}");
+    client(0, "{\"type\":\"settings.set\",\"settings\":{\"dnrt_blockers\":0}}");
+    client(0, "{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"dnrt\":5}}");
     client(0, "{\"type\":\"batch\",\"ops\":[]}");
     client(0, "{\"type\":\"batch\",\"ops\":[{\"type\":\"batch\",\"ops\":[{\"type\":\"snapshot\"}]}]}");
     client(0, "{\"type\":\"batch\",\"ops\":[{\"type\":\"ping\",\"t\":1}]}");
@@ -157,6 +162,13 @@ int main(int argc, char **argv) {
     w.max_lights = w.max_objects = 4096;
     w.rate = 100;
     emit("valid", lc_proto_build_welcome(&nid, &w));
+    /* with asset_info: one asset with a transfer grid, one without (an older bake) */
+    const char *assets2[] = {"chair", "lamp"};
+    lc_proto_asset_info info[2] = {{1, 32, 4, 524288, 1.8f}, {0, 0, 0, 0, 0}};
+    w.assets = assets2;
+    w.n_assets = 2;
+    w.asset_info = info;
+    emit("valid", lc_proto_build_welcome(NULL, &w));
     emit("valid", lc_proto_build_ok(&sid, 43));
     emit("valid", lc_proto_build_ok(NULL, 0));
     lc_proto_error e = {"out_of_range", "/ops/3/light/intensity", "intensity must be in [0, 1e9]"};
@@ -205,7 +217,8 @@ int main(int argc, char **argv) {
     st.materials = ms;
     st.n_materials = 2;
     st.environment = ops[6].environment;
-    st.settings.present = 0x1F;
+    st.settings.present = LC_SET_ALL;
+    st.settings.dnrt = 1;
     st.settings.bounces = 1;
     st.settings.bands = 3;
     st.settings.progressive = 1;
@@ -225,6 +238,12 @@ int main(int argc, char **argv) {
     puts("invalid\t{\"type\":\"changed\",\"revision\":1,\"by\":\"x\",\"ops\":[\"batch\"],\"ids\":[\"a\"]}");
     puts(
         "invalid\t{\"type\":\"welcome\",\"server\":\"s\",\"protocol\":\"lucent/2\",\"role\":\"controller\",\"revision\":0,\"scene\":{},\"limits\":{}}");
+    puts(
+        "invalid\t{\"type\":\"welcome\",\"server\":\"s\",\"protocol\":\"lucent/1\",\"role\":\"viewer\",\"revision\":0,"
+        "\"scene\":{\"lightmap\":{\"width\":1,\"height\":1,\"tile\":1,\"quantity\":\"irradiance\"},\"grid\":{\"origin\":[0,0,0],"
+        "\"cell\":1,\"dims\":[1,1,1],\"quantity\":\"irradiance_sh\",\"coefficients\":9},\"bands\":3,\"assets\":[\"a\"],"
+        "\"materials\":[],\"asset_info\":{\"a\":{\"transfer\":{\"dims\":32,\"coefficients\":5,\"bytes\":1,\"outer_radius\":1}}}},"
+        "\"limits\":{\"max_message\":1,\"max_lights\":1,\"max_objects\":1,\"max_batch\":1,\"rate\":1}}");
     puts(
         "invalid\t{\"type\":\"state\",\"revision\":1,\"lights\":[{\"id\":\"a\",\"type\":\"point\"}],\"objects\":[],\"materials\":[],"
         "\"environment\":{\"type\":\"none\"},\"settings\":{}}");

@@ -1508,6 +1508,131 @@ static void test_nul_escape(void) {
     CHECK(lc_proto_parse_state(st, strlen(st), &ps, &e) == -1 && !strcmp(e.code, "invalid"), "state with NUL");
 }
 
+/* Issue 17: object.set "dnrt", settings.set "dnrt" / "dnrt_blockers" (defaults, type errors
+ * naming the field, journal and snapshot round trips, older snapshots without them) and
+ * welcome.scene.asset_info. */
+static void test_dnrt_fields(void) {
+    lc_proto_request r;
+    PARSE_OK("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\"}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].object.dnrt == 1, "object dnrt defaults to true");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"dnrt\":false}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].object.dnrt == 0 && r.ops[0].object.visible == 1, "object dnrt false");
+    lc_proto_request_release(&r);
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"dnrt\":5}}", "invalid",
+            "/object/dnrt");
+    INVALID(
+        "{\"type\":\"batch\",\"ops\":[{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"c\",\"dnrt\":\"no\"}}]}",
+        "invalid", "/ops/0/object/dnrt");
+
+    PARSE_OK("{\"type\":\"settings.set\",\"settings\":{\"dnrt\":false}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].settings.present == 1u << LC_SET_DNRT && r.ops[0].settings.dnrt == 0,
+          "settings dnrt alone: present %x", r.n_ops ? r.ops[0].settings.present : 0);
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"settings.set\",\"settings\":{\"dnrt\":true,\"dnrt_blockers\":false,\"bounces\":2}}", &r);
+    CHECK(r.n_ops == 1 &&
+              r.ops[0].settings.present ==
+                  ((1u << LC_SET_DNRT) | (1u << LC_SET_DNRT_BLOCKERS) | (1u << LC_SET_BOUNCES)) &&
+              r.ops[0].settings.dnrt == 1 && r.ops[0].settings.dnrt_blockers == 0 && r.ops[0].settings.bounces == 2,
+          "settings dnrt + dnrt_blockers");
+    lc_proto_request_release(&r);
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"dnrt\":1}}", "invalid", "/settings/dnrt");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"dnrt_blockers\":null}}", "invalid", "/settings/dnrt_blockers");
+    CHECK(LC_SET_ALL == 0x7F, "seven settings fields: %x", LC_SET_ALL);
+
+    /* journal records: build_op -> parse gives the same op, the new fields included */
+    const char *msgs[] = {
+        "{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"dnrt\":false}}",
+        "{\"type\":\"settings.set\",\"settings\":{\"dnrt\":false,\"dnrt_blockers\":true}}",
+    };
+    for (int i = 0; i < 2; i++) {
+        lc_proto_request a, b;
+        PARSE_OK(msgs[i], &a);
+        char *s = a.n_ops == 1 ? lc_proto_build_op(&a.ops[0]) : NULL;
+        CHECK(s != NULL, "build_op dnrt %d", i);
+        if (s) {
+            CHECK(strstr(s, "\"dnrt\":false") != NULL, "the op says dnrt false: %s", s);
+            PARSE_OK(s, &b);
+            CHECK(b.n_ops == 1 && !memcmp(&a.ops[0], &b.ops[0], sizeof a.ops[0]), "dnrt op round trip %d: %s", i, s);
+            lc_proto_request_release(&b);
+            free(s);
+        }
+        lc_proto_request_release(&a);
+    }
+
+    /* A snapshot written before issue 17 (no dnrt anywhere) reads with the defaults. */
+    const char *old =
+        "{\"type\":\"state\",\"revision\":7,\"lights\":[],\"objects\":[{\"id\":\"o\",\"asset\":\"chair\","
+        "\"translation\":[0,0,0],\"rotation\":[0,0,0,1],\"scale\":[1,1,1],\"visible\":true}],\"materials\":[],"
+        "\"environment\":{\"type\":\"none\"},\"settings\":{\"bounces\":1,\"bands\":3,\"progressive\":true,"
+        "\"chroma_compression\":false,\"chroma_bands\":3}}";
+    lc_proto_parsed_state p;
+    lc_proto_error e;
+    int rc = lc_proto_parse_state(old, strlen(old), &p, &e);
+    CHECK(rc == 0 && p.n_objects == 1 && p.objects[0].dnrt == 1, "old snapshot: object dnrt true (%s)", e.message);
+    CHECK(rc == 0 && p.settings.present == 0x1F, "old snapshot: dnrt settings absent (present %x)", p.settings.present);
+    lc_proto_parsed_state_free(&p);
+
+    /* state text carries them, and reads back to the same values */
+    lc_proto_object obj;
+    PARSE_OK(msgs[0], &r);
+    if (r.n_ops == 1) obj = r.ops[0].object;
+    else memset(&obj, 0, sizeof obj);
+    lc_proto_request_release(&r);
+    lc_proto_state st = {0};
+    st.objects = &obj;
+    st.n_objects = 1;
+    st.settings.present = LC_SET_ALL;
+    st.settings.bounces = 1;
+    st.settings.bands = st.settings.chroma_bands = 3;
+    st.settings.dnrt = 1;
+    st.settings.dnrt_blockers = 0;
+    char *text = lc_proto_build_state(NULL, &st);
+    cJSON *j = text ? cJSON_Parse(text) : NULL;
+    const cJSON *js = cJSON_GetObjectItem(j, "settings");
+    const cJSON *jo = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "objects"), 0);
+    CHECK(cJSON_IsTrue(cJSON_GetObjectItem(js, "dnrt")) && cJSON_IsFalse(cJSON_GetObjectItem(js, "dnrt_blockers")) &&
+              cJSON_IsFalse(cJSON_GetObjectItem(jo, "dnrt")),
+          "state reports dnrt: %s", text ? text : "NULL");
+    cJSON_Delete(j);
+    rc = text ? lc_proto_parse_state(text, strlen(text), &p, &e) : -1;
+    CHECK(rc == 0 && p.n_objects == 1 && p.objects[0].dnrt == 0 && p.settings.present == LC_SET_ALL &&
+              p.settings.dnrt == 1 && p.settings.dnrt_blockers == 0,
+          "state dnrt round trip");
+    lc_proto_parsed_state_free(&p);
+    free(text);
+
+    /* welcome.scene.asset_info: per asset, transfer or {} */
+    const char *assets[] = {"cube", "old\xff"}, *mats[] = {"white"};
+    lc_proto_asset_info info[2] = {{1, 32, 4, 524288, 0.5196152f}, {0, 0, 0, 0, 0}};
+    lc_proto_welcome w = {0};
+    w.server = "lucentd/0.1.0";
+    w.role = "viewer";
+    w.lightmap_width = w.lightmap_height = 64;
+    w.tile = 32;
+    w.grid_cell = 0.5f;
+    w.grid_dims[0] = w.grid_dims[1] = w.grid_dims[2] = 2;
+    w.bands = 3;
+    w.assets = assets;
+    w.n_assets = 2;
+    w.materials = mats;
+    w.n_materials = 1;
+    lc_proto_default_limits(&w.limits);
+    j = reparse(lc_proto_build_welcome(NULL, &w));
+    CHECK(j && !cJSON_GetObjectItem(cJSON_GetObjectItem(j, "scene"), "asset_info"), "no asset_info when not given");
+    cJSON_Delete(j);
+    w.asset_info = info;
+    j = reparse(lc_proto_build_welcome(NULL, &w));
+    const cJSON *ai = cJSON_GetObjectItem(cJSON_GetObjectItem(j, "scene"), "asset_info");
+    const cJSON *tr = cJSON_GetObjectItem(cJSON_GetObjectItem(ai, "cube"), "transfer");
+    const cJSON *o2 = cJSON_GetObjectItem(ai, "old\xef\xbf\xbd");
+    CHECK(cJSON_GetArraySize(ai) == 2 && num(tr, "dims") == 32 && num(tr, "coefficients") == 4 &&
+              num(tr, "bytes") == 524288 && (float)num(tr, "outer_radius") == 0.5196152f,
+          "asset_info transfer");
+    CHECK(cJSON_IsObject(o2) && o2->child == NULL, "an asset without transfer data is {} (key made valid UTF-8)");
+    cJSON_Delete(j);
+}
+
 int main(void) {
     test_valid();
     test_limits();
@@ -1524,5 +1649,6 @@ int main(void) {
     test_utf8_replies();
     test_utf8_builders();
     test_nul_escape();
+    test_dnrt_fields();
     CHECK_DONE();
 }
