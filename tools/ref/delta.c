@@ -23,6 +23,7 @@ int lc_ref_delta_lightmap(const float *a0, const float *a1, const lc_ref_result 
     mean_y /= n_owned;
     out->floor = floor_frac * mean_y;
     double sum_abs_err = 0, sum_err = 0, sum_abs_ref = 0, sum_sigma = 0, neg[2] = {0, 0}, pos[2] = {0, 0};
+    double vis_abs_err = 0, vis_abs_ref = 0;
     uint32_t agree = 0;
     for (size_t i = 0; i < texels; i++) {
         if (delta_img) delta_img[3 * i] = delta_img[3 * i + 1] = delta_img[3 * i + 2] = NAN;
@@ -48,6 +49,12 @@ int lc_ref_delta_lightmap(const float *a0, const float *a1, const lc_ref_result 
             out->rgb_ref[k] += r1->lightmap[3 * i + k] - r0->lightmap[3 * i + k];
         }
         double y0 = lc_ref_luminance(r0->lightmap + 3 * i);
+        /* Under the object: the reference is (nearly) black with it, the texel hidden. */
+        if (lc_ref_luminance(r1->lightmap + 3 * i) <= 0.02 * y0) out->n_buried++;
+        else {
+            vis_abs_err += fabs(da - dr);
+            vis_abs_ref += fabs(dr);
+        }
         if (y0 > 0) out->max_rel_change = fmax(out->max_rel_change, fabs(dr) / y0);
         if (delta_img) {
             delta_img[3 * i] = (float)dr;
@@ -57,6 +64,7 @@ int lc_ref_delta_lightmap(const float *a0, const float *a1, const lc_ref_result 
     }
     if (!out->n) return -1;
     out->error = sum_abs_err / sum_abs_ref;
+    out->error_unburied = vis_abs_ref > 0 ? vis_abs_err / vis_abs_ref : NAN;
     out->bias = sum_err / sum_abs_ref;
     out->sign_agree = (double)agree / out->n;
     out->neg_ratio = neg[1] != 0 ? neg[0] / neg[1] : NAN;
@@ -75,9 +83,11 @@ char *lc_ref_delta_json(const lc_ref_delta_stats *s) {
     size_t cap = 1024, len = 0;
     char *b = malloc(cap);
     if (!b) return NULL;
-    len += (size_t)snprintf(b, cap, "{\"n\": %u, \"n_darker\": %u, \"n_brighter\": %u, ", s->n, s->n_neg, s->n_pos);
+    len += (size_t)snprintf(b, cap, "{\"n\": %u, \"n_darker\": %u, \"n_brighter\": %u, \"n_buried\": %u, ", s->n,
+                            s->n_neg, s->n_pos, s->n_buried);
     delta_num(b, cap, &len, "error", s->error);
     delta_num(b, cap, &len, "bias", s->bias);
+    delta_num(b, cap, &len, "error_unburied", s->error_unburied);
     delta_num(b, cap, &len, "sign_agree", s->sign_agree);
     delta_num(b, cap, &len, "darker_ratio", s->neg_ratio);
     delta_num(b, cap, &len, "brighter_ratio", s->pos_ratio);

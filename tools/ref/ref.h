@@ -392,6 +392,8 @@ char *lc_ref_errstats_json(const lc_ref_errstats *s);
  * floor_frac x the mean reference luminance. */
 typedef struct lc_ref_delta_stats {
     uint32_t n, n_neg, n_pos;         /* compared; of them darker / brighter in the reference */
+    uint32_t n_buried;                /* of them black (<= 2% of before) in the reference with the object: under it */
+    double error_unburied;            /* the error over the others, the texels a user can see */
     double error;                     /* sum |dY_a - dY_r| / sum |dY_r| */
     double bias;                      /* sum (dY_a - dY_r) / sum |dY_r| */
     double sign_agree;                /* share of compared texels whose change is non-zero with the reference's sign */

@@ -603,10 +603,11 @@ static int cmd_delta(int argc, char **argv) {
         lc_set_err(err, sizeof err, img ? "no texel changes by more than the references' noise" : "out of memory");
         goto done;
     }
-    printf("delta      %u texels (%u darker, %u brighter): error %.2f%% of |dE|, bias %+.2f%%, sign right %.1f%%, "
-           "darker sum ratio %.3f, brighter %.3f, reference noise %.2f%%, largest change %.1f%% of E\n",
-           ds.n, ds.n_neg, ds.n_pos, 100 * ds.error, 100 * ds.bias, 100 * ds.sign_agree, ds.neg_ratio, ds.pos_ratio,
-           100 * ds.ref_noise, 100 * ds.max_rel_change);
+    printf("delta      %u texels (%u darker, %u brighter, %u under the object): error %.2f%% of |dE| (%.2f%% without "
+           "those under it), bias %+.2f%%, sign right %.1f%%, darker sum ratio %.3f, brighter %.3f, reference noise "
+           "%.2f%%, largest change %.1f%% of E\n",
+           ds.n, ds.n_neg, ds.n_pos, ds.n_buried, 100 * ds.error, 100 * ds.error_unburied, 100 * ds.bias,
+           100 * ds.sign_agree, ds.neg_ratio, ds.pos_ratio, 100 * ds.ref_noise, 100 * ds.max_rel_change);
     printf("colour     sum dRGB approx (%.4g, %.4g, %.4g), reference (%.4g, %.4g, %.4g)\n", ds.rgb_approx[0],
            ds.rgb_approx[1], ds.rgb_approx[2], ds.rgb_ref[0], ds.rgb_ref[1], ds.rgb_ref[2]);
     if (o.out[0]) {
