@@ -348,6 +348,47 @@ def fidelity_section(f, md):
     md.append("")
 
 
+DNRT_PAPER = ("paper (DNRT §7, 32³ × 4 SH, screen space, one pass per object): GTX 970 0.077 ms for 1 object, "
+              "0.800 ms for 10; HD 6950 0.191 / 1.450 ms; HD 4600 2.708 / 29.712 ms; Sponza 0.098 ms (GTX 970); "
+              "393 KB per object (8-bit, T − K pre-subtracted; lucent keeps T and K apart: 512 KiB). Quality: "
+              "qualitative only (\"lack of intensity, especially concerning indirect occlusions\").")
+
+
+def dnrt_section(cases, relight, md):
+    md.append("## DNRT: placed objects in the indirect light (`bench/dnrt.sh`, `lucent-bench`)\n")
+    if not cases:
+        md.append("not run\n")
+    else:
+        md.append("The change an object makes, dE = E(with) − E(without) per texel, engine (converged) against "
+                  "lucent-ref (`lucent-ref delta`): texels whose reference change exceeds 3 standard errors and 0.5% "
+                  "of the mean. *error* = Σ|dE_a − dE_r| / Σ|dE_r| (100% = no change at all); *visible* = the same "
+                  "without the texels under the object (black in the reference with it); *darker/brighter* = "
+                  "Σ dE_a / Σ dE_r where the reference darkens / brightens (1 = right). *plain* = the same bake "
+                  "with `--no-transfer`: placed objects only shadow the direct light.\n")
+        md.append("| scene | case | engine | texels | under it | error | visible | bias | sign right | darker | brighter | ref noise |")
+        md.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
+        for r in cases:
+            md.append("| %s | %s | %s | %d | %d | %s | %s | %s | %s | %s | %s | %s |" % (
+                r["scene"], r["case"], r["engine"], r["n"], r.get("n_buried", 0), pct(r["error"]),
+                pct(r.get("error_unburied")), pct(r["bias"], "%+.1f%%"), pct(r["sign_agree"]),
+                fmt(r["darker_ratio"], "{:.2f}"), fmt(r["brighter_ratio"], "{:.2f}"), pct(r["ref_noise"])))
+        md.append("")
+    rows = (relight or {}).get("dnrt") or []
+    if rows:
+        md.append("Cost (`lucent-bench`: objects of the bake's asset scaled to the size shown on upward texels; "
+                  "*light* = the DNRT stage of a relight after a light change, *move* = after one object moved, "
+                  "median ms):\n")
+        md.append("| bake | backend | objects | size | blockers | receivers/object | light ms | per object ms | move ms | relight ms | grid KiB |")
+        md.append("|---|---|---|---|---|---|---|---|---|---|---|")
+        for r in rows:
+            md.append("| %s | %s | %d | %.2f m | %s | %.0f | %.3f | %.4f | %.3f | %.2f | %.0f |" % (
+                os.path.basename(r["bake"]), r["backend"], r["objects"], r["object_size_m"],
+                "rays" if r["blockers"] else "off", r["receivers_per_object"], r["light_change_ms"],
+                r["per_object_ms"], r["move_ms"], r["relight_ms"], r["grid_kib"]))
+        md.append("")
+    md.append(DNRT_PAPER + "\n")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out-dir", required=True)
@@ -359,6 +400,7 @@ def main():
     relight = load(os.path.join(a.out_dir, "relight.json"))
     lat = [j for j in (load(p) for p in sorted(glob.glob(os.path.join(a.out_dir, "latency-*.json")))) if j]
     fid = load(os.path.join(a.out_dir, "fidelity.json"))
+    dnrt = load(os.path.join(a.out_dir, "dnrt", "dnrt.json"))
     m = machine(relight)
     m["cpu_during_run"] = cpu_shares(a.out_dir)
     md = ["# lucent benchmark results", "",
@@ -373,12 +415,13 @@ def main():
     bake_section(bake, md)
     relight_section(relight, md)
     latency_section(lat, md)
+    dnrt_section(dnrt, relight, md)
     fidelity_section(fid, md)
     with open(a.md, "w") as fh:
         fh.write("\n".join(md) + "\n")
     with open(a.json, "w") as fh:
         json.dump({"machine": m, "paper": PAPER, "targets": TARGETS, "bake": bake, "relight": relight,
-                   "latency": lat, "fidelity": fid}, fh, indent=1)
+                   "latency": lat, "dnrt": dnrt, "fidelity": fid}, fh, indent=1)
 
 
 if __name__ == "__main__":

@@ -23,14 +23,17 @@ tmp="$(mktemp -d)"; trap 'rm -rf "$tmp"' EXIT
 mkdir -p "$(dirname "$out")"
 bakes=()
 for preset in moderate high ultra; do
+  # the moderate bakes carry the 10 cm cube with its DNRT transfer grid: lucent-bench's DNRT rows
+  asset=()
+  [ "$preset" = moderate ] && asset=(--asset "cube=$root/scenes/cornell-box/cube.obj")
   echo "baking cornell ($preset)..." >&2
   "$bin/lucent-bake" bake "$root/scenes/cornell-box/cornell-box.obj" -o "$tmp/cornell-$preset.lcb" \
-      --quality "$preset" --quiet --no-write-glb
+      --quality "$preset" --quiet --no-write-glb "${asset[@]}"
   bakes+=("$tmp/cornell-$preset.lcb")
   if [ -f "$shared/scenes/sponza-dabrovic/sponza.obj" ]; then
     echo "baking sponza-dabrovic ($preset)..." >&2
     "$bin/lucent-bake" bake "$shared/scenes/sponza-dabrovic/sponza.obj" -o "$tmp/sponza-$preset.lcb" \
-        --quality "$preset" --quiet --no-write-glb
+        --quality "$preset" --quiet --no-write-glb "${asset[@]}"
     bakes+=("$tmp/sponza-$preset.lcb")
   else
     echo "skip sponza-dabrovic: $shared/scenes/sponza-dabrovic absent" >&2

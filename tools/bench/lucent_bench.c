@@ -218,6 +218,10 @@ static int bench_dnrt(const char *path, lc_backend_kind kind, int runs, int n_ob
         !(e = lc_engine_create(bake, kind, 0, err, sizeof err)))
         goto done;
     const lc_lcb_view *v = lc_lcb_get(bake);
+    if (!(size_m > 0)) { /* auto: 1 m, or a quarter of a small room (the 0.55 m Cornell box: 0.15 m) */
+        float ex = v->grid_cell * (float)(v->grid_dims[0] - 1), ez = v->grid_cell * (float)(v->grid_dims[2] - 1);
+        size_m = fmin(1.0, 0.27 * fmin(ex, ez));
+    }
     if (bench_place_objects(v, n_objects, size_m, objs) != 0) {
         rc = 4; /* no asset with a transfer grid, or no floor */
         goto done;
@@ -280,7 +284,7 @@ static void bench_dnrt_print(const bench_dnrt_row *rows, int n) {
 
 int main(int argc, char **argv) {
     int runs = 15, bounces = 1, dnrt = 1;
-    double object_size = 1.0;
+    double object_size = 0; /* auto */
     const char *json = NULL, *backend = "both";
     const char *files[64];
     int nfiles = 0;
@@ -295,14 +299,15 @@ int main(int argc, char **argv) {
             printf("usage: lucent-bench [--runs N] [--bounces N] [--backend cpu|egl|both] [--json FILE]\n"
                    "                    [--object-size METRES] [--no-dnrt] BAKE.lcb...\n"
                    "  bakes with an asset transfer grid also get the DNRT rows: 1 and 10 objects of --object-size\n"
-                   "  (default 1 m) on the floor, with and without blocker rays\n");
+                   "  (default: 1 m, or 0.27 x the room's smaller horizontal extent when that is less) on the\n"
+                   "  floor, with and without blocker rays\n");
             return 0;
         } else if (argv[i][0] == '-') {
             fprintf(stderr, "lucent-bench: unknown option %s (see --help)\n", argv[i]);
             return 2;
         } else if (nfiles < 64) files[nfiles++] = argv[i];
     }
-    if (nfiles == 0 || runs < 1 || runs > 10000 || bounces < 0 || bounces > 16 || !(object_size > 0) ||
+    if (nfiles == 0 || runs < 1 || runs > 10000 || bounces < 0 || bounces > 16 || !(object_size >= 0) ||
         (strcmp(backend, "cpu") && strcmp(backend, "egl") && strcmp(backend, "both"))) {
         fprintf(stderr, "lucent-bench: need BAKE files; --runs 1..10000, --bounces 0..16, --backend cpu|egl|both\n");
         return 2;
