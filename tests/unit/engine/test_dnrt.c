@@ -8,6 +8,7 @@
  * DNRT is exact here up to the grid's interpolation, 8-bit quantisation and sampling.
  * D6: moved and turned, the change around it is the same closed form (its frame's grid, the
  * rotation of its SH).
+ * D5: a wall between the object and texels: with blocker rays they keep their light.
  * D7: removing the object restores the lightmap bit for bit; switching DNRT off (globally or
  * per object) gives the lightmap without it. */
 #include <math.h>
@@ -52,10 +53,23 @@ typedef struct {
 } dnrt_scene;
 
 /* The 4 m emitting box (albedo 0, L_e = 1) with the sphere asset "ball". */
-static int dnrt_scene_bake(dnrt_scene *s, float radius, float rho, const char *sh) {
+static int dnrt_scene_bake(dnrt_scene *s, float radius, float rho, const char *sh, int partition) {
     static char obj[1 << 17];
     obj[0] = 0;
     fixture_inward_box(obj, sizeof obj, 4.0f, 8, "wall", 1);
+    if (partition) { /* a two-sided emitting wall at x = 2.6 from floor to ceiling, 4x4 quads a side */
+        size_t len = strlen(obj);
+        int base = 6 * 81 + 1;
+        for (int j = 0; j <= 4; j++)
+            for (int i = 0; i <= 4; i++)
+                len += (size_t)snprintf(obj + len, sizeof obj - len, "v 2.6 %g %g\n", 1.0 * j, 1.0 * i);
+        for (int j = 0; j < 4; j++)
+            for (int i = 0; i < 4; i++) {
+                int a = base + j * 5 + i, b = a + 1, c = a + 6, d = a + 5;
+                len += (size_t)snprintf(obj + len, sizeof obj - len, "f %d %d %d %d\nf %d %d %d %d\n", a, b, c, d, a, d,
+                                        c, b);
+            }
+    }
     snprintf(s->tmp, sizeof s->tmp, "/tmp/lc_dnrt_XXXXXX");
     if (!mkdtemp(s->tmp) || write_sphere(s->tmp, radius, rho, s->asset + 5, sizeof s->asset - 5) != 0) return -1;
     memcpy(s->asset, "ball=", 5);
@@ -130,7 +144,7 @@ static void d1_check(const lc_lcb_view *v, const lc_engine_frame *fr, const floa
 static void test_sphere_over_floor(const char *sh) {
     const float R = 0.5f, rho = 0.5f, cy = 1.5f;
     dnrt_scene s;
-    if (dnrt_scene_bake(&s, R, rho, sh) != 0) {
+    if (dnrt_scene_bake(&s, R, rho, sh, 0) != 0) {
         CHECK(0, "DNRT scene bake failed");
         return;
     }
@@ -186,7 +200,51 @@ static void test_sphere_over_floor(const char *sh) {
     dnrt_scene_release(&s);
 }
 
+/* D5: a wall between the sphere and the texels behind it. With blocker rays (the default)
+ * they do not change; without, DNRT's grid (which knows nothing of the wall) darkens them. */
+static void test_blockers(void) {
+    dnrt_scene s;
+    if (dnrt_scene_bake(&s, 0.5f, 0.5f, "4", 1) != 0) {
+        CHECK(0, "DNRT partition scene bake failed");
+        return;
+    }
+    const lc_lcb_view *v = s.f.v;
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(s.f.bake);
+    st.settings.bounces = 0;
+    st.settings.progressive = 0;
+    const lc_engine_frame *fr;
+    char err[256];
+    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    float *base = lightmap_copy(fr);
+    lc_engine_object ball = {
+        .id = "b", .translation = {1.9f, 1.0f, 2}, .rotation = {0, 0, 0, 1}, .scale = {1, 1, 1}, .visible = 1};
+    st.objects = &ball;
+    st.n_objects = 1;
+    double change[2][2] = {{0, 0}, {0, 0}}; /* [blockers][behind the wall?]: sum |dE| / base */
+    for (int b = 0; b < 2; b++) {
+        st.settings.dnrt_blockers = b;
+        CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+        for (uint32_t i = 0; i < v->n_texel_caches; i++) {
+            const lc_lcb_cache *cc = &v->caches[i];
+            if (cc->normal[1] < 0.99f || cc->position[1] > 0.05f) continue; /* floor */
+            if (fabsf(cc->position[0] - 2.6f) < 0.15f) continue;            /* at the wall's foot */
+            size_t t = (size_t)cc->index;
+            change[b][cc->position[0] > 2.6f] += fabs(fr->lightmap[3 * t + 1] - base[3 * t + 1]) / base[3 * t + 1];
+        }
+    }
+    fprintf(stderr,
+            "D5 blockers: sum |dE|/E in front of the wall %.3f (rays) %.3f (off), behind it %.4f (rays) %.3f (off)\n",
+            change[1][0], change[0][0], change[1][1], change[0][1]);
+    CHECK(change[1][0] > 0.5 && change[0][0] > 0.5, "the sphere changes the floor on its own side");
+    CHECK(change[0][1] > 0.2, "without blocker rays the floor behind the wall changes (%.3f)", change[0][1]);
+    CHECK(change[1][1] < 0.02 * change[0][1], "with them it does not (%.4f vs %.3f)", change[1][1], change[0][1]);
+    free(base);
+    dnrt_scene_release(&s);
+}
+
 int main(void) {
+    test_blockers();
     test_sphere_over_floor("4");
     test_sphere_over_floor("9");
     CHECK_DONE();
