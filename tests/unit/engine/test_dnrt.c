@@ -17,6 +17,7 @@
 
 #include "check.h"
 #include "engine_fixture.h"
+#include "util/sh.h"
 
 /* A UV sphere of radius r at the origin, outward faces, one material. */
 static int write_sphere(const char *dir, float r, float rho, char *path, size_t cap) {
@@ -196,6 +197,35 @@ static void test_sphere_over_floor(const char *sh) {
     CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
     CHECK(memcmp(fr->lightmap, with, nf * sizeof(float)) == 0, "back on: the same lightmap as before");
     free(with);
+
+    /* Objects through each other: a second ball 1.2 m away sees the first one's change in its
+     * SH (a sphere of albedo 0.5 in a uniform field darkens what faces it); a ball alone is
+     * never darkened by itself. E facing the other ball: pi L_e (rho - 1) (R/d)^2 = -0.273, which
+     * the L2 lobe of an object's SH has at its peak x (1 + 2 + 5/4) / 4 = 1.0625: -0.290. */
+    float alone[27], off_sh[27], pair[27];
+    memcpy(alone, fr->object_sh, sizeof alone);
+    st.settings.dnrt = 0;
+    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    memcpy(off_sh, fr->object_sh, sizeof off_sh);
+    st.settings.dnrt = 1;
+    CHECK(memcmp(alone, off_sh, sizeof alone) == 0, "a ball alone: its SH is the grid's, DNRT on or off");
+    lc_engine_object two[2] = {ball, ball};
+    snprintf(two[1].id, sizeof two[1].id, "c");
+    two[1].translation[2] = 2 + 1.2f;
+    st.objects = two;
+    st.n_objects = 2;
+    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight with two balls: %s", err);
+    memcpy(pair, fr->object_sh, sizeof pair);
+    float y[9], n[3] = {0, 0, 1}; /* the first ball's irradiance for a normal toward the second (+z) */
+    lc_sh_eval(3, n, y);
+    double e_alone = 0, e_pair = 0;
+    for (int j = 0; j < 9; j++) e_alone += alone[3 * j + 1] * y[j], e_pair += pair[3 * j + 1] * y[j];
+    fprintf(stderr,
+            "two balls: the first one's irradiance toward the other %.4f alone, %.4f beside it (change %.4f, "
+            "closed form -0.290)\n",
+            e_alone, e_pair, e_pair - e_alone);
+    CHECK(fabs((e_pair - e_alone) / -0.290 - 1) < 0.05, "the neighbour darkens it by the closed form (%.4f)",
+          e_pair - e_alone);
     free(base);
     dnrt_scene_release(&s);
 }
