@@ -142,6 +142,19 @@ static void d1_check(const lc_lcb_view *v, const lc_engine_frame *fr, const floa
     CHECK(worst < 0.10, "D1 %s: worst texel %.2f%% (tolerance 10%%)", where, 100 * worst);
 }
 
+/* One relight pass, not progressive: the runs compare bit for bit. Returns the lightmap with
+ * no object (malloc'd). */
+static float *base_lightmap(dnrt_scene *s, lc_engine_state *st) {
+    memset(st, 0, sizeof *st);
+    st->settings = lc_engine_default_settings(s->f.bake);
+    st->settings.bounces = 0;
+    st->settings.progressive = 0;
+    const lc_engine_frame *fr;
+    char err[256];
+    CHECK(lc_engine_relight(s->f.engine, st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    return lightmap_copy(fr);
+}
+
 static void test_sphere_over_floor(const char *sh) {
     const float R = 0.5f, rho = 0.5f, cy = 1.5f;
     dnrt_scene s;
@@ -151,14 +164,10 @@ static void test_sphere_over_floor(const char *sh) {
     }
     const lc_lcb_view *v = s.f.v;
     CHECK(v->n_transfers == 1 && v->transfers[0].coeffs == (uint32_t)atoi(sh), "the bake has the ball's transfer");
-    lc_engine_state st = {0};
-    st.settings = lc_engine_default_settings(s.f.bake);
-    st.settings.bounces = 0;
-    st.settings.progressive = 0;
+    lc_engine_state st;
     const lc_engine_frame *fr;
     char err[256];
-    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
-    float *base = lightmap_copy(fr);
+    float *base = base_lightmap(&s, &st);
     lc_engine_object ball = {
         .id = "b", .asset = 0, .translation = {2, cy, 2}, .rotation = {0, 0, 0, 1}, .scale = {1, 1, 1}, .visible = 1};
     st.objects = &ball;
@@ -239,14 +248,10 @@ static void test_blockers(void) {
         return;
     }
     const lc_lcb_view *v = s.f.v;
-    lc_engine_state st = {0};
-    st.settings = lc_engine_default_settings(s.f.bake);
-    st.settings.bounces = 0;
-    st.settings.progressive = 0;
+    lc_engine_state st;
     const lc_engine_frame *fr;
     char err[256];
-    CHECK(lc_engine_relight(s.f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
-    float *base = lightmap_copy(fr);
+    float *base = base_lightmap(&s, &st);
     lc_engine_object ball = {
         .id = "b", .translation = {1.9f, 1.0f, 2}, .rotation = {0, 0, 0, 1}, .scale = {1, 1, 1}, .visible = 1};
     st.objects = &ball;
