@@ -432,13 +432,14 @@ int lc_dnrt_place(lc_dnrt *d, const lc_engine_object *objects, uint32_t n, const
                                .dirs = d->all.dirs,
                                .values = d->all.values,
                                .n_receivers = d->all.n,
-                               .generation = d->frame.generation + 1};
+                               .generation = d->frame.generation + 1,
+                               .placement = d->frame.placement + 1};
     return 0;
 oom:
     d->n_objects = d->all.n = 0;
     for (uint32_t i = 0; i < d->n_slots; i++) d->slots[i].used = d->slots[i].valid ? 1 : 0;
     dnrt_slots_sweep(d);
-    d->frame = (lc_dnrt_frame){.generation = d->frame.generation + 1};
+    d->frame = (lc_dnrt_frame){.generation = d->frame.generation + 1, .placement = d->frame.placement + 1};
     lc_set_err(err, errlen, "out of memory placing objects for DNRT");
     return -1;
 }

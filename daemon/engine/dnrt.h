@@ -55,6 +55,7 @@ typedef struct lc_dnrt_frame {
     const float *values;     /* per receiver: 36 floats, T (coeff-major RGB) at [0, 27), K at [27, 36) */
     uint32_t n_receivers;
     uint64_t generation; /* changes whenever the contents do (each place and direct): for backends' uploads */
+    uint64_t placement;  /* changes only when the receivers do (each place): their upload */
 } lc_dnrt_frame;
 
 typedef struct lc_dnrt lc_dnrt;

@@ -102,7 +102,8 @@ typedef struct tgl {
     uint32_t n_dn_list;                                             /* corner caches no surfel reads */
     const lc_dnrt_frame *dn_frame; /* what the buffers hold: this frame at dn_generation */
     uint64_t dn_generation;
-    void *dn_stage; /* host staging for the uploads */
+    uint64_t dn_placement; /* ... and its receivers at this placement */
+    void *dn_stage;        /* host staging for the uploads */
     size_t dn_stage_cap;
     /* Host outputs (owned; the frame points here until the next run): */
     lc_transport_outputs out;
@@ -672,10 +673,12 @@ static int tgl_dnrt_upload_objects(tgl *t, const lc_dnrt_frame *f, char *err, si
 }
 
 /* The frame into the GPU buffers when it changed since the last upload (its generation):
- * objects, corner list, and receivers as records of TGL_DNRT_RECORD floats. -1 with err
- * when one object's receivers do not fit a binding or out of memory. */
+ * objects and corner list, and the receivers as records of TGL_DNRT_RECORD floats only when
+ * they changed (its placement: a light change leaves them). -1 with err when one object's
+ * receivers do not fit a binding or out of memory. */
 static int tgl_dnrt_upload(tgl *t, const lc_dnrt_frame *f, char *err, size_t errlen) {
     if (f == t->dn_frame && f->generation == t->dn_generation) return 0;
+    int receivers_kept = f == t->dn_frame && f->placement == t->dn_placement;
     t->dn_frame = NULL;
     const size_t rec = TGL_DNRT_RECORD * 4, step = tgl_dnrt_step(t);
     for (uint32_t i = 0; i < f->n_objects; i++)
@@ -686,6 +689,11 @@ static int tgl_dnrt_upload(tgl *t, const lc_dnrt_frame *f, char *err, size_t err
             return -1;
         }
     if (tgl_dnrt_upload_objects(t, f, err, errlen) != 0) return -1;
+    if (receivers_kept) {
+        t->dn_frame = f;
+        t->dn_generation = f->generation;
+        return 0;
+    }
     size_t bytes = (size_t)f->n_receivers * rec;
     float *r = tgl_dnrt_staging(t, bytes, err, errlen);
     if (!r) return -1;
@@ -699,6 +707,7 @@ static int tgl_dnrt_upload(tgl *t, const lc_dnrt_frame *f, char *err, size_t err
     glNamedBufferSubData(t->b_dn_rec, 0, (GLsizeiptr)bytes, r);
     t->dn_frame = f;
     t->dn_generation = f->generation;
+    t->dn_placement = f->placement;
     return 0;
 }
 
