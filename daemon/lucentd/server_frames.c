@@ -35,6 +35,9 @@ struct lc_frames {
     lc_encoded_lightmap lm_encoded[4]; /* index: lc_encoding */
     lc_residual_memo lm_residual[4];   /* the last residual delta computed per encoding */
     uint64_t residual_states;          /* ids handed to copies made by residual deltas */
+    int peak_valid;                    /* peak: the brightest channel of publication peak_pub_seq */
+    uint64_t peak_pub_seq;
+    float peak;
 };
 
 lc_frames *lc_frames_create(void) { return calloc(1, sizeof(lc_frames)); }
@@ -88,12 +91,18 @@ uint32_t lc_frames_tile_size(int configured, uint32_t w, uint32_t h) {
     return t;
 }
 
+/* fmaxf's result (a NaN argument loses to a number) without libm's call: the per-texel tests
+ * below run a few million times per frame with 10 clients, and gcc only inlines fmaxf under
+ * -ffinite-math-only. */
+static inline float frames_maxf(float a, float b) { return (a > b || b != b) ? a : b; }
+
 /* 1 when texel i of `now` moved by more than thr (relative to the texel's brightest channel,
  * at least floor_v) from `sent`: a dim channel (the blue of a warm light) must not make a
  * texel dirty for changes nobody can see. */
 static int frames_texel_moved(const float *now, const float *sent, size_t i, float thr, float floor_v) {
     const float *a = now + 3 * i, *b = sent + 3 * i;
-    float ref = fmaxf(fmaxf(fmaxf(a[0], a[1]), fmaxf(a[2], b[0])), fmaxf(fmaxf(b[1], b[2]), floor_v));
+    float ref = frames_maxf(frames_maxf(frames_maxf(a[0], a[1]), frames_maxf(a[2], b[0])),
+                            frames_maxf(frames_maxf(b[1], b[2]), floor_v));
     for (int c = 0; c < 3; c++)
         if (fabsf(a[c] - b[c]) > thr * ref) return 1;
     return 0;
@@ -116,6 +125,20 @@ static const uint8_t *frames_lightmap_words(lc_frames *f, const lc_frames_job *j
     e->valid = 1;
     e->pub_seq = j->pub_seq;
     return e->words;
+}
+
+/* The brightest channel of j->frame's lightmap (0 for none brighter), computed once per
+ * publication and shared by every client's delta. */
+static float frames_lightmap_peak(lc_frames *f, const lc_frames_job *j) {
+    if (f->peak_valid && f->peak_pub_seq == j->pub_seq) return f->peak;
+    const lc_published *p = j->frame;
+    const size_t n = (size_t)p->lm_w * p->lm_h * 3;
+    float peak = 0;
+    for (size_t i = 0; i < n; i++) peak = frames_maxf(peak, p->lightmap[i]);
+    f->peak = peak;
+    f->peak_pub_seq = j->pub_seq;
+    f->peak_valid = 1;
+    return peak;
 }
 
 /* The tiles where some texel of j->frame moved by more than thr from cp->lm_sent, into tiles
@@ -221,8 +244,7 @@ static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_
     uint32_t *own_tiles = NULL, n_tiles = 0;
     const uint8_t *residual = NULL;
     size_t delta_texels = 0, payload_len = texels * tb, n = 0;
-    float peak = 0;
-    for (size_t i = 0; !key && i < texels * 3; i++) peak = fmaxf(peak, p->lightmap[i]);
+    const float peak = key ? 0.0f : frames_lightmap_peak(f, j);
     const float thr = (float)j->delta_threshold, floor_v = 1e-3f * peak;
     if (!key && residual_sub) {
         lc_residual_memo *m = &f->lm_residual[enc];

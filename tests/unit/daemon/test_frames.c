@@ -3,7 +3,8 @@
  * precision; a change in one tile gives a delta of exactly that tile; a change under the
  * threshold gives an empty delta; every keyframe_interval-th frame is a keyframe; residual
  * deltas applied to the client's words reproduce the new keyframe exactly, and two clients
- * in the same state get the same bytes (the shared memo); SH grid and object frames carry
+ * in the same state get the same bytes (the shared memo); the dirty test's floor follows the
+ * brightest channel of each publication (NaN ignored); SH grid and object frames carry
  * the floats. */
 #include <math.h>
 #include <stdlib.h>
@@ -166,7 +167,47 @@ int main(void) {
         CHECK(kp && !memcmp(kp, held, sizeof held), "keyframe + residual delta == a keyframe of the new publication");
     }
 
-    /* 6. the SH grid frame carries the floats (f32) */
+    /* 6. the dirty test's floor (1e-3 of the publication's brightest channel, NaN ignored) is
+     * the floor of the publication being sent: a 0.001 -> 0.002 texel next to a 1000 peak is
+     * not sent; the same change in the next publication, whose peak is 3.74, is (one tile). */
+    const int dim = W * H - 1; /* the last tile */
+    lc_published pa = fake_publication(1.0f), pb = fake_publication(1.0f), qa = fake_publication(1.0f),
+                 qb = fake_publication(1.0f);
+    lc_published *dimmed[] = {&pa, &pb, &qa, &qb};
+    for (int k = 0; k < 4; k++)
+        for (int ch = 0; ch < 3; ch++) dimmed[k]->lightmap[3 * dim + ch] = k % 2 ? 0.002f : 0.001f;
+    for (int k = 0; k < 2; k++) {
+        for (int ch = 0; ch < 3; ch++) dimmed[k]->lightmap[ch] = 1000.0f;
+        dimmed[k]->lightmap[3] = NAN;
+    }
+    lc_frames_copy x, y;
+    memset(&x, 0, sizeof x);
+    memset(&y, 0, sizeof y);
+    j = lightmap_job(&pa, 10, 1, LC_ENC_F32, 0);
+    n = lc_frames_encode(f, &x, &j);
+    j = lightmap_job(&qa, 20, 1, LC_ENC_F32, 0);
+    n = lc_frames_encode(f, &y, &j);
+    j = lightmap_job(&pb, 11, 2, LC_ENC_F32, 0);
+    n = lc_frames_encode(f, &x, &j);
+    pl = parse(&x, n, j.pre, &h, &tiles);
+    CHECK(pl && (h.flags & LC_FRAME_DELTA) && h.tile_count == 0,
+          "a change under 1e-3 of a 1000 peak (a NaN texel beside it) sends no tile (tiles %u)", pl ? h.tile_count : 0);
+    j = lightmap_job(&qb, 21, 2, LC_ENC_F32, 0);
+    n = lc_frames_encode(f, &y, &j);
+    pl = parse(&y, n, j.pre, &h, &tiles);
+    t0 = 0;
+    if (pl && h.tile_count) memcpy(&t0, tiles, 4);
+    CHECK(pl && (h.flags & LC_FRAME_DELTA) && h.tile_count == 1 && t0 == (W / tile) * (H / tile) - 1,
+          "the same change under the next publication's own peak (3.74) sends its tile (tiles %u, first %u)",
+          pl ? h.tile_count : 0, t0);
+    lc_frames_copy_release(&x);
+    lc_frames_copy_release(&y);
+    for (int k = 0; k < 4; k++) {
+        free(dimmed[k]->lightmap);
+        free(dimmed[k]->grid_sh);
+    }
+
+    /* 7. the SH grid frame carries the floats (f32) */
     lc_frames_job g = {
         .frame = &p1, .pub_seq = 1, .stream = LC_STREAM_SHGRID, .enc = LC_ENC_F32, .sequence = 1, .pre = 16};
     n = lc_frames_encode(f, &a, &g);
