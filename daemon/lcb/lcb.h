@@ -30,6 +30,10 @@
  *   AIDX  uint32_t[3]          asset triangles (indices relative to the asset's first vertex)
  *   ATRN  lc_lcb_transfer      optional: per asset with DNRT transfer data, its grid's header
  *   ATRD  int8_t               the transfer grids' quantised values (ATRN says where each starts)
+ *   ASPT  lc_lcb_sparse_point  optional: LightSkin sparse points, asset-local, sorted by asset
+ *   AVNN  lc_lcb_sparse_vertex per AVRT vertex, its 8 nearest sparse points (iff ASPT)
+ * Optional sections were added without a version change (the minor stays 0): a reader that
+ * does not know one skips it, and a bake without one stays valid.
  */
 #ifndef LC_LCB_H
 #define LC_LCB_H
@@ -181,6 +185,28 @@ typedef struct lc_lcb_transfer {
     uint64_t data_offset; /* byte offset of vertex 0 in ATRD */
 } lc_lcb_transfer;
 
+/* A LightSkin sparse scene point (Lensing & Broll 2013 §3.2; tools/bake/sparse.h makes them):
+ * on the asset's surface, in asset-local metres, with the geometric normal of the triangle it
+ * lies on (unit) and its occluder-disc radius (§3.3: the largest distance to an asset vertex
+ * whose nearest point it is, or sqrt(asset area / (pi N)) when no vertex is). ASPT is sorted
+ * by asset; an asset's points are contiguous (lc_lcb_asset_sparse finds them), at most 65535. */
+typedef struct lc_lcb_sparse_point {
+    uint32_t asset; /* index into ASET */
+    float position[3];
+    float normal[3];
+    float radius; /* > 0 */
+} lc_lcb_sparse_point;
+
+/* Per asset vertex (AVNN, in AVRT order): its 8 nearest sparse points, nearest first, as
+ * indices among the asset's points, with the weights of §3.2 eq. 12
+ *   w_j = (1 - d_j / d_max) * clamp(n_v . n_j, 0, 1),  d_max = max_j d_j,
+ * normalised to sum 1 (all zero: the nearest point alone, weight 1). Fewer than 8 points:
+ * the nearest repeated with weight 0. An asset without points has all-zero records. */
+typedef struct lc_lcb_sparse_vertex {
+    uint16_t index[8];
+    float weight[8];
+} lc_lcb_sparse_vertex;
+
 static inline uint64_t lc_lcb_transfer_bytes(const lc_lcb_transfer *t) {
     return (uint64_t)t->dims * t->dims * t->dims * t->coeffs * 4u;
 }
@@ -197,6 +223,8 @@ _Static_assert(sizeof(lc_lcb_link) == 12, "link layout");
 _Static_assert(sizeof(lc_lcb_asset) == 120, "asset layout");
 _Static_assert(sizeof(lc_lcb_asset_vertex) == 36, "asset vertex layout");
 _Static_assert(sizeof(lc_lcb_transfer) == 192, "transfer layout");
+_Static_assert(sizeof(lc_lcb_sparse_point) == 32, "sparse point layout");
+_Static_assert(sizeof(lc_lcb_sparse_vertex) == 48, "sparse vertex layout");
 
 /* --- link direction/cone packing ------------------------------------------------------- */
 
@@ -291,6 +319,9 @@ typedef struct lc_lcb_view {
     uint32_t n_transfers;
     const int8_t *transfer_data;
     uint64_t transfer_data_size;
+    const lc_lcb_sparse_point *sparse_points; /* NULL when the bake has none (ASPT) */
+    uint32_t n_sparse_points;
+    const lc_lcb_sparse_vertex *sparse_vertices; /* n_asset_vertices records when sparse_points */
 } lc_lcb_view;
 
 /* The asset's DNRT transfer grid, or NULL (no data: an older bake, or baked without). */
@@ -298,6 +329,25 @@ static inline const lc_lcb_transfer *lc_lcb_asset_transfer(const lc_lcb_view *v,
     for (uint32_t i = 0; i < v->n_transfers; i++)
         if (v->transfers[i].asset == asset) return &v->transfers[i];
     return NULL;
+}
+
+/* The asset's sparse points: sets [*first, *first + *count) in v->sparse_points and returns
+ * *count (0: none, an older bake or --mr-points 0). AVNN indices are relative to *first. */
+static inline uint32_t lc_lcb_asset_sparse(const lc_lcb_view *v, uint32_t asset, uint32_t *first, uint32_t *count) {
+    uint32_t b[2];
+    for (int k = 0; k < 2; k++) { /* the first point of an asset >= asset, resp. > asset */
+        uint32_t lo = 0, hi = v->n_sparse_points;
+        while (lo < hi) {
+            uint32_t mid = lo + (hi - lo) / 2;
+            uint32_t a = v->sparse_points[mid].asset;
+            if (k ? a <= asset : a < asset) lo = mid + 1;
+            else hi = mid;
+        }
+        b[k] = lo;
+    }
+    *first = b[0];
+    *count = b[1] - b[0];
+    return *count;
 }
 
 /* Maps and validates a bake file. Errors name the section and the check that failed, e.g.

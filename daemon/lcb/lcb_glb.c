@@ -18,6 +18,7 @@
 #define GLB_MAX_BYTES 0xFFFFFFFCull /* the header's length is 32-bit and a multiple of 4 */
 
 #define GL_FLOAT 5126
+#define GL_UNSIGNED_SHORT 5123
 #define GL_UNSIGNED_INT 5125
 #define GL_ARRAY_BUFFER 34962
 #define GL_ELEMENT_ARRAY_BUFFER 34963
@@ -28,6 +29,8 @@
 /* Asset vertices: POSITION + NORMAL + COLOR_0. */
 #define GLB_ASSET_VERTEX_BYTES (12 + 12 + 12)
 #define GLB_TRIANGLE_BYTES 12
+/* With LightSkin sparse points: _LUCENT_SP_INDEX0/1 (VEC4 u16) + _LUCENT_SP_WEIGHT0/1 (VEC4 f32). */
+#define GLB_ASSET_SPARSE_BYTES (8 + 8 + 16 + 16)
 
 typedef struct glb_doc {
     cJSON *root, *views, *accessors, *materials;
@@ -485,6 +488,27 @@ out:
 
 /* --- an asset ------------------------------------------------------------------------------- */
 
+/* The vertices' sparse-point tables (AVNN, PROTOCOL §8.7) as four attributes of attrs:
+ * _LUCENT_SP_INDEX0/1 = indices 0-3 / 4-7 among the asset's points (VEC4 UNSIGNED_SHORT, two
+ * per 4-byte word, little-endian), _LUCENT_SP_WEIGHT0/1 = their weights (VEC4 FLOAT, the
+ * eq. 12 weights normalised to sum 1). Returns 0 or -1 (out of memory). */
+static int glb_asset_sparse(glb_doc *d, const lc_lcb_sparse_vertex *r, uint32_t n, cJSON *attrs) {
+    static const char *const names[4] = {"_LUCENT_SP_INDEX0", "_LUCENT_SP_INDEX1", "_LUCENT_SP_WEIGHT0",
+                                         "_LUCENT_SP_WEIGHT1"};
+    for (int a = 0; a < 4; a++) {
+        size_t off = d->bin_len;
+        int half = 4 * (a & 1);
+        for (uint32_t i = 0; i < n; i++)
+            for (int k = half; k < half + 4; k += a < 2 ? 2 : 1) {
+                if (a < 2) glb_u32(d, (uint32_t)r[i].index[k] | (uint32_t)r[i].index[k + 1] << 16);
+                else glb_f32(d, r[i].weight[k]);
+            }
+        int acc = glb_accessor(d, off, GL_ARRAY_BUFFER, a < 2 ? GL_UNSIGNED_SHORT : GL_FLOAT, n, "VEC4");
+        if (acc < 0 || !cJSON_AddNumberToObject(attrs, names[a], acc)) return -1;
+    }
+    return 0;
+}
+
 /* The asset's one primitive: POSITION, NORMAL, COLOR_0 over all its vertices, its triangles.
  * vtri is a scratch of vertex_count entries, normals of 3 x vertex_count. NULL out of memory. */
 static cJSON *glb_asset_primitive(glb_doc *d, const lc_lcb_view *v, const lc_lcb_asset *a, uint32_t *vtri,
@@ -510,6 +534,10 @@ static cJSON *glb_asset_primitive(glb_doc *d, const lc_lcb_view *v, const lc_lcb
     if (pos < 0 || nrm < 0 || col < 0 || !cJSON_AddNumberToObject(attrs, "POSITION", pos) ||
         !cJSON_AddNumberToObject(attrs, "NORMAL", nrm) || !cJSON_AddNumberToObject(attrs, "COLOR_0", col))
         goto err;
+    uint32_t first, points;
+    if (lc_lcb_asset_sparse(v, (uint32_t)(a - v->assets), &first, &points) &&
+        glb_asset_sparse(d, v->sparse_vertices + a->first_vertex, a->vertex_count, attrs) != 0)
+        goto err;
     size_t off = d->bin_len;
     for (size_t k = 0; k < 3 * (size_t)a->triangle_count; k++) glb_u32(d, ix[k]);
     int idx = glb_accessor(d, off, GL_ELEMENT_ARRAY_BUFFER, GL_UNSIGNED_INT, 3 * a->triangle_count, "SCALAR");
@@ -520,6 +548,14 @@ static cJSON *glb_asset_primitive(glb_doc *d, const lc_lcb_view *v, const lc_lcb
 err:
     cJSON_Delete(prim);
     return NULL;
+}
+
+/* mesh 0's extras.lucent.sparse_points = n (PROTOCOL §8.7: the points its tables refer to). */
+static int glb_mesh_sparse_extras(glb_doc *d, uint32_t n) {
+    cJSON *mesh = cJSON_GetArrayItem(cJSON_GetObjectItem(d->root, "meshes"), 0);
+    cJSON *extras = mesh ? cJSON_AddObjectToObject(mesh, "extras") : NULL;
+    cJSON *lucent = extras ? cJSON_AddObjectToObject(extras, "lucent") : NULL;
+    return lucent && cJSON_AddNumberToObject(lucent, "sparse_points", n) ? 0 : -1;
 }
 
 int lc_lcb_asset_glb(const lc_lcb *f, uint32_t asset, unsigned char **out, size_t *len, char *err, size_t errlen) {
@@ -542,9 +578,11 @@ int lc_lcb_asset_glb(const lc_lcb *f, uint32_t asset, unsigned char **out, size_
     const lc_lcb_asset *a = &v->assets[asset];
     /* a mesh needs vertices and triangles; an empty asset is a node alone */
     int has_mesh = a->vertex_count > 0 && a->triangle_count > 0;
-    uint64_t bin_bytes = has_mesh
-        ? (uint64_t)a->vertex_count * GLB_ASSET_VERTEX_BYTES + (uint64_t)a->triangle_count * GLB_TRIANGLE_BYTES
-        : 0;
+    uint32_t sp_first, sp_count;
+    lc_lcb_asset_sparse(v, asset, &sp_first, &sp_count);
+    uint64_t vertex_bytes = GLB_ASSET_VERTEX_BYTES + (sp_count ? GLB_ASSET_SPARSE_BYTES : 0);
+    uint64_t bin_bytes =
+        has_mesh ? (uint64_t)a->vertex_count * vertex_bytes + (uint64_t)a->triangle_count * GLB_TRIANGLE_BYTES : 0;
     if (glb_doc_open(&d, f, bin_bytes, a->name, err, errlen) != 0) return -1;
     vtri = malloc((a->vertex_count ? a->vertex_count : 1) * sizeof *vtri);
     normals = malloc((a->vertex_count ? a->vertex_count : 1) * 3 * sizeof *normals);
@@ -557,7 +595,7 @@ int lc_lcb_asset_glb(const lc_lcb *f, uint32_t asset, unsigned char **out, size_
     }
     rc = glb_node(&d, a->name, prims);
     prims = NULL;
-    if (rc != 0) goto oom;
+    if (rc != 0 || (has_mesh && sp_count && glb_mesh_sparse_extras(&d, sp_count) != 0)) goto oom;
     rc = glb_finish(&d, uses_strength, out, len, err, errlen);
     goto out;
 oom:

@@ -73,6 +73,21 @@ static void lcb_print_value(const cJSON *j, FILE *out) {
     free(s);
 }
 
+/* LightSkin sparse points (ASPT): the total and each asset's count, or that the bake has none. */
+static void lcb_print_sparse(const lc_lcb_view *v, FILE *out) {
+    if (!v->sparse_points) {
+        if (v->n_assets) fputs("  sparse pts  none (baked without --mr-points)\n", out);
+        return;
+    }
+    fprintf(out, "  sparse pts  %u:", v->n_sparse_points);
+    for (uint32_t i = 0; i < v->n_assets; i++) {
+        uint32_t first, count;
+        lc_lcb_asset_sparse(v, i, &first, &count);
+        fprintf(out, "%s %s %u", i ? "," : "", v->assets[i].name, count);
+    }
+    fputc('\n', out);
+}
+
 static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *meta, const lcb_stats *st,
                             const char *path, FILE *out) {
     char b[32];
@@ -115,6 +130,7 @@ static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *
             v->grid_dims[2], v->grid_cell, v->grid_origin[0], v->grid_origin[1], v->grid_origin[2]);
     fprintf(out, "  assets      %u (%u vertices, %u triangles)\n", v->n_assets, v->n_asset_vertices,
             v->n_asset_triangles);
+    lcb_print_sparse(v, out);
 
     fputs("sections\n", out);
     fprintf(out, "  %-4s  %12s  %10s  %12s  %s\n", "id", "records", "record", "bytes", "crc");
@@ -177,6 +193,15 @@ static int lcb_print_json(const lc_lcb *f, const lc_lcb_view *v, const cJSON *me
     };
     for (size_t i = 0; i < sizeof nums / sizeof nums[0]; i++)
         if (!lcb_add_num(cnt, nums[i].k, nums[i].v)) goto err;
+    if (!lcb_add_num(cnt, "sparse_points", v->n_sparse_points)) goto err;
+    cJSON *asp = cJSON_AddArrayToObject(cnt, "asset_sparse_points"); /* per asset, ASET order */
+    for (uint32_t i = 0; asp && i < v->n_assets; i++) {
+        uint32_t first, count;
+        cJSON *x = cJSON_CreateNumber(lc_lcb_asset_sparse(v, i, &first, &count));
+        if (!x) goto err;
+        cJSON_AddItemToArray(asp, x);
+    }
+    if (!asp) goto err;
     cJSON *lm = cJSON_AddObjectToObject(cnt, "lightmap");
     uint64_t texels = (uint64_t)v->lightmap_width * v->lightmap_height;
     if (!lm || !lcb_add_num(lm, "width", v->lightmap_width) || !lcb_add_num(lm, "height", v->lightmap_height) ||

@@ -66,6 +66,8 @@ enum {
     S_AIDX,
     S_ATRN,
     S_ATRD,
+    S_ASPT,
+    S_AVNN,
     S_COUNT
 };
 static const struct {
@@ -91,6 +93,8 @@ static const struct {
     {"AIDX", 3 * sizeof(uint32_t), 0, "uint32_t[3]"},
     {"ATRN", sizeof(lc_lcb_transfer), 0, "lc_lcb_transfer"},
     {"ATRD", 1, 0, "int8_t"},
+    {"ASPT", sizeof(lc_lcb_sparse_point), 0, "lc_lcb_sparse_point"},
+    {"AVNN", sizeof(lc_lcb_sparse_vertex), 0, "lc_lcb_sparse_vertex"},
 };
 
 /* What META says; the sections are checked against it. */
@@ -743,6 +747,91 @@ static int lcb_check_transfers(lcb_ctx *c) {
     return 0;
 }
 
+/* LightSkin sparse points: ASPT and AVNN together and only with assets; points name an asset,
+ * sorted (so each asset's are contiguous), at most 65535 per asset, finite, unit normals and
+ * a positive radius; one AVNN record per AVRT vertex, its indices inside its asset's points
+ * and its weights in [0, 1] summing to 1 (all zero for an asset without points). */
+#define LCB_SPARSE_UNIT_TOL 1e-3f
+#define LCB_SPARSE_SUM_TOL 1e-3f
+#define LCB_SPARSE_MAX_PER_ASSET 65535u
+
+static int lcb_check_sparse_points(lcb_ctx *c, uint64_t n_assets) {
+    const lc_lcb_sparse_point *p = lcb_data(c, S_ASPT);
+    uint64_t n = lcb_count(c, S_ASPT), run = 0;
+    for (uint64_t i = 0; i < n; i++) {
+        unsigned long long ui = (unsigned long long)i;
+        if (p[i].asset >= n_assets)
+            return lcb_fail(c, "ASPT: point %llu asset %u out of range (the bake has %llu assets)" LCB_INCONSISTENT, ui,
+                            p[i].asset, (unsigned long long)n_assets);
+        if (i > 0 && p[i].asset < p[i - 1].asset)
+            return lcb_fail(c, "ASPT: point %llu asset %u after asset %u — not sorted by asset" LCB_INCONSISTENT, ui,
+                            p[i].asset, p[i - 1].asset);
+        run = i > 0 && p[i].asset == p[i - 1].asset ? run + 1 : 1;
+        if (run > LCB_SPARSE_MAX_PER_ASSET)
+            return lcb_fail(c, "ASPT: asset %u has more than %u points" LCB_INCONSISTENT, p[i].asset,
+                            LCB_SPARSE_MAX_PER_ASSET);
+        if (!lcb_finite(p[i].position, 3))
+            return lcb_fail(c, "ASPT: point %llu position is not finite" LCB_INCONSISTENT, ui);
+        if (!lcb_finite(p[i].normal, 3))
+            return lcb_fail(c, "ASPT: point %llu normal is not finite" LCB_INCONSISTENT, ui);
+        const float *nn = p[i].normal;
+        float len = sqrtf(nn[0] * nn[0] + nn[1] * nn[1] + nn[2] * nn[2]);
+        if (!(fabsf(len - 1.0f) <= LCB_SPARSE_UNIT_TOL))
+            return lcb_fail(c, "ASPT: point %llu normal has length %g, not unit (within %g)" LCB_INCONSISTENT, ui,
+                            (double)len, (double)LCB_SPARSE_UNIT_TOL);
+        if (!(isfinite(p[i].radius) && p[i].radius > 0))
+            return lcb_fail(c, "ASPT: point %llu radius %g is not finite and > 0" LCB_INCONSISTENT, ui,
+                            (double)p[i].radius);
+    }
+    return 0;
+}
+
+/* One AVNN record of a vertex whose asset has `points` points. */
+static int lcb_check_sparse_vertex(lcb_ctx *c, const lc_lcb_sparse_vertex *r, uint64_t vi, uint32_t asset,
+                                   uint32_t points) {
+    unsigned long long uv = (unsigned long long)vi;
+    float sum = 0;
+    for (int k = 0; k < 8; k++) {
+        if (points ? r->index[k] >= points : r->index[k] != 0)
+            return lcb_fail(c, "AVNN: vertex %llu index[%d] = %u, asset %u has %u points" LCB_INCONSISTENT, uv, k,
+                            r->index[k], asset, points);
+        float w = r->weight[k];
+        if (!(isfinite(w) && w >= 0 && w <= 1) || (!points && w != 0))
+            return lcb_fail(c, "AVNN: vertex %llu weight[%d] = %g is not in [0, 1]%s" LCB_INCONSISTENT, uv, k,
+                            (double)w, points ? "" : " (0: its asset has no points)");
+        sum += w;
+    }
+    if (points && !(fabsf(sum - 1.0f) <= LCB_SPARSE_SUM_TOL))
+        return lcb_fail(c, "AVNN: vertex %llu weights sum to %g, not 1 (within %g)" LCB_INCONSISTENT, uv, (double)sum,
+                        (double)LCB_SPARSE_SUM_TOL);
+    return 0;
+}
+
+static int lcb_check_sparse(lcb_ctx *c) {
+    if (!!c->sec[S_ASPT] != !!c->sec[S_AVNN])
+        return lcb_fail(c, "%s: missing (ASPT and AVNN come together)" LCB_INCONSISTENT,
+                        c->sec[S_ASPT] ? "AVNN" : "ASPT");
+    if (!c->sec[S_ASPT]) return 0;
+    if (!c->sec[S_ASET]) return lcb_fail(c, "ASPT: sparse points but no assets (ASET)" LCB_INCONSISTENT);
+    uint64_t n_assets = lcb_count(c, S_ASET), n_v = lcb_count(c, S_AVRT);
+    if (lcb_check_sparse_points(c, n_assets)) return -1;
+    if (lcb_count(c, S_AVNN) != n_v)
+        return lcb_fail(c, "AVNN: %llu records, AVRT has %llu vertices (one each)" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_AVNN), (unsigned long long)n_v);
+    const lc_lcb_asset *a = lcb_data(c, S_ASET);
+    const lc_lcb_sparse_point *p = lcb_data(c, S_ASPT);
+    const lc_lcb_sparse_vertex *r = lcb_data(c, S_AVNN);
+    uint64_t n = lcb_count(c, S_ASPT), at = 0;
+    for (uint32_t i = 0; i < (uint32_t)n_assets; i++) {
+        uint64_t first = at; /* sorted: asset i's points start where asset i-1's end */
+        while (at < n && p[at].asset == i) at++;
+        uint32_t points = (uint32_t)(at - first);
+        for (uint64_t v = a[i].first_vertex; v < (uint64_t)a[i].first_vertex + a[i].vertex_count; v++)
+            if (lcb_check_sparse_vertex(c, &r[v], v, i, points)) return -1;
+    }
+    return 0;
+}
+
 /* --- load ------------------------------------------------------------------------------ */
 
 static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
@@ -754,7 +843,8 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     c.errlen = errlen;
     if (lcb_check_header(&c, f) || lcb_check_sections(&c, f) || lcb_find_sections(&c, f) || lcb_check_meta(&c, f) ||
         lcb_check_geometry(&c) || lcb_check_surfels(&c) || lcb_check_levels(&c) || lcb_check_nodes(&c) ||
-        lcb_check_caches(&c) || lcb_check_links(&c) || lcb_check_assets(&c) || lcb_check_transfers(&c))
+        lcb_check_caches(&c) || lcb_check_links(&c) || lcb_check_assets(&c) || lcb_check_transfers(&c) ||
+        lcb_check_sparse(&c))
         return -1;
 
     lc_lcb_view *v = &f->view;
@@ -798,6 +888,9 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     v->n_transfers = (uint32_t)lcb_count(&c, S_ATRN);
     v->transfer_data = LCB_ARR(S_ATRD);
     v->transfer_data_size = lcb_count(&c, S_ATRD);
+    v->sparse_points = LCB_ARR(S_ASPT);
+    v->n_sparse_points = (uint32_t)lcb_count(&c, S_ASPT);
+    v->sparse_vertices = LCB_ARR(S_AVNN);
 #undef LCB_ARR
     return 0;
 }

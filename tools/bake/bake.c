@@ -20,6 +20,7 @@
 #include "bake/scene.h"
 #include "bake/surfels.h"
 #include "bake/texels.h"
+#include "bake/sparse.h"
 #include "bake/transfer.h"
 #include "bake/uvgen.h"
 #include "lcb/lcb.h"
@@ -121,6 +122,9 @@ typedef struct bake_assets {
     int8_t *transfer_data;      /* their values (ATRD) */
     uint32_t n_transfers;
     uint64_t transfer_bytes;
+    lc_lcb_sparse_point *sparse;           /* LightSkin sparse points (ASPT), sorted by asset */
+    lc_lcb_sparse_vertex *sparse_vertices; /* per asset vertex, its 8 nearest (AVNN); NULL: none */
+    uint32_t n_sparse;
 } bake_assets;
 
 static void bake_assets_release(bake_assets *a) {
@@ -129,6 +133,8 @@ static void bake_assets_release(bake_assets *a) {
     free(a->indices);
     free(a->transfers);
     free(a->transfer_data);
+    free(a->sparse);
+    free(a->sparse_vertices);
     memset(a, 0, sizeof *a);
 }
 
@@ -171,6 +177,43 @@ static int bake_asset_transfer(const lc_bake_settings *s, const lc_scene *sc, ui
     return 0;
 }
 
+/* The asset's LightSkin sparse points and its vertices' tables (bake/sparse.h), appended to
+ * out's ASPT; its AVNN records (out->sparse_vertices, already sized for its vertices and
+ * zeroed) are filled. An asset without triangles gets no points (all-zero records). */
+static int bake_asset_sparse(const lc_bake_settings *s, uint32_t asset, bake_assets *out, char *err, size_t errlen) {
+    const lc_lcb_asset *a = &out->assets[asset];
+    if (a->triangle_count == 0) {
+        if (!s->quiet) lc_info("bake", "asset %s: no triangles, no sparse points", a->name);
+        return 0;
+    }
+    uint32_t n = (uint32_t)s->mr_points;
+    lc_lcb_sparse_point *np = realloc(out->sparse, ((size_t)out->n_sparse + n) * sizeof *np);
+    if (!np) {
+        lc_set_err(err, errlen, "out of memory for the sparse points of asset %s", a->name);
+        return -1;
+    }
+    out->sparse = np;
+    lc_lcb_sparse_point *pts = np + out->n_sparse;
+    const lc_lcb_asset_vertex *v = out->vertices + a->first_vertex;
+    lc_sparse_stats ps, ts;
+    char serr[256];
+    if (lc_sparse_points(v, a->vertex_count, out->indices + 3 * (size_t)a->first_triangle, a->triangle_count, n,
+                         (uint32_t)s->seed, asset, pts, &ps, serr, sizeof serr) != 0 ||
+        lc_sparse_vertex_table(v, a->vertex_count, pts, n, out->sparse_vertices + a->first_vertex, &ts, serr,
+                               sizeof serr) != 0) {
+        lc_set_err(err, errlen, "--asset %s: %s", a->name, serr);
+        return -1;
+    }
+    out->n_sparse += n;
+    if (!s->quiet)
+        lc_info("bake",
+                "asset %s: %u sparse points (spacing min/mean %.3f, %u with the area radius) in %.3f s, tables for %u "
+                "vertices (%u fall back to the nearest) in %.3f s",
+                a->name, n, ps.mean_spacing > 0 ? ps.min_spacing / ps.mean_spacing : 0, ps.empty_regions, ps.seconds,
+                a->vertex_count, ts.fallback_vertices, ts.seconds);
+    return 0;
+}
+
 static int bake_assets_import(const lc_bake_settings *s, bake_assets *out, char *err, size_t errlen) {
     memset(out, 0, sizeof *out);
     if (s->n_assets == 0) return 0;
@@ -195,7 +238,13 @@ static int bake_assets_import(const lc_bake_settings *s, bake_assets *out, char 
         uint32_t *nib = nvb ? realloc(out->indices, nt * 3 * sizeof *nib) : NULL;
         if (nvb) out->vertices = nvb;
         if (nib) out->indices = nib;
-        if (!nvb || !nib) {
+        lc_lcb_sparse_vertex *nsv =
+            nib && s->mr_points > 0 ? realloc(out->sparse_vertices, (nv ? nv : 1) * sizeof *nsv) : NULL;
+        if (nsv) {
+            out->sparse_vertices = nsv;
+            memset(nsv + out->n_vertices, 0, (size_t)m->n_vertices * sizeof *nsv);
+        }
+        if (!nvb || !nib || (s->mr_points > 0 && !nsv)) {
             lc_scene_release(&sc);
             goto oom;
         }
@@ -228,7 +277,8 @@ static int bake_assets_import(const lc_bake_settings *s, bake_assets *out, char 
             area_sum += area;
         }
         for (int k = 0; k < 3; k++) a->albedo[k] = area_sum > 0 ? (float)(albedo_sum[k] / area_sum) : 0;
-        if (s->transfer && bake_asset_transfer(s, &sc, (uint32_t)i, out, err, errlen) != 0) {
+        if ((s->transfer && bake_asset_transfer(s, &sc, (uint32_t)i, out, err, errlen) != 0) ||
+            (s->mr_points > 0 && bake_asset_sparse(s, (uint32_t)i, out, err, errlen) != 0)) {
             lc_scene_release(&sc);
             goto err;
         }
@@ -680,6 +730,9 @@ static void bake_meta_lists(const bake_job *b, cJSON *meta) {
             cJSON_AddNumberToObject(jt, "outer_radius", tr->outer_radius);
             cJSON_AddNumberToObject(jt, "bytes", (double)lc_lcb_transfer_bytes(tr));
         }
+        uint32_t sp = 0;
+        for (uint32_t p = 0; p < b->assets.n_sparse; p++) sp += b->assets.sparse[p].asset == i;
+        cJSON_AddNumberToObject(o, "sparse_points", sp);
         cJSON_AddItemToArray(ja, o);
     }
 }
@@ -777,6 +830,11 @@ static int bake_add_sections(bake_job *b, char *err, size_t errlen) {
         if (b->assets.n_transfers) {
             add_rc |= lc_lcb_writer_add(w, "ATRN", sizeof(lc_lcb_transfer), b->assets.transfers, b->assets.n_transfers);
             add_rc |= lc_lcb_writer_add(w, "ATRD", 1, b->assets.transfer_data, b->assets.transfer_bytes);
+        }
+        if (b->assets.sparse_vertices) { /* ASPT and AVNN together (an empty ASPT: no asset had triangles) */
+            add_rc |= lc_lcb_writer_add(w, "ASPT", sizeof(lc_lcb_sparse_point), b->assets.sparse, b->assets.n_sparse);
+            add_rc |= lc_lcb_writer_add(w, "AVNN", sizeof(lc_lcb_sparse_vertex), b->assets.sparse_vertices,
+                                        b->assets.n_vertices);
         }
     }
     if (add_rc) {

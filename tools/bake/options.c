@@ -111,6 +111,8 @@ static const lc_opt bake_options[] = {
      "transfer grid half side in bounding-sphere radii (the inner volume)", NULL, NULL},
     {"transfer-outer", LC_OPT_FLOAT, OFF(transfer_outer), 1, 100, "2", NULL,
      "outer volume radius / inner half side: beyond the grid the effect falls off as 1/d^2 up to here", NULL, NULL},
+    {"mr-points", LC_OPT_INT, OFF(mr_points), 0, 65535, "256", NULL,
+     "LightSkin sparse points per asset, with each vertex's 8 nearest (mixed-reality light; 0 = none)", NULL, NULL},
     {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "random seed (same seed, same bytes)", NULL, NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", NULL, NULL},
     {"stats-json", LC_OPT_STRING, OFF(stats_json), 0, LC_BAKE_PATH_MAX, NULL, NULL,

@@ -59,6 +59,7 @@ typedef struct lc_bake_settings {
     int transfer_rays;      /* rays per vertex */
     double transfer_extent; /* inner half side in bounding radii */
     double transfer_outer;  /* outer radius / inner half side */
+    int mr_points;          /* LightSkin sparse points per asset (bake/sparse.h), 0 = none */
 } lc_bake_settings;
 
 /* The option table (NULL-terminated). */

@@ -75,10 +75,13 @@ static void check_views(const glb *g) {
         int ct = (int)num(a, "componentType");
         const cJSON *type = cJSON_GetObjectItem(a, "type");
         int comps = cJSON_IsString(type) ? comps_of(type->valuestring) : 0;
-        CHECK(view && (ct == 5126 || ct == 5125) && comps > 0, "accessor view/componentType %d/type", ct);
+        /* FLOAT, UNSIGNED_INT, and UNSIGNED_SHORT (the sparse-point indices: VEC4, 8 bytes) */
+        CHECK(view && (ct == 5126 || ct == 5125 || (ct == 5123 && comps == 4)) && comps > 0,
+              "accessor view/componentType %d/type", ct);
+        int bytes = ct == 5123 ? 2 : 4;
         if (view)
-            CHECK(num(a, "count") >= 1 && num(a, "count") * comps * 4 <= num(view, "byteLength"),
-                  "accessor of %g x %d floats does not fit its view of %g bytes", num(a, "count"), comps,
+            CHECK(num(a, "count") >= 1 && num(a, "count") * comps * bytes <= num(view, "byteLength"),
+                  "accessor of %g x %d x %d bytes does not fit its view of %g bytes", num(a, "count"), comps, bytes,
                   num(view, "byteLength"));
     }
 }
@@ -279,6 +282,51 @@ out:
     free(again);
 }
 
+/* The asset's sparse-point tables (PROTOCOL §8.7): _LUCENT_SP_INDEX0/1 (VEC4 UNSIGNED_SHORT)
+ * and _LUCENT_SP_WEIGHT0/1 (VEC4 FLOAT), one element per vertex, bit for bit AVNN's; indices
+ * below the asset's point count, weights summing to 1; mesh extras.lucent.sparse_points. */
+static void check_asset_sparse(const glb *g, const cJSON *prim, const lc_lcb_view *v, uint32_t asset) {
+    const lc_lcb_asset *a = &v->assets[asset];
+    uint32_t first = 0, points = 0;
+    lc_lcb_asset_sparse(v, asset, &first, &points);
+    CHECK(v->sparse_points && points == 256, "the Cornell cube has the default 256 sparse points (%u)", points);
+    const cJSON *mesh = cJSON_GetArrayItem(cJSON_GetObjectItem(g->json, "meshes"), 0);
+    const cJSON *lucent = cJSON_GetObjectItem(cJSON_GetObjectItem(mesh, "extras"), "lucent");
+    CHECK(num(lucent, "sparse_points") == points, "mesh extras.lucent.sparse_points %g, bake %u",
+          num(lucent, "sparse_points"), points);
+    static const char *const names[4] = {"_LUCENT_SP_INDEX0", "_LUCENT_SP_INDEX1", "_LUCENT_SP_WEIGHT0",
+                                         "_LUCENT_SP_WEIGHT1"};
+    const void *data[4] = {NULL, NULL, NULL, NULL};
+    for (int k = 0; k < 4; k++) {
+        int acc = attr(prim, names[k]);
+        const cJSON *ja = cJSON_GetArrayItem(cJSON_GetObjectItem(g->json, "accessors"), acc);
+        uint32_t n = 0;
+        int comps = 0;
+        data[k] = acc >= 0 ? acc_data(g, acc, &n, &comps) : NULL;
+        CHECK(data[k] && n == a->vertex_count && comps == 4, "%s: %u x VEC%d, asset %u vertices", names[k], n, comps,
+              a->vertex_count);
+        CHECK(num(ja, "componentType") == (k < 2 ? 5123 : 5126), "%s componentType %g", names[k],
+              num(ja, "componentType"));
+    }
+    if (!data[0] || !data[1] || !data[2] || !data[3]) return;
+    for (uint32_t i = 0; i < a->vertex_count; i++) {
+        const lc_lcb_sparse_vertex *r = &v->sparse_vertices[a->first_vertex + i];
+        uint16_t ix[8];
+        float w[8];
+        memcpy(ix, (const uint16_t *)data[0] + 4 * (size_t)i, 8);
+        memcpy(ix + 4, (const uint16_t *)data[1] + 4 * (size_t)i, 8);
+        memcpy(w, (const float *)data[2] + 4 * (size_t)i, 16);
+        memcpy(w + 4, (const float *)data[3] + 4 * (size_t)i, 16);
+        CHECK(!memcmp(ix, r->index, sizeof ix) && !memcmp(w, r->weight, sizeof w), "vertex %u: table = AVNN", i);
+        double sum = 0;
+        for (int k = 0; k < 8; k++) {
+            CHECK(ix[k] < points, "vertex %u index[%d] = %u < %u", i, k, ix[k], points);
+            sum += w[k];
+        }
+        CHECK_NEAR(sum, 1.0, 1e-5);
+    }
+}
+
 /* The cube asset: bounds, positions and albedo bit for bit, 12 triangles, white material. */
 static void check_asset(const lc_lcb *f) {
     const lc_lcb_view *v = lc_lcb_get(f);
@@ -316,6 +364,7 @@ static void check_asset(const lc_lcb *f) {
     }
     for (uint32_t k = 0; idx && k < 3 * a->triangle_count; k++)
         CHECK(idx[k] == v->asset_indices[3 * (size_t)a->first_triangle + k], "asset index %u", k);
+    check_asset_sparse(&g, prim, v, 0);
     const cJSON *bc =
         cJSON_GetObjectItem(cJSON_GetObjectItem(material(&g, 0), "pbrMetallicRoughness"), "baseColorFactor");
     CHECK(cJSON_GetArraySize(bc) == 4 && json_f(bc, 0) == 1 && json_f(bc, 1) == 1 && json_f(bc, 2) == 1, "white");
