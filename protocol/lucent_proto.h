@@ -15,8 +15,9 @@
 
 #define LC_PROTO_NAME "lucent/1"
 #define LC_PROTO_SUBPROTOCOL "lucent.v1"
-#define LC_PROTO_ID_MAX 64    /* bytes in a light/object id or request id string */
-#define LC_PROTO_NAME_MAX 128 /* client names */
+#define LC_PROTO_VERSION "1.1" /* welcome "version" (§8.1); absent = 1.0 */
+#define LC_PROTO_ID_MAX 64     /* bytes in a light/object id or request id string */
+#define LC_PROTO_NAME_MAX 128  /* client names */
 #define LC_PROTO_TOKEN_MAX 256
 #define LC_FRAME_MAGIC 0x3146434Cu /* "LCF1" little-endian */
 #define LC_FRAME_HEADER_SIZE 64
@@ -36,15 +37,33 @@ typedef enum {
     LC_REQ_STATE_GET,
     LC_REQ_SNAPSHOT,
     LC_REQ_PING,
+    LC_REQ_MR_BEGIN, /* lucent/1.1 (§8.2): not change requests; the server checks the role */
+    LC_REQ_MR_END,
     LC_REQ_COUNT
 } lc_req_type;
 
 /* "light.set" etc. */
 const char *lc_proto_type_name(lc_req_type t);
-/* 1 for the change requests (light.set .. settings.set, batch): controller only. */
+/* 1 for the change requests (light.set .. settings.set, batch): controller only. 0 for
+ * mr.begin / mr.end: they change no state; who may start a session is the server's call
+ * (the `mr` capability, §8.1). */
 int lc_proto_is_change(lc_req_type t);
 
-typedef enum { LC_STREAM_LIGHTMAP = 1, LC_STREAM_SHGRID = 2, LC_STREAM_OBJECTS = 3 } lc_stream;
+/* hello/welcome "capabilities" (§8.1): bit per known name ("mr"). */
+#define LC_CAP_MR (1u << 0)
+#define LC_CAP_COUNT 1
+#define LC_PROTO_CAPS_MAX 8      /* names in hello.capabilities */
+#define LC_PROTO_CAP_NAME_MAX 32 /* bytes per name */
+/* "mr" for LC_CAP_MR; NULL for a bit without a name. */
+const char *lc_proto_capability_name(uint32_t cap_bit);
+
+typedef enum {
+    LC_STREAM_LIGHTMAP = 1,
+    LC_STREAM_SHGRID = 2,
+    LC_STREAM_OBJECTS = 3,
+    LC_STREAM_MR_VPL = 4 /* "mr.vpl" (§8.7): per session object its sparse points' two lights */
+} lc_stream;
+#define LC_STREAM_MAX LC_STREAM_MR_VPL
 typedef enum { LC_ENC_RGB9E5 = 1, LC_ENC_RGBA16F = 2, LC_ENC_F32 = 3 } lc_encoding;
 const char *lc_proto_stream_name(lc_stream s);
 const char *lc_proto_encoding_name(lc_encoding e);
@@ -117,13 +136,33 @@ typedef struct lc_proto_op {
     lc_proto_settings settings;
 } lc_proto_op;
 
+/* mr.begin "session" (§8.2); defaults filled in by the parser. */
+#define LC_PROTO_MR_OBJECTS_MAX 16
+#define LC_PROTO_MR_SIDE_MIN 8
+#define LC_PROTO_MR_SIDE_MAX 1024
+#define LC_PROTO_MR_PIXELS_MAX 1048576u
+typedef struct lc_proto_mr_session {
+    char objects[LC_PROTO_MR_OBJECTS_MAX][LC_PROTO_ID_MAX + 1]; /* object ids, distinct */
+    uint32_t n_objects;                                         /* 1..16 */
+    uint32_t width, height;                                     /* 8..1024 each, width*height <= 1048576 */
+    int depth_encoding;       /* LC_DEPTH_U16MM | LC_DEPTH_F16M (lucent_upload.h): "u16mm" | "f16m" */
+    int color_encoding;       /* LC_COLOR_RGB8_SRGB | LC_COLOR_RGB16F_LINEAR: "rgb8_srgb" | "rgb16f_linear" */
+    double max_rate;          /* 0.1..60 frames per second, default 10 */
+    int glossy;               /* default 1 */
+    double specular_exponent; /* 1..10000, default 16 */
+    double min_confidence;    /* 0..1, default 0.5 */
+    double smoothing;         /* 0..0.99, default 0 */
+    int light_add;            /* "light": "replace" (default, 0) | "add" (1) */
+} lc_proto_mr_session;
+
 typedef struct lc_proto_request {
     lc_req_type type;
     lc_proto_id id;
     /* hello */
     char client[LC_PROTO_NAME_MAX + 1];
     char token[LC_PROTO_TOKEN_MAX + 1];
-    uint32_t encodings; /* bit (1 << lc_encoding) per encoding listed */
+    uint32_t encodings;    /* bit (1 << lc_encoding) per encoding listed */
+    uint32_t capabilities; /* LC_CAP_* of the known names listed (unknown names ignored) */
     /* subscribe / unsubscribe */
     lc_stream stream;
     lc_encoding encoding; /* the stream's default when not given */
@@ -131,6 +170,8 @@ typedef struct lc_proto_request {
     int residual;         /* subscribe "delta": "residual" (lightmap) */
     /* ping */
     double ping_t;
+    /* mr.begin */
+    lc_proto_mr_session mr;
     /* change requests: 1 op, or the batch's ops (malloc'd, owned) */
     lc_proto_op *ops;
     uint32_t n_ops;
@@ -209,6 +250,7 @@ typedef struct lc_proto_welcome {
     uint32_t n_materials;
     lc_proto_limits limits;
     uint32_t max_lights, max_objects, rate;
+    uint32_t capabilities; /* LC_CAP_* granted (§8.1): always written, with "version": "1.1" */
 } lc_proto_welcome;
 
 typedef struct lc_proto_material_state {
@@ -231,6 +273,11 @@ typedef struct lc_proto_state {
 
 char *lc_proto_build_welcome(const lc_proto_id *id, const lc_proto_welcome *w);
 char *lc_proto_build_ok(const lc_proto_id *id, uint64_t revision);
+/* ok for mr.begin (§8.2): the plain ok plus "mr": {session, max_frame, max_rate, max_lights, points}. */
+char *lc_proto_build_ok_mr(const lc_proto_id *id, uint64_t revision, uint32_t session, uint64_t max_frame,
+                           double max_rate, uint32_t max_lights, uint32_t points);
+/* {"type":"mr.ack","seq","capture_us","status":"processed"|"replaced","lights","ms"} (§8.5). */
+char *lc_proto_build_mr_ack(uint32_t seq, uint64_t capture_us, int replaced, uint32_t lights, double ms);
 char *lc_proto_build_error(const lc_proto_id *id, const lc_proto_error *e);
 char *lc_proto_build_changed(uint64_t revision, const char *by, const lc_proto_op *ops, uint32_t n_ops);
 char *lc_proto_build_state(const lc_proto_id *id, const lc_proto_state *st);
@@ -306,6 +353,25 @@ int lc_residual_inflate(const uint8_t *in, size_t n, uint8_t *out, size_t expect
 /* Bytes per lightmap texel / per SH value for an encoding (0 when not allowed). */
 size_t lc_frame_texel_bytes(lc_encoding e);
 size_t lc_frame_sh_value_bytes(lc_encoding e);
+
+/* mr.vpl payload (§8.7): per session object (sorted by id) a block of 64 bytes of id (zero
+ * padded), u32 point count P, u32 reserved (0), then P records of LC_FRAME_MR_VPL_VALUES
+ * values (f32, or binary16 with rgba16f): I_d rgb, l_d xyz, I_s rgb, l_s xyz. Header width =
+ * the number of objects, height = the sum of P, depth 1, tile_size 0, keyframes only. */
+#define LC_FRAME_MR_VPL_VALUES 12
+#define LC_FRAME_MR_VPL_BLOCK_HEADER 72 /* id + P + reserved */
+/* Bytes of one object's block with `points` records; 0 for an encoding the stream lacks. */
+size_t lc_frame_mr_vpl_block_bytes(lc_encoding e, uint32_t points);
+/* Writes one object's block at out (cap bytes): the id (at most 64 bytes, cut there), P, 0,
+ * then records[0 .. points*12) encoded. Returns the bytes written, 0 when it does not fit
+ * or the encoding is not f32 / rgba16f. */
+size_t lc_frame_mr_vpl_block(lc_encoding e, const char *id, uint32_t points, const float *records, uint8_t *out,
+                             size_t cap);
+/* Walks a parsed mr.vpl payload: block `*at` (start 0) -> its id (NUL-terminated copy),
+ * point count and records pointer; advances *at. 0, or -1 at the end / on a bad block
+ * (lc_frame_parse has checked the layout, so -1 then means the end). */
+int lc_frame_mr_vpl_next(const lc_frame_header *h, const uint8_t *payload, size_t *at, char id[LC_PROTO_ID_MAX + 1],
+                         uint32_t *points, const uint8_t **records);
 
 /* GL RGB9_E5 (shared exponent) — the same bits a GL upload of GL_RGB9_E5 expects. */
 uint32_t lc_rgb9e5_encode(const float rgb[3]);

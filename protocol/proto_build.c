@@ -273,12 +273,25 @@ static cJSON *proto_asset_info_json(proto_b *b, const lc_proto_welcome *w) {
     return all;
 }
 
+/* §8.1: the names of the granted capability bits (unnamed bits are not written). */
+static cJSON *proto_caps_json(proto_b *b, uint32_t caps) {
+    cJSON *arr = proto_chk(b, cJSON_CreateArray());
+    for (uint32_t k = 0; arr && k < 32; k++) {
+        const char *name = (caps >> k) & 1u ? lc_proto_capability_name(1u << k) : NULL;
+        cJSON *it = name ? proto_chk(b, cJSON_CreateString(name)) : NULL;
+        if (it) cJSON_AddItemToArray(arr, it);
+    }
+    return arr;
+}
+
 char *lc_proto_build_welcome(const lc_proto_id *id, const lc_proto_welcome *w) {
     proto_b b = {0};
     if (!w) return NULL;
     cJSON *m = proto_msg(&b, "welcome", id);
     proto_add_str(&b, m, "server", w->server);
     proto_add_str(&b, m, "protocol", LC_PROTO_NAME);
+    proto_add_str(&b, m, "version", LC_PROTO_VERSION);
+    proto_add(&b, m, "capabilities", proto_caps_json(&b, w->capabilities));
     proto_add_str(&b, m, "role", w->role);
     proto_add_u64(&b, m, "revision", w->revision);
     cJSON *scene = proto_chk(&b, cJSON_CreateObject());
@@ -321,6 +334,32 @@ char *lc_proto_build_ok(const lc_proto_id *id, uint64_t revision) {
     proto_b b = {0};
     cJSON *m = proto_msg(&b, "ok", id);
     proto_add_u64(&b, m, "revision", revision);
+    return proto_finish(&b, m);
+}
+
+char *lc_proto_build_ok_mr(const lc_proto_id *id, uint64_t revision, uint32_t session, uint64_t max_frame,
+                           double max_rate, uint32_t max_lights, uint32_t points) {
+    proto_b b = {0};
+    cJSON *m = proto_msg(&b, "ok", id);
+    proto_add_u64(&b, m, "revision", revision);
+    cJSON *mr = proto_chk(&b, cJSON_CreateObject());
+    proto_add_u64(&b, mr, "session", session);
+    proto_add_u64(&b, mr, "max_frame", max_frame);
+    proto_add_double(&b, mr, "max_rate", max_rate);
+    proto_add_u64(&b, mr, "max_lights", max_lights);
+    proto_add_u64(&b, mr, "points", points);
+    proto_add(&b, m, "mr", mr);
+    return proto_finish(&b, m);
+}
+
+char *lc_proto_build_mr_ack(uint32_t seq, uint64_t capture_us, int replaced, uint32_t lights, double ms) {
+    proto_b b = {0};
+    cJSON *m = proto_msg(&b, "mr.ack", NULL);
+    proto_add_u64(&b, m, "seq", seq);
+    proto_add_u64(&b, m, "capture_us", capture_us);
+    proto_add_str(&b, m, "status", replaced ? "replaced" : "processed");
+    proto_add_u64(&b, m, "lights", lights);
+    proto_add_double(&b, m, "ms", ms >= 0 ? ms : 0);
     return proto_finish(&b, m);
 }
 

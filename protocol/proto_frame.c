@@ -8,6 +8,7 @@
 
 #include "lucent_proto.h"
 #include "util/crc32.h"
+#include "util/half.h"
 
 #define PROTO_FRAME_CRC_OFFSET 60
 #define PROTO_OBJECT_ID_BYTES 64
@@ -119,6 +120,80 @@ static uint64_t proto_mul(uint64_t a, uint64_t b) {
     return a * b;
 }
 
+/* §8.7: `width` blocks of 64-byte id, u32 P, u32 0, P records; the P sum to `height`. The
+ * payload length was checked against the frame length; this walks the blocks inside it. */
+static int proto_mr_vpl_check(const lc_frame_header *h, int key, const uint8_t *pl, lc_proto_error *err) {
+    size_t vb = lc_frame_sh_value_bytes((lc_encoding)h->encoding);
+    if (!vb) return proto_bad(err, "%s", "bad mr.vpl encoding");
+    if (!key) return proto_bad(err, "%s", "mr.vpl sends keyframes only");
+    if (h->tile_size) return proto_bad(err, "%s", "tile size must be 0 for mr.vpl");
+    if (h->depth != 1) return proto_bad(err, "%s", "mr.vpl: depth must be 1");
+    uint64_t at = 0, points = 0, rec = LC_FRAME_MR_VPL_VALUES * vb;
+    for (uint32_t i = 0; i < h->width; i++) {
+        if (h->payload_length - at < LC_FRAME_MR_VPL_BLOCK_HEADER)
+            return proto_bad(err, "%s", "mr.vpl: payload length does not match the objects");
+        uint32_t p = proto_get32(pl + at + PROTO_OBJECT_ID_BYTES);
+        if (proto_get32(pl + at + PROTO_OBJECT_ID_BYTES + 4))
+            return proto_bad(err, "%s", "mr.vpl: reserved word is not 0");
+        at += LC_FRAME_MR_VPL_BLOCK_HEADER;
+        if (p > (h->payload_length - at) / rec)
+            return proto_bad(err, "%s", "mr.vpl: payload length does not match the point counts");
+        at += p * rec;
+        points += p;
+    }
+    if (points != h->height) return proto_bad(err, "%s", "mr.vpl: point counts do not sum to the height");
+    if (at != h->payload_length) return proto_bad(err, "%s", "payload length does not match the stream");
+    return 0;
+}
+
+size_t lc_frame_mr_vpl_block_bytes(lc_encoding e, uint32_t points) {
+    size_t vb = lc_frame_sh_value_bytes(e);
+    if (!vb) return 0;
+    return LC_FRAME_MR_VPL_BLOCK_HEADER + (size_t)points * LC_FRAME_MR_VPL_VALUES * vb;
+}
+
+size_t lc_frame_mr_vpl_block(lc_encoding e, const char *id, uint32_t points, const float *records, uint8_t *out,
+                             size_t cap) {
+    size_t n = lc_frame_mr_vpl_block_bytes(e, points), vb = lc_frame_sh_value_bytes(e);
+    if (!n || n > cap || !out || (points && !records)) return 0;
+    memset(out, 0, PROTO_OBJECT_ID_BYTES);
+    if (id) memcpy(out, id, strnlen(id, PROTO_OBJECT_ID_BYTES));
+    proto_put32(out + PROTO_OBJECT_ID_BYTES, points);
+    proto_put32(out + PROTO_OBJECT_ID_BYTES + 4, 0);
+    uint8_t *o = out + LC_FRAME_MR_VPL_BLOCK_HEADER;
+    for (size_t k = 0; k < (size_t)points * LC_FRAME_MR_VPL_VALUES; k++, o += vb) {
+        float v = records[k];
+        if (vb == 2) {
+            proto_put16(o, lc_half_from_float(v));
+        } else {
+            uint32_t bits;
+            memcpy(&bits, &v, 4);
+            proto_put32(o, bits);
+        }
+    }
+    return n;
+}
+
+int lc_frame_mr_vpl_next(const lc_frame_header *h, const uint8_t *payload, size_t *at, char id[LC_PROTO_ID_MAX + 1],
+                         uint32_t *points, const uint8_t **records) {
+    if (!h || !payload || !at || h->stream != LC_STREAM_MR_VPL) return -1;
+    size_t vb = lc_frame_sh_value_bytes((lc_encoding)h->encoding), len = h->payload_length;
+    if (!vb || *at > len || len - *at < LC_FRAME_MR_VPL_BLOCK_HEADER) return -1;
+    const uint8_t *b = payload + *at;
+    uint32_t p = proto_get32(b + PROTO_OBJECT_ID_BYTES);
+    size_t rec = LC_FRAME_MR_VPL_VALUES * vb;
+    if (p > (len - *at - LC_FRAME_MR_VPL_BLOCK_HEADER) / rec) return -1;
+    if (id) {
+        size_t n = strnlen((const char *)b, PROTO_OBJECT_ID_BYTES);
+        memcpy(id, b, n);
+        id[n] = 0;
+    }
+    if (points) *points = p;
+    if (records) *records = b + LC_FRAME_MR_VPL_BLOCK_HEADER;
+    *at += LC_FRAME_MR_VPL_BLOCK_HEADER + (size_t)p * rec;
+    return 0;
+}
+
 int lc_frame_parse(const uint8_t *data, size_t len, lc_frame_header *h, const uint8_t **tile_table,
                    const uint8_t **payload, lc_proto_error *err) {
     lc_frame_header tmp;
@@ -208,6 +283,10 @@ int lc_frame_parse(const uint8_t *data, size_t len, lc_frame_header *h, const ui
         }
         break;
     }
+    case LC_STREAM_MR_VPL:
+        if (proto_mr_vpl_check(h, key, tiles + 4 * (size_t)h->tile_count, err) < 0) return -1;
+        expect = h->payload_length;
+        break;
     default: return proto_bad(err, "%s", "unknown stream");
     }
     if (expect != h->payload_length) return proto_bad(err, "%s", "payload length does not match the stream");

@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "lucent_proto.h"
+#include "lucent_upload.h"
 #include "util/limits.h"
 #include "util/utf8.h"
 
@@ -26,9 +27,14 @@
 enum { PROTO_SCAN_BAD_UTF8 = 1, PROTO_SCAN_NUL_ESCAPE = 2, PROTO_SCAN_NUL_IN_ID = 4 };
 
 static const char *const proto_type_names[LC_REQ_COUNT] = {
-    "hello",        "subscribe",       "unsubscribe",  "light.set", "light.remove", "object.set", "object.remove",
-    "material.set", "environment.set", "settings.set", "batch",     "state.get",    "snapshot",   "ping"};
-static const char *const proto_stream_names[] = {"lightmap", "shgrid", "objects"};
+    "hello",         "subscribe",    "unsubscribe",     "light.set",    "light.remove", "object.set",
+    "object.remove", "material.set", "environment.set", "settings.set", "batch",        "state.get",
+    "snapshot",      "ping",         "mr.begin",        "mr.end"};
+static const char *const proto_stream_names[] = {"lightmap", "shgrid", "objects", "mr.vpl"};
+static const char *const proto_capability_names[LC_CAP_COUNT] = {"mr"};
+static const char *const proto_depth_names[] = {"u16mm", "f16m"};              /* LC_DEPTH_* - 1 */
+static const char *const proto_color_names[] = {"rgb8_srgb", "rgb16f_linear"}; /* LC_COLOR_* - 1 */
+static const char *const proto_mr_light_names[] = {"replace", "add"};
 static const char *const proto_encoding_names[] = {"rgb9e5", "rgba16f", "f32"};
 static const char *const proto_delta_names[] = {"tiles", "residual"};
 static const char *const proto_light_type_names[] = {"point", "spot", "directional", "area"};
@@ -40,7 +46,13 @@ const char *lc_proto_type_name(lc_req_type t) { return (unsigned)t < LC_REQ_COUN
 int lc_proto_is_change(lc_req_type t) { return t >= LC_REQ_LIGHT_SET && t <= LC_REQ_BATCH; }
 
 const char *lc_proto_stream_name(lc_stream s) {
-    return s >= LC_STREAM_LIGHTMAP && s <= LC_STREAM_OBJECTS ? proto_stream_names[s - 1] : "unknown";
+    return s >= LC_STREAM_LIGHTMAP && s <= LC_STREAM_MAX ? proto_stream_names[s - 1] : "unknown";
+}
+
+const char *lc_proto_capability_name(uint32_t cap_bit) {
+    for (int k = 0; k < LC_CAP_COUNT; k++)
+        if (cap_bit == 1u << k) return proto_capability_names[k];
+    return NULL;
 }
 
 const char *lc_proto_encoding_name(lc_encoding e) {
@@ -647,6 +659,87 @@ static int proto_parse_settings(const cJSON *o, const char *p, lc_proto_settings
     return 0;
 }
 
+/* §3.2 hello; §8.1 capabilities. */
+static int proto_parse_hello(const cJSON *m, lc_proto_request *out, lc_proto_error *err) {
+    char p[PROTO_PTR_MAX];
+    if (proto_str(m, "client", "", 1, 1, LC_PROTO_NAME_MAX, out->client, sizeof out->client, err) < 0) return -1;
+    if (proto_str(m, "token", "", 0, 0, LC_PROTO_TOKEN_MAX, out->token, sizeof out->token, err) < 0) return -1;
+    const cJSON *enc = cJSON_GetObjectItemCaseSensitive(m, "encodings");
+    if (enc) {
+        if (!cJSON_IsArray(enc)) return proto_fail(err, LC_ERR_INVALID, "/encodings", "/encodings must be an array");
+        int i = 0;
+        for (const cJSON *e = enc->child; e; e = e->next, i++) {
+            proto_ptr_index(p, "/encodings", i);
+            if (proto_str_item(e, p, 0, PROTO_STR_MAX, NULL, 0, err) < 0) return -1;
+            for (int k = 0; k < 3; k++) /* unknown names are ignored: newer clients list more */
+                if (!strcmp(e->valuestring, proto_encoding_names[k])) out->encodings |= 1u << (k + 1);
+        }
+    }
+    const cJSON *caps = cJSON_GetObjectItemCaseSensitive(m, "capabilities");
+    if (!caps) return 0;
+    if (!cJSON_IsArray(caps)) return proto_fail(err, LC_ERR_INVALID, "/capabilities", "/capabilities must be an array");
+    int n = cJSON_GetArraySize(caps);
+    if (n > LC_PROTO_CAPS_MAX)
+        return proto_fail(err, LC_ERR_INVALID, "/capabilities", "/capabilities has %d names, at most %d", n,
+                          LC_PROTO_CAPS_MAX);
+    int i = 0;
+    for (const cJSON *e = caps->child; e; e = e->next, i++) {
+        proto_ptr_index(p, "/capabilities", i);
+        if (proto_str_item(e, p, 1, LC_PROTO_CAP_NAME_MAX, NULL, 0, err) < 0) return -1;
+        for (int k = 0; k < LC_CAP_COUNT; k++) /* unknown names are ignored (§8.1) */
+            if (!strcmp(e->valuestring, proto_capability_names[k])) out->capabilities |= 1u << k;
+    }
+    return 0;
+}
+
+/* §8.2 mr.begin "session": objects (1..16 distinct ids), image size and encodings, tuning. */
+static int proto_parse_mr_session(const cJSON *o, const char *p, lc_proto_mr_session *S, lc_proto_error *err) {
+    char q[PROTO_PTR_MAX], qe[PROTO_PTR_MAX];
+    int k;
+    memset(S, 0, sizeof *S);
+    proto_ptr(q, p, "objects");
+    const cJSON *objs = cJSON_GetObjectItemCaseSensitive(o, "objects");
+    if (!objs) return proto_fail(err, LC_ERR_INVALID, q, "%s is required", q);
+    int n = cJSON_IsArray(objs) ? cJSON_GetArraySize(objs) : -1;
+    if (n < 1 || n > LC_PROTO_MR_OBJECTS_MAX)
+        return proto_fail(err, LC_ERR_INVALID, q, "%s must be an array of 1..%d object ids", q,
+                          LC_PROTO_MR_OBJECTS_MAX);
+    int i = 0;
+    for (const cJSON *e = objs->child; e; e = e->next, i++) {
+        proto_ptr_index(qe, q, i);
+        if (proto_str_item(e, qe, 1, LC_PROTO_ID_MAX, S->objects[i], sizeof S->objects[i], err) < 0) return -1;
+        for (int j = 0; j < i; j++)
+            if (!strcmp(S->objects[j], S->objects[i]))
+                return proto_fail(err, LC_ERR_INVALID, qe, "%s repeats %s/%d", qe, q, j);
+        S->n_objects = (uint32_t)i + 1;
+    }
+    if (proto_uint(o, "width", p, 1, LC_PROTO_MR_SIDE_MIN, LC_PROTO_MR_SIDE_MAX, &S->width, err) < 0) return -1;
+    if (proto_uint(o, "height", p, 1, LC_PROTO_MR_SIDE_MIN, LC_PROTO_MR_SIDE_MAX, &S->height, err) < 0) return -1;
+    if ((uint64_t)S->width * S->height > LC_PROTO_MR_PIXELS_MAX) {
+        proto_ptr(q, p, "height");
+        return proto_fail(err, LC_ERR_OUT_OF_RANGE, q, "%s: width * height must be at most %u", q,
+                          LC_PROTO_MR_PIXELS_MAX);
+    }
+    if (proto_enum(o, "depth", p, 1, proto_depth_names, 2, &k, err) < 0) return -1;
+    S->depth_encoding = k + 1;
+    if (proto_enum(o, "color", p, 1, proto_color_names, 2, &k, err) < 0) return -1;
+    S->color_encoding = k + 1;
+    S->max_rate = 10;
+    if (proto_num(o, "max_rate", p, 0, 0.1, 60, &S->max_rate, err) < 0) return -1;
+    S->glossy = 1;
+    if (proto_bool(o, "glossy", p, 0, &S->glossy, err) < 0) return -1;
+    S->specular_exponent = 16;
+    if (proto_num(o, "specular_exponent", p, 0, 1, 10000, &S->specular_exponent, err) < 0) return -1;
+    S->min_confidence = 0.5;
+    if (proto_num(o, "min_confidence", p, 0, 0, 1, &S->min_confidence, err) < 0) return -1;
+    S->smoothing = 0;
+    if (proto_num(o, "smoothing", p, 0, 0, 0.99, &S->smoothing, err) < 0) return -1;
+    k = 0;
+    if (proto_enum(o, "light", p, 0, proto_mr_light_names, 2, &k, err) < 0) return -1;
+    S->light_add = k;
+    return 0;
+}
+
 /* One change (§4.3-4.9) from message or batch op m; base "" or "/ops/i". */
 static int proto_parse_op(const cJSON *m, const char *base, lc_req_type t, lc_proto_op *op, lc_proto_error *err) {
     char p[PROTO_PTR_MAX];
@@ -731,26 +824,10 @@ static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto
     char p[PROTO_PTR_MAX];
     int k, r;
     switch (out->type) {
-    case LC_REQ_HELLO: {
-        if (proto_str(m, "client", "", 1, 1, LC_PROTO_NAME_MAX, out->client, sizeof out->client, err) < 0) return -1;
-        if (proto_str(m, "token", "", 0, 0, LC_PROTO_TOKEN_MAX, out->token, sizeof out->token, err) < 0) return -1;
-        const cJSON *enc = cJSON_GetObjectItemCaseSensitive(m, "encodings");
-        if (enc) {
-            if (!cJSON_IsArray(enc))
-                return proto_fail(err, LC_ERR_INVALID, "/encodings", "/encodings must be an array");
-            int i = 0;
-            for (const cJSON *e = enc->child; e; e = e->next, i++) {
-                proto_ptr_index(p, "/encodings", i);
-                if (proto_str_item(e, p, 0, PROTO_STR_MAX, NULL, 0, err) < 0) return -1;
-                for (k = 0; k < 3; k++) /* unknown names are ignored: newer clients list more */
-                    if (!strcmp(e->valuestring, proto_encoding_names[k])) out->encodings |= 1u << (k + 1);
-            }
-        }
-        return 0;
-    }
+    case LC_REQ_HELLO: return proto_parse_hello(m, out, err);
     case LC_REQ_SUBSCRIBE:
     case LC_REQ_UNSUBSCRIBE:
-        if (proto_enum(m, "stream", "", 1, proto_stream_names, 3, &k, err) < 0) return -1;
+        if (proto_enum(m, "stream", "", 1, proto_stream_names, LC_STREAM_MAX, &k, err) < 0) return -1;
         out->stream = (lc_stream)(k + 1);
         out->encoding = out->stream == LC_STREAM_LIGHTMAP ? LC_ENC_RGB9E5 : LC_ENC_F32;
         if (out->type == LC_REQ_UNSUBSCRIBE) return 0;
@@ -792,8 +869,14 @@ static int proto_parse_body(const cJSON *m, const lc_proto_limits *lim, lc_proto
         }
         return 0;
     }
+    case LC_REQ_MR_BEGIN: {
+        const cJSON *sub;
+        if (proto_object(m, "session", "", 1, &sub, p, err) < 0) return -1;
+        return proto_parse_mr_session(sub, p, &out->mr, err);
+    }
     case LC_REQ_STATE_GET:
-    case LC_REQ_SNAPSHOT: return 0;
+    case LC_REQ_SNAPSHOT:
+    case LC_REQ_MR_END: return 0;
     case LC_REQ_PING: return proto_num(m, "t", "", 1, -INFINITY, INFINITY, &out->ping_t, err) < 0 ? -1 : 0;
     default:
         out->ops = calloc(1, sizeof *out->ops);

@@ -19,13 +19,15 @@ except ImportError:  # pragma: no cover
 
 BASE = "https://lucent.example/schema/"
 CLIENT = ["hello", "subscribe", "unsubscribe", "light.set", "light.remove", "object.set", "object.remove",
-          "material.set", "environment.set", "settings.set", "batch", "state.get", "snapshot", "ping"]
-SERVER = ["welcome", "ok", "error", "changed", "state", "pong"]
+          "material.set", "environment.set", "settings.set", "batch", "state.get", "snapshot", "ping",
+          "mr.begin", "mr.end"]
+SERVER = ["welcome", "ok", "error", "changed", "state", "pong", "mr.ack"]
 
 
 def check_asyncapi(path, schema_dir, failures):
     """asyncapi.yaml: every client message under publish, every server message under subscribe,
-    each payload a $ref to an existing schema file; the binary frame as octet-stream."""
+    each payload a $ref to an existing schema file; a binary frame as octet-stream in each
+    direction (the data frame to the client, the MR upload frame from it, §8.4)."""
     try:
         import yaml
     except ImportError:
@@ -48,8 +50,10 @@ def check_asyncapi(path, schema_dir, failures):
             target = m["payload"]["$ref"]
             if not os.path.exists(os.path.join(schema_dir, os.path.basename(target))):
                 failures.append(f"asyncapi.yaml: {t} payload {target} does not exist")
-    if not any(m.get("contentType") == "application/octet-stream" for m in msgs.values()):
-        failures.append("asyncapi.yaml: no binary frame message")
+    for op in ("publish", "subscribe"):
+        refs = [m["$ref"].rsplit("/", 1)[1] for m in channel[op]["message"]["oneOf"]]
+        if not any(msgs[r].get("contentType") == "application/octet-stream" for r in refs):
+            failures.append(f"asyncapi.yaml: no binary frame message under {op}")
 
 
 def main():

@@ -102,6 +102,17 @@ int main(int argc, char **argv) {
     client(1, "{\"type\":\"state.get\",\"id\":3}");
     client(1, "{\"type\":\"snapshot\"}");
     client(1, "{\"type\":\"ping\",\"t\":12345.678}");
+    /* lucent/1.1 (§8) */
+    client(1, "{\"type\":\"hello\",\"client\":\"ar/1\",\"capabilities\":[\"mr\",\"future\"]}");
+    client(1, "{\"type\":\"subscribe\",\"stream\":\"mr.vpl\",\"encoding\":\"rgba16f\"}");
+    client(1,
+           "{\"type\":\"mr.begin\",\"id\":4,\"session\":{\"objects\":[\"chair-1\"],\"width\":256,\"height\":192,"
+           "\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\"}}");
+    client(1,
+           "{\"type\":\"mr.begin\",\"session\":{\"objects\":[\"a\",\"b\"],\"width\":1024,\"height\":1024,"
+           "\"depth\":\"f16m\",\"color\":\"rgb16f_linear\",\"max_rate\":60,\"glossy\":false,\"specular_exponent\":1e4,"
+           "\"min_confidence\":1,\"smoothing\":0.99,\"light\":\"add\"}}");
+    client(1, "{\"type\":\"mr.end\",\"id\":\"e\"}");
 
     /* --- client -> server, invalid (schema and parser must both refuse) --- */
     client(0, "{\"type\":\"hello\",\"token\":\"x\"}");
@@ -141,6 +152,24 @@ int main(int argc, char **argv) {
     client(0, "{\"type\":\"ping\",\"t\":\"NaN\"}");
     client(0, "{\"type\":\"snapshot\",\"id\":9007199254740992}");
     client(0, "{\"type\":\"snapshot\",\"id\":\"\"}");
+    client(0, "{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[\"mr\",\"\"]}");
+    client(
+        0,
+        "{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[\"1\",\"2\",\"3\",\"4\",\"5\",\"6\",\"7\",\"8\",\"9\"]}");
+    client(0, "{\"type\":\"subscribe\",\"stream\":\"mr.vpl\",\"encoding\":\"rgb9e5\"}");
+    client(0, "{\"type\":\"mr.begin\"}");
+    client(0,
+           "{\"type\":\"mr.begin\",\"session\":{\"objects\":[\"a\",\"a\"],\"width\":8,\"height\":8,"
+           "\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\"}}");
+    client(0,
+           "{\"type\":\"mr.begin\",\"session\":{\"objects\":[\"a\"],\"width\":7,\"height\":8,"
+           "\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\"}}");
+    client(0,
+           "{\"type\":\"mr.begin\",\"session\":{\"objects\":[\"a\"],\"width\":8,\"height\":8,"
+           "\"depth\":\"u8\",\"color\":\"rgb8_srgb\"}}");
+    client(0,
+           "{\"type\":\"mr.begin\",\"session\":{\"objects\":[\"a\"],\"width\":8,\"height\":8,"
+           "\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\",\"smoothing\":0.995}}");
 
     /* --- server -> client, as built --- */
     lc_proto_id nid = {2, "", 1}, sid = {1, "req-7", 0};
@@ -179,6 +208,13 @@ int main(int argc, char **argv) {
     lc_proto_error e3 = {"bad_utf8", "", "text frame is not valid UTF-8"};
     emit("valid", lc_proto_build_error(NULL, &e3));
     emit("valid", lc_proto_build_pong(&nid, 12345.678, 1700000000000000ULL));
+    /* lucent/1.1 (§8): a welcome granting mr, ok for mr.begin, both mr.ack kinds */
+    w.capabilities = LC_CAP_MR;
+    emit("valid", lc_proto_build_welcome(&nid, &w));
+    w.capabilities = 0;
+    emit("valid", lc_proto_build_ok_mr(&nid, 43, 1, 4194304, 10, 16384, 2048));
+    emit("valid", lc_proto_build_mr_ack(1, 1700000000123456ULL, 0, 49152, 4.75));
+    emit("valid", lc_proto_build_mr_ack(2, 1700000000223456ULL, 1, 0, 0));
 
     /* state and changed from parsed requests, so every light kind appears */
     const char *sets[] = {
@@ -235,6 +271,9 @@ int main(int argc, char **argv) {
     puts("invalid\t{\"type\":\"error\",\"code\":\"oops\",\"message\":\"\",\"pointer\":\"\"}");
     puts("invalid\t{\"type\":\"error\",\"code\":\"invalid\",\"message\":\"\",\"pointer\":\"light\"}");
     puts("invalid\t{\"type\":\"pong\",\"t\":1}");
+    puts("invalid\t{\"type\":\"mr.ack\",\"seq\":1,\"capture_us\":0,\"status\":\"dropped\",\"lights\":0,\"ms\":1}");
+    puts("invalid\t{\"type\":\"mr.ack\",\"seq\":0,\"capture_us\":0,\"status\":\"processed\",\"lights\":0,\"ms\":1}");
+    puts("invalid\t{\"type\":\"ok\",\"revision\":1,\"mr\":{\"session\":1,\"max_frame\":1,\"max_rate\":10}}");
     puts("invalid\t{\"type\":\"changed\",\"revision\":1,\"by\":\"x\",\"ops\":[\"batch\"],\"ids\":[\"a\"]}");
     puts(
         "invalid\t{\"type\":\"welcome\",\"server\":\"s\",\"protocol\":\"lucent/2\",\"role\":\"controller\",\"revision\":0,\"scene\":{},\"limits\":{}}");

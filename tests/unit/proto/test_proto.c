@@ -10,7 +10,9 @@
 
 #include "check.h"
 #include "lucent_proto.h"
+#include "lucent_upload.h"
 #include "util/crc32.h"
+#include "util/half.h"
 
 static int parse(const char *s, lc_proto_request *r, lc_proto_error *e) {
     return lc_proto_parse_request(s, strlen(s), NULL, r, e);
@@ -988,7 +990,7 @@ static void test_frames(void) {
     CHECK(frame_bad(n, "tile table"), "keyframe with tiles");
     n = make_frame(&h, 1, 1, LC_FRAME_KEYFRAME, 5, 3, 1, 4, NULL, 0, 56);
     CHECK(frame_bad(n, "payload"), "keyframe payload short");
-    n = make_frame(&h, 4, 3, LC_FRAME_KEYFRAME, 1, 1, 1, 0, NULL, 0, 12);
+    n = make_frame(&h, 5, 3, LC_FRAME_KEYFRAME, 1, 1, 1, 0, NULL, 0, 12);
     CHECK(frame_bad(n, "stream"), "unknown stream");
     n = make_frame(&h, 1, 4, LC_FRAME_KEYFRAME, 1, 1, 1, 0, NULL, 0, 12);
     CHECK(frame_bad(n, "encoding"), "unknown encoding");
@@ -1633,6 +1635,365 @@ static void test_dnrt_fields(void) {
     cJSON_Delete(j);
 }
 
+/* --- lucent/1.1 MR messages (§8.1-8.3, 8.5, 8.7) -------------------------------------------- */
+
+static void test_mr_hello(void) {
+    lc_proto_request r;
+    PARSE_OK("{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[\"mr\",\"future\"]}", &r);
+    CHECK(r.capabilities == LC_CAP_MR, "capabilities %u", r.capabilities);
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[\"future\"]}", &r);
+    CHECK(r.capabilities == 0, "unknown names only: %u", r.capabilities);
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[]}", &r);
+    CHECK(r.capabilities == 0, "empty list");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"hello\",\"client\":\"ar\"}", &r);
+    CHECK(r.capabilities == 0, "no list");
+    lc_proto_request_release(&r);
+    /* 8 names of 32 bytes: the limits themselves */
+    PARSE_OK("{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[\"a\",\"b\",\"c\",\"d\",\"e\",\"f\","
+             "\"gggggggggggggggggggggggggggggggg\",\"mr\"]}",
+             &r);
+    CHECK(r.capabilities == LC_CAP_MR, "8 names, one of 32 bytes");
+    lc_proto_request_release(&r);
+    INVALID("{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[\"a\",\"b\",\"c\",\"d\",\"e\",\"f\",\"g\",\"h\","
+            "\"mr\"]}",
+            "invalid", "/capabilities");
+    INVALID("{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[\"mr\",\"a\",\"b\",\"\"]}", "invalid",
+            "/capabilities/3");
+    INVALID("{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[\"mr\",\"a\",\"b\","
+            "\"ggggggggggggggggggggggggggggggggg\"]}",
+            "invalid", "/capabilities/3");
+    INVALID("{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":[\"mr\",\"a\",\"b\",3]}", "invalid",
+            "/capabilities/3");
+    INVALID("{\"type\":\"hello\",\"client\":\"ar\",\"capabilities\":\"mr\"}", "invalid", "/capabilities");
+    CHECK(!strcmp(lc_proto_capability_name(LC_CAP_MR), "mr") && lc_proto_capability_name(1u << 5) == NULL &&
+              lc_proto_capability_name(0) == NULL,
+          "capability names");
+}
+
+#define MR_BEGIN(fields) "{\"type\":\"mr.begin\",\"id\":5,\"session\":{" fields "}}"
+#define MR_MIN "\"objects\":[\"chair-1\"],\"width\":256,\"height\":192,\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\""
+#define MR_BASE "\"objects\":[\"a\"],\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\""
+
+/* mr.begin with the given width/height over MR_BASE: 1 when it parses. */
+static int mr_size_ok(unsigned w, unsigned h, const char *code, const char *ptr) {
+    char buf[256];
+    snprintf(buf, sizeof buf, MR_BEGIN(MR_BASE ",\"width\":%u,\"height\":%u"), w, h);
+    lc_proto_request r;
+    lc_proto_error e;
+    int rc = parse(buf, &r, &e);
+    lc_proto_request_release(&r);
+    if (rc == 0) return 1;
+    CHECK(!strcmp(e.code, code) && !strcmp(e.pointer, ptr), "%ux%u: %s %s, expected %s %s", w, h, e.code, e.pointer,
+          code, ptr);
+    return 0;
+}
+
+static void test_mr_begin(void) {
+    lc_proto_request r;
+    PARSE_OK(MR_BEGIN(MR_MIN), &r);
+    const lc_proto_mr_session *S = &r.mr;
+    CHECK(r.type == LC_REQ_MR_BEGIN && r.id.kind == 2 && r.id.num == 5 && r.ops == NULL, "mr.begin type");
+    CHECK(S->n_objects == 1 && !strcmp(S->objects[0], "chair-1") && S->width == 256 && S->height == 192 &&
+              S->depth_encoding == LC_DEPTH_U16MM && S->color_encoding == LC_COLOR_RGB8_SRGB,
+          "minimal session fields");
+    CHECK(S->max_rate == 10 && S->glossy == 1 && S->specular_exponent == 16 && S->min_confidence == 0.5 &&
+              S->smoothing == 0 && S->light_add == 0,
+          "defaults: rate %g glossy %d k %g conf %g s %g add %d", S->max_rate, S->glossy, S->specular_exponent,
+          S->min_confidence, S->smoothing, S->light_add);
+    lc_proto_request_release(&r);
+    PARSE_OK(MR_BEGIN("\"objects\":[\"b\",\"a\",\"c\"],\"width\":1024,\"height\":1024,\"depth\":\"f16m\","
+                      "\"color\":\"rgb16f_linear\",\"max_rate\":30,\"glossy\":false,\"specular_exponent\":64.5,"
+                      "\"min_confidence\":0.25,\"smoothing\":0.75,\"light\":\"add\",\"future\":{\"x\":1}"),
+             &r);
+    CHECK(S->n_objects == 3 && !strcmp(S->objects[0], "b") && !strcmp(S->objects[1], "a") &&
+              !strcmp(S->objects[2], "c") && S->width == 1024 && S->height == 1024 &&
+              S->depth_encoding == LC_DEPTH_F16M && S->color_encoding == LC_COLOR_RGB16F_LINEAR && S->max_rate == 30 &&
+              S->glossy == 0 && S->specular_exponent == 64.5 && S->min_confidence == 0.25 && S->smoothing == 0.75 &&
+              S->light_add == 1,
+          "full session (unknown field ignored)");
+    lc_proto_request_release(&r);
+    /* range edges: accepted */
+    PARSE_OK(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"max_rate\":0.1,\"specular_exponent\":1,"
+                              "\"min_confidence\":0,\"smoothing\":0.99"),
+             &r);
+    CHECK(S->width == 8 && S->height == 8 && S->max_rate == 0.1 && S->specular_exponent == 1 &&
+              S->min_confidence == 0 && S->smoothing == 0.99,
+          "lower edges");
+    lc_proto_request_release(&r);
+    PARSE_OK(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"max_rate\":60,\"specular_exponent\":10000,"
+                              "\"min_confidence\":1,\"light\":\"replace\""),
+             &r);
+    CHECK(S->max_rate == 60 && S->specular_exponent == 10000 && S->min_confidence == 1 && S->light_add == 0,
+          "upper edges");
+    lc_proto_request_release(&r);
+    PARSE_OK(MR_BEGIN("\"objects\":[\"o0\",\"o1\",\"o2\",\"o3\",\"o4\",\"o5\",\"o6\",\"o7\",\"o8\",\"o9\",\"oa\","
+                      "\"ob\",\"oc\",\"od\",\"oe\",\"of\"],\"width\":8,\"height\":8,\"depth\":\"u16mm\","
+                      "\"color\":\"rgb8_srgb\""),
+             &r);
+    CHECK(S->n_objects == 16 && !strcmp(S->objects[15], "of"), "16 objects");
+    lc_proto_request_release(&r);
+    CHECK(mr_size_ok(8, 1024, "", ""), "8x1024");
+    CHECK(mr_size_ok(1024, 1024, "", ""), "1024x1024 = 2^20");
+    CHECK(!mr_size_ok(7, 8, "out_of_range", "/session/width"), "width 7");
+    CHECK(!mr_size_ok(1025, 8, "out_of_range", "/session/width"), "width 1025");
+    CHECK(!mr_size_ok(8, 7, "out_of_range", "/session/height"), "height 7");
+    CHECK(!mr_size_ok(1024, 1025, "out_of_range", "/session/height"), "1024x1025");
+    /* rejected */
+    INVALID(MR_BEGIN("\"objects\":[\"o0\",\"o1\",\"o2\",\"o3\",\"o4\",\"o5\",\"o6\",\"o7\",\"o8\",\"o9\",\"oa\","
+                     "\"ob\",\"oc\",\"od\",\"oe\",\"of\",\"og\"],\"width\":8,\"height\":8,\"depth\":\"u16mm\","
+                     "\"color\":\"rgb8_srgb\""),
+            "invalid", "/session/objects");
+    INVALID(MR_BEGIN("\"objects\":[],\"width\":8,\"height\":8,\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\""), "invalid",
+            "/session/objects");
+    INVALID(MR_BEGIN("\"objects\":[\"a\",\"b\",\"c\",\"b\"],\"width\":8,\"height\":8,\"depth\":\"u16mm\","
+                     "\"color\":\"rgb8_srgb\""),
+            "invalid", "/session/objects/3");
+    INVALID(MR_BEGIN("\"objects\":[\"a\",\"b\",\"c\",\"\"],\"width\":8,\"height\":8,\"depth\":\"u16mm\","
+                     "\"color\":\"rgb8_srgb\""),
+            "invalid", "/session/objects/3");
+    INVALID(MR_BEGIN("\"objects\":[\"a\",\"b\",\"c\",7],\"width\":8,\"height\":8,\"depth\":\"u16mm\","
+                     "\"color\":\"rgb8_srgb\""),
+            "invalid", "/session/objects/3");
+    INVALID(MR_BEGIN(
+                "\"objects\":[\"a\",\"b\",\"c\",\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\"],"
+                "\"width\":8,\"height\":8,\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\""),
+            "invalid", "/session/objects/3");
+    INVALID(MR_BEGIN("\"objects\":\"a\",\"width\":8,\"height\":8,\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\""),
+            "invalid", "/session/objects");
+    INVALID(MR_BEGIN("\"width\":8,\"height\":8,\"depth\":\"u16mm\",\"color\":\"rgb8_srgb\""), "invalid",
+            "/session/objects");
+    INVALID(MR_BEGIN(MR_BASE ",\"height\":8"), "invalid", "/session/width");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8.5,\"height\":8"), "invalid", "/session/width");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"max_rate\":0.05"), "out_of_range", "/session/max_rate");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"max_rate\":60.1"), "out_of_range", "/session/max_rate");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"specular_exponent\":0.5"), "out_of_range",
+            "/session/specular_exponent");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"specular_exponent\":10001"), "out_of_range",
+            "/session/specular_exponent");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"smoothing\":0.995"), "out_of_range", "/session/smoothing");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"min_confidence\":1.5"), "out_of_range",
+            "/session/min_confidence");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"min_confidence\":-0.1"), "out_of_range",
+            "/session/min_confidence");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"glossy\":1"), "invalid", "/session/glossy");
+    INVALID(MR_BEGIN(MR_BASE ",\"width\":8,\"height\":8,\"light\":\"x\""), "invalid", "/session/light");
+    INVALID(MR_BEGIN("\"objects\":[\"a\"],\"width\":8,\"height\":8,\"depth\":\"u8\",\"color\":\"rgb8_srgb\""),
+            "invalid", "/session/depth");
+    INVALID(MR_BEGIN("\"objects\":[\"a\"],\"width\":8,\"height\":8,\"color\":\"rgb8_srgb\""), "invalid",
+            "/session/depth");
+    INVALID(MR_BEGIN("\"objects\":[\"a\"],\"width\":8,\"height\":8,\"depth\":\"u16mm\",\"color\":\"rgb8\""), "invalid",
+            "/session/color");
+    INVALID("{\"type\":\"mr.begin\",\"id\":5}", "invalid", "/session");
+    INVALID("{\"type\":\"mr.begin\",\"session\":[]}", "invalid", "/session");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"mr.end\"}]}", "invalid", "/ops/0/type");
+    /* mr.end: no fields */
+    PARSE_OK("{\"type\":\"mr.end\",\"id\":\"e\"}", &r);
+    CHECK(r.type == LC_REQ_MR_END && r.id.kind == 1 && !strcmp(r.id.str, "e") && r.ops == NULL && r.n_ops == 0,
+          "mr.end");
+    lc_proto_request_release(&r);
+    CHECK(!lc_proto_is_change(LC_REQ_MR_BEGIN) && !lc_proto_is_change(LC_REQ_MR_END), "MR requests are no changes");
+    CHECK(!strcmp(lc_proto_type_name(LC_REQ_MR_BEGIN), "mr.begin") &&
+              !strcmp(lc_proto_type_name(LC_REQ_MR_END), "mr.end"),
+          "MR type names");
+    /* subscribe mr.vpl */
+    PARSE_OK("{\"type\":\"subscribe\",\"stream\":\"mr.vpl\"}", &r);
+    CHECK(r.stream == LC_STREAM_MR_VPL && r.encoding == LC_ENC_F32, "mr.vpl default f32");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"subscribe\",\"stream\":\"mr.vpl\",\"encoding\":\"rgba16f\",\"max_rate\":30}", &r);
+    CHECK(r.stream == LC_STREAM_MR_VPL && r.encoding == LC_ENC_RGBA16F && r.max_rate == 30, "mr.vpl rgba16f");
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"unsubscribe\",\"stream\":\"mr.vpl\"}", &r);
+    CHECK(r.type == LC_REQ_UNSUBSCRIBE && r.stream == LC_STREAM_MR_VPL, "unsubscribe mr.vpl");
+    lc_proto_request_release(&r);
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"mr.vpl\",\"encoding\":\"rgb9e5\"}", "invalid", "/encoding");
+    INVALID("{\"type\":\"subscribe\",\"stream\":\"mr.vpl\",\"delta\":\"tiles\"}", "invalid", "/delta");
+    CHECK(!strcmp(lc_proto_stream_name(LC_STREAM_MR_VPL), "mr.vpl") && !strcmp(lc_proto_stream_name(5), "unknown"),
+          "stream names");
+}
+
+static void test_mr_builders(void) {
+    lc_proto_id sid = {1, "mr-1", 0};
+    cJSON *j = reparse(lc_proto_build_ok_mr(&sid, 77, 3, 4194304, 7.5, 4096, 1234));
+    const cJSON *mr = cJSON_GetObjectItemCaseSensitive(j, "mr");
+    CHECK(j && !strcmp(str(j, "type"), "ok") && !strcmp(str(j, "id"), "mr-1") && num(j, "revision") == 77 &&
+              cJSON_GetArraySize(j) == 4,
+          "ok_mr top level");
+    CHECK(cJSON_IsObject(mr) && cJSON_GetArraySize(mr) == 5 && num(mr, "session") == 3 &&
+              num(mr, "max_frame") == 4194304 && num(mr, "max_rate") == 7.5 && num(mr, "max_lights") == 4096 &&
+              num(mr, "points") == 1234,
+          "ok_mr.mr fields");
+    cJSON_Delete(j);
+    char *s = lc_proto_build_ok_mr(NULL, 0, 4294967295u, 18446744073709551615ULL, 0.1, 0, 0);
+    CHECK(s && strstr(s, "\"session\":4294967295") && strstr(s, "\"max_frame\":18446744073709551615") &&
+              strstr(s, "\"max_rate\":0.1") && !strstr(s, "\"id\""),
+          "ok_mr exact integers, no id: %s", s);
+    free(s);
+    j = reparse(lc_proto_build_mr_ack(17, 1700000000123456ULL, 0, 812, 3.25));
+    CHECK(j && !strcmp(str(j, "type"), "mr.ack") && num(j, "seq") == 17 && num(j, "capture_us") == 1700000000123456.0 &&
+              !strcmp(str(j, "status"), "processed") && num(j, "lights") == 812 && num(j, "ms") == 3.25 &&
+              cJSON_GetArraySize(j) == 6 && !cJSON_GetObjectItem(j, "id"),
+          "mr.ack processed");
+    cJSON_Delete(j);
+    s = lc_proto_build_mr_ack(4294967295u, 18446744073709551615ULL, 1, 0, NAN);
+    CHECK(s && strstr(s, "\"seq\":4294967295") && strstr(s, "\"capture_us\":18446744073709551615") &&
+              strstr(s, "\"status\":\"replaced\"") && strstr(s, "\"ms\":0"),
+          "mr.ack replaced, exact integers, NaN ms as 0: %s", s);
+    free(s);
+    /* welcome: always version 1.1 and the granted names */
+    const char *assets[] = {"chair"};
+    lc_proto_welcome w;
+    memset(&w, 0, sizeof w);
+    w.server = "lucentd/0.1.0";
+    w.role = "controller";
+    w.assets = assets;
+    w.n_assets = 1;
+    w.bands = 3;
+    lc_proto_default_limits(&w.limits);
+    for (int granted = 0; granted < 2; granted++) {
+        w.capabilities = granted ? LC_CAP_MR | (1u << 7) : 0; /* an unnamed bit is not written */
+        j = reparse(lc_proto_build_welcome(NULL, &w));
+        const cJSON *caps = cJSON_GetObjectItemCaseSensitive(j, "capabilities");
+        CHECK(j && !strcmp(str(j, "version"), "1.1") && !strcmp(str(j, "protocol"), "lucent/1"), "welcome version");
+        CHECK(cJSON_IsArray(caps) && cJSON_GetArraySize(caps) == granted, "welcome capabilities size");
+        if (granted && cJSON_IsArray(caps))
+            CHECK(cJSON_IsString(caps->child) && !strcmp(caps->child->valuestring, "mr"), "welcome grants mr");
+        cJSON_Delete(j);
+    }
+}
+
+/* An mr.vpl frame: objects ids[n] with counts[n] points; record k's value c = k * 12 + c + 0.5. */
+static size_t make_vpl(lc_encoding enc, const char *const *ids, const uint32_t *counts, uint32_t n, uint32_t height,
+                       uint16_t flags, lc_frame_header *h) {
+    static uint8_t payload[1 << 14];
+    float rec[64 * LC_FRAME_MR_VPL_VALUES];
+    size_t at = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        for (uint32_t k = 0; k < counts[i] * LC_FRAME_MR_VPL_VALUES; k++) rec[k] = (float)(i * 1000 + k) + 0.5f;
+        size_t b = lc_frame_mr_vpl_block(enc, ids[i], counts[i], rec, payload + at, sizeof payload - at);
+        CHECK(b == lc_frame_mr_vpl_block_bytes(enc, counts[i]) && b > 0, "block %u: %zu bytes", i, b);
+        at += b;
+    }
+    memset(h, 0, sizeof *h);
+    h->version = 1;
+    h->stream = LC_STREAM_MR_VPL;
+    h->encoding = (uint8_t)enc;
+    h->flags = flags;
+    h->width = n;
+    h->height = height;
+    h->depth = 1;
+    h->payload_length = (uint32_t)at;
+    return lc_frame_write(h, NULL, payload, frame_buf, sizeof frame_buf);
+}
+
+/* Re-frames the payload now in frame_buf after a header change (new CRC). */
+static size_t rewrite_vpl(const lc_frame_header *h) {
+    static uint8_t copy[1 << 14];
+    memcpy(copy, frame_buf + 64, sizeof copy);
+    return lc_frame_write(h, NULL, copy, frame_buf, sizeof frame_buf);
+}
+
+static void test_mr_vpl_frames(void) {
+    const char *ids[] = {"lamp", "chair-1", "aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa"};
+    const uint32_t counts[] = {2, 0, 3};
+    lc_frame_header h, out;
+    const uint8_t *tt, *pl;
+    lc_proto_error e;
+    for (int pass = 0; pass < 2; pass++) {
+        lc_encoding enc = pass ? LC_ENC_RGBA16F : LC_ENC_F32;
+        size_t vb = pass ? 2 : 4;
+        size_t n = make_vpl(enc, ids, counts, 3, 5, LC_FRAME_KEYFRAME, &h);
+        CHECK(n == 64 + 3 * 72 + 5 * 12 * vb, "frame size %zu", n);
+        int rc = lc_frame_parse(frame_buf, n, &out, &tt, &pl, &e);
+        CHECK(rc == 0 && out.stream == LC_STREAM_MR_VPL && out.width == 3 && out.height == 5 &&
+                  out.payload_length == 3 * 72 + 5 * 12 * vb,
+              "%s frame parses: %s", lc_proto_encoding_name(enc), e.message);
+        if (rc != 0) continue;
+        /* bytes on the wire, then the walker */
+        CHECK(!memcmp(pl, "lamp", 5) && pl[64] == 2 && pl[65] == 0 && !memcmp(pl + 68, "\0\0\0\0", 4),
+              "first block header bytes");
+        size_t at = 0;
+        char id[LC_PROTO_ID_MAX + 1];
+        uint32_t p, total = 0;
+        const uint8_t *recs;
+        for (uint32_t i = 0; i < 3; i++) {
+            CHECK(lc_frame_mr_vpl_next(&out, pl, &at, id, &p, &recs) == 0, "block %u", i);
+            CHECK(!strcmp(id, ids[i]) && p == counts[i], "block %u: id %s P %u", i, id, p);
+            for (uint32_t k = 0; k < p * LC_FRAME_MR_VPL_VALUES; k++) {
+                float v, want = (float)(i * 1000 + k) + 0.5f;
+                if (vb == 2) {
+                    v = lc_half_to_float((uint16_t)(recs[2 * k] | recs[2 * k + 1] << 8));
+                    want = lc_half_to_float(lc_half_from_float(want));
+                } else {
+                    uint32_t bits = (uint32_t)recs[4 * k] | (uint32_t)recs[4 * k + 1] << 8 |
+                        (uint32_t)recs[4 * k + 2] << 16 | (uint32_t)recs[4 * k + 3] << 24;
+                    memcpy(&v, &bits, 4);
+                }
+                if (v != want) {
+                    CHECK(0, "block %u value %u: %g, expected %g", i, k, v, want);
+                    break;
+                }
+            }
+            total += p;
+        }
+        CHECK(total == 5 && at == out.payload_length && lc_frame_mr_vpl_next(&out, pl, &at, id, &p, &recs) == -1,
+              "walker ends at the payload's end");
+        /* bad frames (CRC valid) */
+        n = make_vpl(enc, ids, counts, 3, 4, LC_FRAME_KEYFRAME, &h);
+        CHECK(frame_bad(n, "sum to the height"), "P sum 5 != height 4");
+        n = make_vpl(enc, ids, counts, 3, 6, LC_FRAME_KEYFRAME, &h);
+        CHECK(frame_bad(n, "sum to the height"), "P sum 5 != height 6");
+        n = make_vpl(enc, ids, counts, 3, 5, LC_FRAME_DELTA, &h);
+        CHECK(frame_bad(n, "keyframes"), "delta flag");
+        n = make_vpl(enc, ids, counts, 3, 5, LC_FRAME_KEYFRAME, &h);
+        h.payload_length -= (uint32_t)vb; /* the last record cut short */
+        n = rewrite_vpl(&h);
+        CHECK(frame_bad(n, "point counts"), "payload one value short");
+        n = make_vpl(enc, ids, counts, 3, 5, LC_FRAME_KEYFRAME, &h);
+        h.width = 4; /* a fourth block announced, none there */
+        n = rewrite_vpl(&h);
+        CHECK(frame_bad(n, "objects"), "width over the blocks");
+        n = make_vpl(enc, ids, counts, 3, 5, LC_FRAME_KEYFRAME, &h);
+        h.width = 2; /* bytes left after the blocks */
+        h.height = 2;
+        n = rewrite_vpl(&h);
+        CHECK(frame_bad(n, "payload length"), "trailing bytes");
+        n = make_vpl(enc, ids, counts, 3, 5, LC_FRAME_KEYFRAME, &h);
+        h.tile_size = 16;
+        n = rewrite_vpl(&h);
+        CHECK(frame_bad(n, "tile size"), "tile size");
+        n = make_vpl(enc, ids, counts, 3, 5, LC_FRAME_KEYFRAME, &h);
+        frame_buf[64 + 68] = 1; /* block 0's reserved word */
+        uint32_t crc = lc_crc32(0, frame_buf, 60);
+        crc = lc_crc32(crc, frame_buf + 64, n - 64);
+        memcpy(frame_buf + 60, &crc, 4);
+        CHECK(frame_bad(n, "reserved"), "reserved word");
+        n = make_vpl(enc, ids, counts, 3, 5, LC_FRAME_KEYFRAME, &h);
+        size_t b2 = 64 + 2 * 72 + 2 * 12 * vb + 64; /* block 2's P = 0xFF0000FF: far past the payload */
+        frame_buf[b2] = 0xFF;
+        frame_buf[b2 + 3] = 0xFF;
+        crc = lc_crc32(0, frame_buf, 60);
+        crc = lc_crc32(crc, frame_buf + 64, n - 64);
+        memcpy(frame_buf + 60, &crc, 4);
+        CHECK(frame_bad(n, "point counts"), "huge P");
+    }
+    lc_frame_header hh;
+    size_t n = make_vpl(LC_ENC_F32, ids, counts, 0, 0, LC_FRAME_KEYFRAME, &hh);
+    CHECK(frame_ok(n, NULL), "no objects: an empty mr.vpl frame");
+    hh.encoding = LC_ENC_RGB9E5;
+    n = lc_frame_write(&hh, NULL, NULL, frame_buf, sizeof frame_buf);
+    CHECK(frame_bad(n, "encoding"), "rgb9e5 mr.vpl");
+    uint8_t small[71];
+    float rec[12] = {0};
+    CHECK(lc_frame_mr_vpl_block(LC_ENC_F32, "a", 0, rec, small, sizeof small) == 0 &&
+              lc_frame_mr_vpl_block(LC_ENC_RGB9E5, "a", 0, rec, frame_buf, sizeof frame_buf) == 0 &&
+              lc_frame_mr_vpl_block_bytes(LC_ENC_RGB9E5, 1) == 0 &&
+              lc_frame_mr_vpl_block_bytes(LC_ENC_F32, 2) == 72 + 96,
+          "block writer refuses what does not fit or has no encoding");
+}
+
 int main(void) {
     test_valid();
     test_limits();
@@ -1650,5 +2011,9 @@ int main(void) {
     test_utf8_builders();
     test_nul_escape();
     test_dnrt_fields();
+    test_mr_hello();
+    test_mr_begin();
+    test_mr_builders();
+    test_mr_vpl_frames();
     CHECK_DONE();
 }
