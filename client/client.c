@@ -26,7 +26,7 @@
 #define CLIENT_MAX_MESSAGE (256u << 20) /* largest frame we reassemble (a 4k f32 lightmap is 192 MiB) */
 #define CLIENT_MAX_TEXT (16u << 20)
 #define CLIENT_ID_PREFIX "lc~" /* ids of the library's own requests */
-#define CLIENT_STREAMS 4       /* indexed by LC_CLIENT_LIGHTMAP.. (0 unused) */
+#define CLIENT_STREAMS 5       /* indexed by LC_CLIENT_LIGHTMAP..LC_CLIENT_MR_VPL (0 unused) */
 
 /* ------------------------------------------------------------------------------------------
  * Views: a client-side copy of one stream
@@ -41,9 +41,10 @@ struct lc_client_view {
     uint32_t width, height, depth, tile_size;
     float *values; /* value_count floats */
     size_t value_count, value_cap;
-    char **object_ids; /* objects stream: width strings */
+    char **object_ids; /* objects and mr.vpl streams: width strings */
     uint32_t n_object_ids;
-    uint8_t *words; /* lightmap: the texels as received, encoded (residual deltas add to them) */
+    uint32_t *object_points; /* mr.vpl: width point counts */
+    uint8_t *words;          /* lightmap: the texels as received, encoded (residual deltas add to them) */
     size_t words_len, words_cap;
     int words_encoding;
     uint32_t *tiles; /* tiles of the last applied delta */
@@ -77,7 +78,9 @@ lc_client_view *lc_client_view_create(void) { return calloc(1, sizeof(lc_client_
 static void view_free_ids(lc_client_view *v) {
     for (uint32_t i = 0; i < v->n_object_ids; i++) free(v->object_ids[i]);
     free(v->object_ids);
+    free(v->object_points);
     v->object_ids = NULL;
+    v->object_points = NULL;
     v->n_object_ids = 0;
 }
 
@@ -157,7 +160,9 @@ static void view_fill_out(const lc_client_view *v, lc_client_frame *out) {
     out->tiles = v->tile_count ? v->tiles : NULL;
     out->values = v->values;
     out->value_count = v->value_count;
-    out->object_ids = v->stream == LC_CLIENT_OBJECTS ? (const char *const *)v->object_ids : NULL;
+    int ids = v->stream == LC_CLIENT_OBJECTS || v->stream == LC_CLIENT_MR_VPL;
+    out->object_ids = ids ? (const char *const *)v->object_ids : NULL;
+    out->object_points = v->stream == LC_CLIENT_MR_VPL ? v->object_points : NULL;
     out->raw = v->raw;
     out->raw_len = v->raw_len;
 }
@@ -275,6 +280,41 @@ static int apply_sh(lc_client_view *v, const lc_frame_header *h, const uint8_t *
     return 0;
 }
 
+/* mr.vpl (PROTOCOL.md §8.7): the records of all objects in order, ids and point counts;
+ * lc_frame_parse checked the blocks against the length and the height. */
+static int apply_vpl(lc_client_view *v, const lc_frame_header *h, const uint8_t *payload, char *err, size_t errlen) {
+    size_t vb = lc_frame_sh_value_bytes((lc_encoding)h->encoding), at = 0, rec = 0;
+    /* height <= payload_length / 24 (each record has 12 values of 2 or 4 bytes): no overflow */
+    if (view_reserve(v, (size_t)h->height * LC_FRAME_MR_VPL_VALUES) != 0) {
+        set_err(err, errlen, "frame does not fit in memory");
+        return -1;
+    }
+    view_free_ids(v);
+    v->object_ids = calloc(h->width ? h->width : 1, sizeof(char *));
+    v->object_points = calloc(h->width ? h->width : 1, sizeof(uint32_t));
+    if (!v->object_ids || !v->object_points) goto oom;
+    v->n_object_ids = h->width;
+    for (uint32_t i = 0; i < h->width; i++) {
+        char id[LC_PROTO_ID_MAX + 1];
+        uint32_t n;
+        const uint8_t *p;
+        if (lc_frame_mr_vpl_next(h, payload, &at, id, &n, &p) != 0 || n > h->height - rec) {
+            set_err(err, errlen, "bad frame: mr.vpl block %u", i);
+            return -1;
+        }
+        if (!(v->object_ids[i] = strdup(id))) goto oom;
+        v->object_points[i] = n;
+        for (size_t k = 0; k < (size_t)n * LC_FRAME_MR_VPL_VALUES; k++, p += vb)
+            v->values[rec * LC_FRAME_MR_VPL_VALUES + k] = decode_sh_value(h->encoding, p);
+        rec += n;
+    }
+    v->tile_count = 0;
+    return 0;
+oom:
+    set_err(err, errlen, "out of memory");
+    return -1;
+}
+
 int lc_client_view_apply(lc_client_view *v, const uint8_t *frame, size_t len, lc_client_frame *out, char *err,
                          size_t errlen) {
     lc_frame_header h;
@@ -288,7 +328,7 @@ int lc_client_view_apply(lc_client_view *v, const uint8_t *frame, size_t len, lc
         set_err(err, errlen, "bad frame: %s", pe.message);
         return -1;
     }
-    if (h.stream != LC_STREAM_LIGHTMAP && h.stream != LC_STREAM_SHGRID && h.stream != LC_STREAM_OBJECTS) {
+    if (h.stream < LC_STREAM_LIGHTMAP || h.stream > LC_STREAM_MR_VPL) {
         set_err(err, errlen, "bad frame: unknown stream %u", h.stream);
         return -1;
     }
@@ -319,6 +359,7 @@ int lc_client_view_apply(lc_client_view *v, const uint8_t *frame, size_t len, lc
         }
     }
     int r = h.stream == LC_STREAM_LIGHTMAP ? apply_lightmap(v, &h, tiles, payload, err, errlen)
+        : h.stream == LC_STREAM_MR_VPL     ? apply_vpl(v, &h, payload, err, errlen)
                                            : apply_sh(v, &h, payload, err, errlen);
     if (r != 0) {
         if (r == -1 && key) v->have_key = 0; /* a half-written keyframe */

@@ -34,8 +34,9 @@ extern "C" {
 
 typedef struct lc_client lc_client;
 
-/* Streams and encodings, numbered as in the frame header (PROTOCOL.md §6.1). */
-enum { LC_CLIENT_LIGHTMAP = 1, LC_CLIENT_SHGRID = 2, LC_CLIENT_OBJECTS = 3 };
+/* Streams and encodings, numbered as in the frame header (PROTOCOL.md §6.1). mr.vpl (§8.7)
+ * carries an MR session's lights; the server sends it only with the `mr` capability. */
+enum { LC_CLIENT_LIGHTMAP = 1, LC_CLIENT_SHGRID = 2, LC_CLIENT_OBJECTS = 3, LC_CLIENT_MR_VPL = 4 };
 enum { LC_CLIENT_RGB9E5 = 1, LC_CLIENT_RGBA16F = 2, LC_CLIENT_F32 = 3 };
 /* OR'd into a lightmap subscription's encoding: delta frames as compressed residuals
  * (PROTOCOL.md §6.2.1; smaller for small changes, applied to the view's encoded copy). */
@@ -64,7 +65,9 @@ void lc_client_options_init(lc_client_options *o);
  * `values` is the whole current stream content as float32, NOT just this frame:
  *   lightmap: width*height texels x 3 (RGB irradiance, W/m^2), row 0 = top;
  *   shgrid:   width*height*depth samples (x fastest) x 27 (9 SH coefficients x RGB);
- *   objects:  width objects x 27, in the order of `object_ids` (sorted by id).
+ *   objects:  width objects x 27, in the order of `object_ids` (sorted by id);
+ *   mr.vpl:   height records x 12 (I_d rgb, l_d xyz, I_s rgb, l_s xyz; PROTOCOL.md §8.7):
+ *             object_points[i] records of object_ids[i], object after object (width).
  * For f32 frames the values are bit-identical to the server's. For a delta frame, `tiles`
  * lists the tiles it replaced (tile_count of them); for keyframes tile_count is 0. */
 typedef struct lc_client_frame {
@@ -80,7 +83,8 @@ typedef struct lc_client_frame {
     const uint32_t *tiles;
     const float *values;
     size_t value_count;
-    const char *const *object_ids; /* objects stream: width ids; NULL otherwise */
+    const char *const *object_ids; /* objects and mr.vpl streams: width ids; NULL otherwise */
+    const uint32_t *object_points; /* mr.vpl: width point counts; NULL otherwise */
     const uint8_t *raw;            /* the frame as received (header, tile table, payload) */
     size_t raw_len;
 } lc_client_frame;
