@@ -274,6 +274,14 @@ int main(int argc, char **argv) {
     puts("invalid\t{\"type\":\"mr.ack\",\"seq\":1,\"capture_us\":0,\"status\":\"dropped\",\"lights\":0,\"ms\":1}");
     puts("invalid\t{\"type\":\"mr.ack\",\"seq\":0,\"capture_us\":0,\"status\":\"processed\",\"lights\":0,\"ms\":1}");
     puts("invalid\t{\"type\":\"ok\",\"revision\":1,\"mr\":{\"session\":1,\"max_frame\":1,\"max_rate\":10}}");
+    puts("invalid\t{\"type\":\"ok\",\"revision\":1,\"mr\":{\"session\":1,\"max_frame\":1,\"max_rate\":0,"
+         "\"max_lights\":1,\"points\":1}}");
+    puts(
+        "invalid\t{\"type\":\"welcome\",\"server\":\"s\",\"protocol\":\"lucent/1\",\"version\":\"2.0\",\"role\":\"viewer\","
+        "\"revision\":0,\"scene\":{\"lightmap\":{\"width\":1,\"height\":1,\"tile\":1,\"quantity\":\"irradiance\"},"
+        "\"grid\":{\"origin\":[0,0,0],\"cell\":1,\"dims\":[1,1,1],\"quantity\":\"irradiance_sh\",\"coefficients\":9},"
+        "\"bands\":3,\"assets\":[],\"materials\":[]},"
+        "\"limits\":{\"max_message\":1,\"max_lights\":1,\"max_objects\":1,\"max_batch\":1,\"rate\":1}}");
     puts("invalid\t{\"type\":\"changed\",\"revision\":1,\"by\":\"x\",\"ops\":[\"batch\"],\"ids\":[\"a\"]}");
     puts(
         "invalid\t{\"type\":\"welcome\",\"server\":\"s\",\"protocol\":\"lucent/2\",\"role\":\"controller\",\"revision\":0,\"scene\":{},\"limits\":{}}");
