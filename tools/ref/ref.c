@@ -567,6 +567,11 @@ static void ref_sample_grid(const lc_ref *r, const ref_path_cfg *cfg, const floa
  * every kind of light alike (emitters, lights, sky). */
 void lc_ref_radiance(const lc_ref *r, const float org_in[3], const float dir_in[3], uint32_t max_depth,
                      uint32_t rr_depth, lc_rng *rng, float L[3], uint64_t *rays) {
+    lc_ref_radiance_ex(r, org_in, dir_in, max_depth, rr_depth, 1, rng, L, rays);
+}
+
+void lc_ref_radiance_ex(const lc_ref *r, const float org_in[3], const float dir_in[3], uint32_t max_depth,
+                        uint32_t rr_depth, int sky_first, lc_rng *rng, float L[3], uint64_t *rays) {
     float org[3] = {org_in[0], org_in[1], org_in[2]}, dir[3] = {dir_in[0], dir_in[1], dir_in[2]};
     float T[3] = {1, 1, 1};
     float pdf_prev = 0; /* 0: the eye's ray, which light sampling cannot produce */
@@ -575,7 +580,7 @@ void lc_ref_radiance(const lc_ref *r, const float org_in[3], const float dir_in[
         ref_hit h;
         (*rays)++;
         if (!ref_intersect(r, org, dir, &h)) {
-            if (r->sky_on) {
+            if (r->sky_on && (depth > 0 || sky_first)) {
                 float s[3];
                 ref_sky(r, dir, s);
                 for (int k = 0; k < 3; k++) L[k] += T[k] * s[k];
@@ -622,6 +627,24 @@ void lc_ref_radiance(const lc_ref *r, const float org_in[3], const float dir_in[
         memcpy(org, x, sizeof org);
     }
 }
+
+int lc_ref_first_hit(const lc_ref *r, const float org[3], const float dir[3], float *t, float ng[3]) {
+    ref_hit h;
+    if (!ref_intersect(r, org, dir, &h)) return 0;
+    *t = h.t;
+    if (h.geom == REF_GEOM_STATIC) {
+        const float *a, *b, *c;
+        ref_tri(r, h.prim, &a, &b, &c);
+        ref_tri_normal(a, b, c, ng);
+    } else {
+        const uint32_t *ix = r->obj_idx + 3 * (size_t)h.prim;
+        ref_tri_normal(r->obj_pos + 4 * (size_t)ix[0], r->obj_pos + 4 * (size_t)ix[1], r->obj_pos + 4 * (size_t)ix[2],
+                       ng);
+    }
+    return 1;
+}
+
+float lc_ref_eps(const lc_ref *r) { return r->eps; }
 
 void lc_ref_irradiance(lc_ref *r, const float p[3], const float n[3], uint32_t spp, uint64_t seed, double mean[3],
                        double stderr_out[3]) {

@@ -212,6 +212,20 @@ void lc_ref_irradiance(lc_ref *r, const float p[3], const float n[3], uint32_t s
 void lc_ref_radiance(const lc_ref *r, const float org[3], const float dir[3], uint32_t max_depth, uint32_t rr_depth,
                      lc_rng *rng, float L[3], uint64_t *rays);
 
+/* The same with sky_first = 0: a first ray that escapes sees nothing (the environment still
+ * lights surfaces, through every later ray): what an RGB-D capture records, where a pixel
+ * without a surface has no colour. lc_ref_radiance is sky_first = 1. */
+void lc_ref_radiance_ex(const lc_ref *r, const float org[3], const float dir[3], uint32_t max_depth, uint32_t rr_depth,
+                        int sky_first, lc_rng *rng, float L[3], uint64_t *rays);
+
+/* The first surface along a ray (unit dir) from org, any side: 1 with its distance *t and the
+ * triangle's winding normal ng (unit; a ray with dot(dir, ng) > 0 sees its back), 0 when the
+ * ray escapes. */
+int lc_ref_first_hit(const lc_ref *r, const float org[3], const float dir[3], float *t, float ng[3]);
+
+/* The ray offset (m) the reference lifts every path vertex by (ref.h, "eps"). */
+float lc_ref_eps(const lc_ref *r);
+
 /* Total power leaving the static surfaces before any transport (W, RGB): the integral over
  * every triangle's front of pi L_e + albedo (direct + sky) irradiance — the engine's
  * sum of B0 x surfel area. Estimated from `samples` points spread by area; stderr may be NULL. */
@@ -295,6 +309,163 @@ uint8_t lc_ref_srgb8(double v);
  * lc_image_write_float of img->rgb). Returns 0 or -1 with err set. */
 int lc_ref_image_write_png(const char *path, const lc_ref_image *img, lc_ref_tonemap_kind kind, double exposure,
                            char *err, size_t errlen);
+
+/* --- RGB-D capture (capture.c, `lucent-ref capture`) ------------------------------------------ */
+
+/* The baked scene as an RGB-D camera records it: the replay format `lucentctl mr replay` reads.
+ *   DIR/capture.json   {"format": "lucent-rgbd/1", "width", "height", "frames", "source": {"bake", "state"}}
+ *   DIR/frame_00001.json {"sequence": k, "time_us", "intrinsics": {"fx", "fy", "cx", "cy"},
+ *                       "pose": {"translation": [3], "rotation": [x, y, z, w]}, "exposure": E,
+ *                       "color": "linear16" | "srgb8"}
+ *   DIR/depth_00001.png 16-bit grey, millimetres along the view axis, rounded; 0 = no surface or
+ *                       beyond 65.535 m
+ *   DIR/color_00001.png RGB: linear16 = 16-bit, radiance (nits) = v / 65535 x E; srgb8 = 8-bit,
+ *                       radiance = sRGB EOTF(v / 255) x E. E is the frame's brightest channel
+ *                       value (nothing clips; 1 for a black frame).
+ * The camera is PROTOCOL.md §8.4's: glTF (+X right, +Y up, looking along -Z), pixel (x, y)'s
+ * centre at (u, v) = (x + 0.5, y + 0.5), depth z its distance along the view axis, camera-space
+ * point ((u - cx) z / fx, -(v - cy) z / fy, -z), world point R p + t. A look-at camera
+ * (lc_ref_camera) has fx = fy = (H / 2) / tan(fov / 2), cx = W / 2, cy = H / 2 and R's columns
+ * right, up, -forward: exactly lc_ref_camera_ray's rays. Colour is lc_ref_radiance_ex with
+ * sky_first = 0 (emitters seen directly, direct and indirect light; a pixel without a surface is
+ * black), averaged over spp stratified positions in the pixel; depth is the pixel centre's ray's
+ * first hit (front or back). */
+#define LC_REF_CAPTURE_FORMAT "lucent-rgbd/1"
+#define LC_REF_CAPTURE_MAX_FRAMES 99999u /* five digits in the file names */
+
+typedef struct lc_ref_rgbd_view {
+    uint32_t width, height;
+    double fx, fy, cx, cy;
+    double rotation[4];    /* camera-to-world unit quaternion x, y, z, w */
+    double translation[3]; /* camera position, world metres */
+} lc_ref_rgbd_view;
+
+/* Unit quaternion (normalised here) -> row-major 3x3 rotation, and back (m orthonormal). */
+void lc_ref_quat_matrix(const double q[4], double m[9]);
+void lc_ref_matrix_quat(const double m[9], double q[4]);
+
+/* The look-at camera's view (lc_ref_camera_setup's checks and errors). */
+int lc_ref_rgbd_lookat(const lc_ref_camera *cam, lc_ref_rgbd_view *out, char *err, size_t errlen);
+/* The ray through image point (u, v): origin = the camera position, unit world direction;
+ * *z_per_t (may be NULL) = depth per unit of ray distance (z = t x z_per_t). */
+void lc_ref_rgbd_ray(const lc_ref_rgbd_view *view, double u, double v, float org[3], float dir[3], double *z_per_t);
+/* The world point at image point (u, v) with depth z (metres). */
+void lc_ref_rgbd_unproject(const lc_ref_rgbd_view *view, double u, double v, double z, double out[3]);
+
+typedef struct lc_ref_capture_settings {
+    uint32_t spp;       /* colour samples per pixel (stratified; 1 = the centre) */
+    uint32_t max_depth; /* reflections per path (lc_ref_radiance) */
+    uint32_t rr_depth;
+    uint64_t seed;
+    int srgb8; /* colour PNG: 0 linear16, 1 srgb8 */
+    int quiet; /* no progress on stderr */
+} lc_ref_capture_settings;
+
+/* One frame (index `frame`, for its random streams): rgb W*H*3 linear radiance, depth W*H metres
+ * along the view axis (0: the centre ray escapes), row 0 = top. *rays (may be NULL) counts the
+ * rays. Same seed and frame, same images on any thread count. Returns 0 or -1 with err set. */
+int lc_ref_rgbd_render(lc_ref *r, const lc_ref_rgbd_view *view, const lc_ref_capture_settings *s, uint32_t frame,
+                       float *rgb, float *depth, uint64_t *rays, char *err, size_t errlen);
+
+/* A frame's pose and time. */
+typedef struct lc_ref_capture_pose {
+    lc_ref_rgbd_view view;
+    uint64_t time_us;
+} lc_ref_capture_pose;
+
+/* PATH.json {"frames": [{"eye": [3], "target": [3], "up": [3]?, "time_us": T?}...]} (1 to
+ * LC_REF_CAPTURE_MAX_FRAMES frames) with the camera's size and fov from tmpl (up default: tmpl's);
+ * time_us defaults to (k - 1) x 100000. *out is malloc'd. Errors name the file and the JSON pointer. */
+int lc_ref_capture_path_load(const char *path, const lc_ref_camera *tmpl, lc_ref_capture_pose **out, uint32_t *n,
+                             char *err, size_t errlen);
+/* n poses of base, each moved by a uniform +-jitter_mm millimetres per axis and turned by a
+ * uniform +-jitter_deg degrees about a uniformly random axis (through the camera), seeded;
+ * time_us = (k - 1) x 100000. */
+void lc_ref_capture_jitter(const lc_ref_rgbd_view *base, uint32_t n, double jitter_mm, double jitter_deg, uint64_t seed,
+                           lc_ref_capture_pose *out);
+
+/* Renders and writes every frame to dir (created), and capture.json with bake and state (NULL:
+ * JSON null) as its source. Progress per frame on stderr unless s->quiet. */
+int lc_ref_capture_run(lc_ref *r, const char *dir, const lc_ref_capture_pose *poses, uint32_t n,
+                       const lc_ref_capture_settings *s, const char *bake, const char *state, char *err, size_t errlen);
+/* The files of frame k (1-based) from its images; *exposure_out (may be NULL) gets E. */
+int lc_ref_capture_write_frame(const char *dir, uint32_t k, const lc_ref_capture_pose *pose, const float *rgb,
+                               const float *depth, int srgb8, double *exposure_out, char *err, size_t errlen);
+
+/* Frame k of a capture directory, decoded. */
+typedef struct lc_ref_capture_frame {
+    lc_ref_rgbd_view view;
+    uint32_t sequence;
+    uint64_t time_us;
+    double exposure;
+    int srgb8;
+    uint16_t *depth_mm; /* W*H */
+    float *rgb;         /* W*H*3 linear radiance, nits (decoded colour x exposure) */
+} lc_ref_capture_frame;
+/* Reads DIR/capture.json (format, size, frame count) and frame k's three files; errors name the
+ * file and the field. */
+int lc_ref_capture_read_frame(const char *dir, uint32_t k, lc_ref_capture_frame *out, char *err, size_t errlen);
+void lc_ref_capture_frame_free(lc_ref_capture_frame *f);
+
+/* PNG without colour management (libpng): channels 1 (grey) or 3 (RGB), bits 8 or 16, samples
+ * W*H*channels (8-bit: 0..255). Read accepts grey and RGB, 8 or 16 bits, sides up to max_side. */
+int lc_ref_png_write(const char *path, uint32_t width, uint32_t height, int channels, int bits, const uint16_t *samples,
+                     char *err, size_t errlen);
+int lc_ref_png_read(const char *path, uint32_t max_side, uint32_t *width, uint32_t *height, int *channels, int *bits,
+                    uint16_t **samples, char *err, size_t errlen);
+/* The sRGB EOTF (IEC 61966-2-1) of v in [0, 1]. */
+double lc_ref_srgb_eotf(double v);
+
+/* --- MR truths (mr_truth.c, `lucent-ref mr-truth`) ------------------------------------------- */
+
+/* At points x (normal n) near virtual objects, the irradiance from the real room two ways, by
+ * cosine-weighted hemisphere rays from x + eps n (each sample pi L of what the ray meets):
+ *   full:    the real scene (the bake's static geometry and the state's objects with the state's
+ *            light, L = lc_ref_radiance_ex of the first surface, all bounces, the sky not seen
+ *            directly: what a camera pixel shows of that surface);
+ *   visible: only the patches the camera saw in one frame: a mesh from its depth map (two
+ *            triangles per 2x2 block of valid depths, none whose depths differ by more than 5% of
+ *            the nearest), one-sided facing the camera, each triangle's radiance the mean linear
+ *            colour of its three pixels; its back and everything else are black.
+ * In both the virtual objects (occluders: the bake's assets, placed) block the rays (a hit on
+ * them gives 0; they are not real, so they change nothing else). visible isolates LightSkin's own
+ * error (the server sees exactly those patches); full - visible is what the capture cannot see. */
+typedef struct lc_ref_mr_point {
+    float position[3], normal[3]; /* normal: unit (normalised on load) */
+} lc_ref_mr_point;
+
+typedef struct lc_ref_mr_input {
+    lc_ref_mr_point *points;
+    uint32_t n_points;
+    lc_engine_object *occluders; /* asset indices into the bake */
+    uint32_t n_occluders;
+} lc_ref_mr_input;
+
+#define LC_REF_MR_MAX_POINTS 1000000u
+#define LC_REF_MR_MAX_OCCLUDERS 1024u
+
+/* POINTS.json {"points": [{"position": [3], "normal": [3]}...], "occluders": {"objects": [{"asset":
+ * NAME, "translation"?, "rotation"?, "scale"?}...]}?}. Errors name the file and JSON pointer. */
+int lc_ref_mr_points_load(const char *path, const lc_lcb_view *v, lc_ref_mr_input *out, char *err, size_t errlen);
+void lc_ref_mr_input_free(lc_ref_mr_input *in);
+
+typedef struct lc_ref_mr_settings {
+    uint32_t spp, max_depth, rr_depth;
+    uint64_t seed;
+    int quiet;
+} lc_ref_mr_settings;
+
+typedef struct lc_ref_mr_value {
+    double full[3], full_stderr[3], visible[3], visible_stderr[3];
+} lc_ref_mr_value;
+
+/* frame NULL: visible is 0 (only full). Per point its own random stream: same result on any
+ * thread count. *visible_triangles (may be NULL) gets the mesh's size. Returns 0 or -1. */
+int lc_ref_mr_truth(lc_ref *r, const lc_lcb_view *v, const lc_ref_capture_frame *frame, const lc_ref_mr_input *in,
+                    const lc_ref_mr_settings *s, lc_ref_mr_value *out, uint32_t *visible_triangles, char *err,
+                    size_t errlen);
+/* {"points": [{"full", "full_stderr", "visible", "visible_stderr"}...], "spp": N} (malloc'd). */
+char *lc_ref_mr_json(const lc_ref_mr_value *values, uint32_t n, uint32_t spp);
 
 /* --- comparison ------------------------------------------------------------------------------ */
 

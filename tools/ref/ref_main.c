@@ -8,6 +8,8 @@
  * variation), the texel spacing, and write error_lightmap_uv.png (the lightmap's layout).
  *   lucent-ref fidelity BAKE.lcb [--state STATE.json] [--reference DIR] [--backend cpu] [--out DIR]
  *   lucent-ref camera BAKE.lcb [--state STATE.json] --eye X,Y,Z --target X,Y,Z [--exr F] [--png F] ...
+ *   lucent-ref capture BAKE.lcb --out DIR (--path PATH.json | --eye X,Y,Z --target X,Y,Z) ...
+ *   lucent-ref mr-truth BAKE.lcb --capture DIR --frame K --points POINTS.json --out TRUTH.json ...
  * Exit codes: 0 ok, 1 failure, 2 usage error. */
 #include <cjson/cJSON.h>
 #include <math.h>
@@ -41,6 +43,10 @@ typedef struct ref_opts {
     double fov, exposure;
     float eye[3], target[3], up[3];
     int have_eye, have_target, have_up;
+    /* capture, mr-truth */
+    char path[REF_PATH_MAX], capture[REF_PATH_MAX], points[REF_PATH_MAX];
+    int frames, frame, color;
+    double jitter_mm, jitter_deg;
 } ref_opts;
 
 /* X,Y,Z: three finite numbers, the flag named in the error. */
@@ -81,8 +87,9 @@ static const lc_opt ref_options[] = {
     {"out", LC_OPT_STRING, OFF(out), 0, REF_PATH_MAX, NULL, NULL,
      "output directory (render: required; compare/fidelity: default none / fidelity-out)", "DIR", NULL},
     {"spp", LC_OPT_INT, OFF(spp), 1, 1 << 24, NULL, NULL,
-     "[render] paths per cache, default 4096 (the cap with --target-stderr); [camera] paths per pixel, default 64", "N",
-     NULL},
+     "[render] paths per cache, default 4096 (the cap with --target-stderr); [camera] paths per pixel, default 64; "
+     "[capture] default 16; [mr-truth] rays per point, default 4096",
+     "N", NULL},
     {"batch", LC_OPT_INT, OFF(batch), 1, 1 << 20, "256", NULL, "[render] paths per cache per pass", "N", NULL},
     {"target-stderr", LC_OPT_FLOAT, OFF(target_stderr), 0, 1, "0", NULL,
      "[render] stop a cache when its relative standard error is below F (0 = fixed --spp)", "F", NULL},
@@ -143,11 +150,38 @@ static const lc_opt ref_options[] = {
     {"up", LC_OPT_CALLBACK, 0, 0, 0, NULL, NULL, "[camera] up vector, as three.js's camera.up (default 0,1,0)", "X,Y,Z",
      ref_opt_up},
     {"fov", LC_OPT_FLOAT, OFF(fov), 0, 180, "50", NULL,
-     "[camera] vertical field of view in degrees, as three.js's PerspectiveCamera (0 and 180 excluded)", "DEG", NULL},
-    {"width", LC_OPT_INT, OFF(width), 1, LC_REF_CAMERA_MAX_SIDE, "640", NULL, "[camera] image width", "N", NULL},
-    {"height", LC_OPT_INT, OFF(height), 1, LC_REF_CAMERA_MAX_SIDE, "480", NULL, "[camera] image height", "N", NULL},
+     "[camera, capture] vertical field of view in degrees, as three.js's PerspectiveCamera (0 and 180 excluded); "
+     "default camera 50, capture 60",
+     "DEG", NULL},
+    {"width", LC_OPT_INT, OFF(width), 1, LC_REF_CAMERA_MAX_SIDE, "640", NULL,
+     "[camera, capture] image width, default camera 640, capture 256", "N", NULL},
+    {"height", LC_OPT_INT, OFF(height), 1, LC_REF_CAMERA_MAX_SIDE, "480", NULL,
+     "[camera, capture] image height, default camera 480, capture 192", "N", NULL},
     {"max-depth", LC_OPT_INT, OFF(max_depth), 0, 1024, "8", NULL,
-     "[camera] reflections per path (0 = emitters and the environment seen directly, 1 = direct light)", "N", NULL},
+     "[camera, capture, mr-truth] reflections per path (0 = emitters and the environment seen directly, 1 = direct "
+     "light); default camera 8, capture and mr-truth 32 (Russian roulette from --rr-depth)",
+     "N", NULL},
+    {"path", LC_OPT_STRING, OFF(path), 1, REF_PATH_MAX, NULL, NULL,
+     "[capture] camera path JSON {\"frames\": [{\"eye\": [3], \"target\": [3], \"up\": [3]?, \"time_us\": T?}...]} "
+     "(instead of --eye/--target)",
+     "PATH.json", NULL},
+    {"frames", LC_OPT_INT, OFF(frames), 1, (int)LC_REF_CAPTURE_MAX_FRAMES, "1", NULL,
+     "[capture] frames of the --eye/--target pose, each jittered by --jitter-mm/--jitter-deg", "N", NULL},
+    {"jitter-mm", LC_OPT_FLOAT, OFF(jitter_mm), 0, 10000, "0", NULL,
+     "[capture] per frame, move the camera by a uniform +-J mm along each axis", "J", NULL},
+    {"jitter-deg", LC_OPT_FLOAT, OFF(jitter_deg), 0, 180, "0", NULL,
+     "[capture] per frame, turn the camera by a uniform +-A degrees about a random axis", "A", NULL},
+    {"color", LC_OPT_ENUM, OFF(color), 0, 0, "linear16", "linear16|srgb8",
+     "[capture] colour PNGs: linear16 = 16-bit linear (radiance = v / 65535 x exposure), srgb8 = 8-bit sRGB", NULL,
+     NULL},
+    {"capture", LC_OPT_STRING, OFF(capture), 1, REF_PATH_MAX, NULL, NULL,
+     "[mr-truth] capture directory (`lucent-ref capture`, or a recording in its format)", "DIR", NULL},
+    {"frame", LC_OPT_INT, OFF(frame), 1, (int)LC_REF_CAPTURE_MAX_FRAMES, "1", NULL,
+     "[mr-truth] the capture's frame whose patches are the visible emitters", "K", NULL},
+    {"points", LC_OPT_STRING, OFF(points), 1, REF_PATH_MAX, NULL, NULL,
+     "[mr-truth] {\"points\": [{\"position\": [3], \"normal\": [3]}...], \"occluders\": {\"objects\": [{\"asset\": "
+     "NAME, \"translation\", \"rotation\", \"scale\"}...]}}",
+     "POINTS.json", NULL},
     {"exposure", LC_OPT_FLOAT, OFF(exposure), 0, 1e6, "1", NULL,
      "[camera] PNG: radiance scale before the tone map (three.js toneMappingExposure)", "X", NULL},
     {"tonemap", LC_OPT_ENUM, OFF(tonemap), 0, 0, "none", "none|neutral",
@@ -178,7 +212,16 @@ static void usage(FILE *out) {
         "       lucent-ref camera BAKE.lcb [--state STATE.json] --eye X,Y,Z --target X,Y,Z [--up 0,1,0] [--fov 50]\n"
         "                         [--width 640] [--height 480] [--spp 64] [--max-depth 8] [--exposure 1]\n"
         "                         [--tonemap none|neutral] [--exr OUT.exr] [--png OUT.png] [--seed 1] [--threads 0]\n"
-        "         path-trace the full illumination (direct + indirect) seen by a pinhole camera\n\n"
+        "         path-trace the full illumination (direct + indirect) seen by a pinhole camera\n"
+        "       lucent-ref capture BAKE.lcb [--state STATE.json] --out DIR (--path PATH.json | --eye X,Y,Z\n"
+        "                         --target X,Y,Z [--up ..] [--frames N --jitter-mm J --jitter-deg A])\n"
+        "                         [--width 256 --height 192 --fov 60] [--spp 16] [--color linear16|srgb8] [--seed S]\n"
+        "         record the scene as an RGB-D camera: DIR/capture.json, frame_K.json, depth_K.png (16-bit mm),\n"
+        "         color_K.png (the replay format of `lucentctl mr replay`; camera model PROTOCOL.md 8.4)\n"
+        "       lucent-ref mr-truth BAKE.lcb [--state STATE.json] --capture DIR [--frame K] --points POINTS.json\n"
+        "                         --out TRUTH.json [--spp 4096] [--seed S]\n"
+        "         irradiance at MR points from the real room: full (the scene) and visible (frame K's patches),\n"
+        "         the virtual occluders blocking\n\n"
         "options:\n");
     lc_opt_help(ref_options, out);
     fprintf(out,
@@ -927,6 +970,158 @@ done:
     return rc;
 }
 
+/* 1 when argv holds --name or --name=... (a flag whose default differs per command). */
+static int flag_given(int argc, char **argv, const char *name) {
+    size_t n = strlen(name);
+    for (int i = 2; i < argc; i++) {
+        if (!strcmp(argv[i], "--")) return 0;
+        if (!strncmp(argv[i], "--", 2) && !strncmp(argv[i] + 2, name, n) &&
+            (argv[i][2 + n] == 0 || argv[i][2 + n] == '='))
+            return 1;
+    }
+    return 0;
+}
+
+/* The capture's poses from --path, or --frames jittered copies of --eye/--target. */
+static int capture_poses(const ref_opts *o, int argc, char **argv, lc_ref_capture_pose **poses, uint32_t *n, char *err,
+                         size_t errlen) {
+    lc_ref_camera cam;
+    memset(&cam, 0, sizeof cam);
+    if (o->have_up) memcpy(cam.up, o->up, sizeof cam.up);
+    else cam.up[1] = 1;
+    cam.fov_deg = flag_given(argc, argv, "fov") ? o->fov : 60;
+    cam.width = (uint32_t)(flag_given(argc, argv, "width") ? o->width : 256);
+    cam.height = (uint32_t)(flag_given(argc, argv, "height") ? o->height : 192);
+    if (o->path[0]) {
+        if (o->have_eye || o->have_target || flag_given(argc, argv, "frames")) {
+            lc_set_err(err, errlen, "--path: not with --eye/--target/--frames (the path gives every pose)");
+            return -1;
+        }
+        return lc_ref_capture_path_load(o->path, &cam, poses, n, err, errlen);
+    }
+    if (!o->have_eye || !o->have_target) {
+        lc_set_err(err, errlen, "%s: required without --path (camera position and the point it looks at)",
+                   !o->have_eye ? "--eye" : "--target");
+        return -1;
+    }
+    memcpy(cam.eye, o->eye, sizeof cam.eye);
+    memcpy(cam.target, o->target, sizeof cam.target);
+    lc_ref_rgbd_view base;
+    if (lc_ref_rgbd_lookat(&cam, &base, err, errlen) != 0) return -1;
+    *poses = calloc((size_t)o->frames, sizeof **poses);
+    if (!*poses) {
+        lc_set_err(err, errlen, "--frames: out of memory for %d poses", o->frames);
+        return -1;
+    }
+    *n = (uint32_t)o->frames;
+    lc_ref_capture_jitter(&base, *n, o->jitter_mm, o->jitter_deg, (uint64_t)o->seed, *poses);
+    return 0;
+}
+
+static int cmd_capture(int argc, char **argv) {
+    static ref_opts o;
+    char *pos[2];
+    char err[1024] = "";
+    int n = parse(&o, argc, argv, pos, 2);
+    if (n < 0) return EXIT_USAGE;
+    lc_ref_capture_pose *poses = NULL;
+    uint32_t n_poses = 0;
+    if (n != 1 || !o.out[0]) {
+        fprintf(stderr, "lucent-ref: %s\n", n != 1 ? "capture needs one BAKE.lcb (see --help)" : "--out: required");
+        return EXIT_USAGE;
+    }
+    if (capture_poses(&o, argc, argv, &poses, &n_poses, err, sizeof err) != 0) {
+        fprintf(stderr, "lucent-ref: %s\n", err);
+        return EXIT_USAGE;
+    }
+    lc_ref_capture_settings cs = {(uint32_t)(o.spp ? o.spp : 16),
+                                  (uint32_t)(flag_given(argc, argv, "max-depth") ? o.max_depth : 32),
+                                  (uint32_t)o.rr_depth,
+                                  (uint64_t)o.seed,
+                                  o.color == 1,
+                                  o.quiet};
+    lc_lcb *bake = NULL;
+    lc_ref *r = NULL;
+    lc_ref_state st;
+    memset(&st, 0, sizeof st);
+    int rc = EXIT_FAIL;
+    if (lc_lcb_open(pos[0], &bake, err, sizeof err) != 0) goto done;
+    if (lc_ref_state_load(bake, o.state[0] ? o.state : NULL, 1, &st, err, sizeof err) != 0) goto done;
+    if (!(r = lc_ref_create(bake, &st.st, o.threads, err, sizeof err))) goto done;
+    if (lc_ref_capture_run(r, o.out, poses, n_poses, &cs, pos[0], o.state[0] ? o.state : NULL, err, sizeof err) != 0)
+        goto done;
+    fprintf(stderr, "lucent-ref: capture %ux%u, %u frames, %u spp -> %s\n", poses[0].view.width, poses[0].view.height,
+            n_poses, cs.spp, o.out);
+    rc = EXIT_OK;
+done:
+    if (rc != EXIT_OK) fprintf(stderr, "lucent-ref: %s\n", err);
+    free(poses);
+    lc_ref_release(r);
+    lc_ref_state_free(&st);
+    lc_lcb_close(bake);
+    return rc;
+}
+
+static int cmd_mr_truth(int argc, char **argv) {
+    static ref_opts o;
+    char *pos[2];
+    char err[1024] = "";
+    int n = parse(&o, argc, argv, pos, 2);
+    if (n < 0) return EXIT_USAGE;
+    const char *missing = n != 1 ? "mr-truth needs one BAKE.lcb (see --help)"
+        : !o.capture[0]          ? "--capture: required"
+        : !o.points[0]           ? "--points: required"
+        : !o.out[0]              ? "--out: required (TRUTH.json)"
+                                 : NULL;
+    if (missing) {
+        fprintf(stderr, "lucent-ref: %s\n", missing);
+        return EXIT_USAGE;
+    }
+    lc_ref_mr_settings ms = {(uint32_t)(o.spp ? o.spp : 4096),
+                             (uint32_t)(flag_given(argc, argv, "max-depth") ? o.max_depth : 32), (uint32_t)o.rr_depth,
+                             (uint64_t)o.seed, o.quiet};
+    lc_lcb *bake = NULL;
+    lc_ref *r = NULL;
+    lc_ref_state st;
+    memset(&st, 0, sizeof st);
+    lc_ref_capture_frame frame;
+    memset(&frame, 0, sizeof frame);
+    lc_ref_mr_input in;
+    memset(&in, 0, sizeof in);
+    lc_ref_mr_value *values = NULL;
+    char *text = NULL;
+    uint32_t tris = 0;
+    int rc = EXIT_FAIL;
+    if (lc_lcb_open(pos[0], &bake, err, sizeof err) != 0) goto done;
+    if (lc_ref_mr_points_load(o.points, lc_lcb_get(bake), &in, err, sizeof err) != 0) goto done;
+    if (lc_ref_capture_read_frame(o.capture, (uint32_t)o.frame, &frame, err, sizeof err) != 0) goto done;
+    if (lc_ref_state_load(bake, o.state[0] ? o.state : NULL, 1, &st, err, sizeof err) != 0) goto done;
+    if (!(r = lc_ref_create(bake, &st.st, o.threads, err, sizeof err))) goto done;
+    if (!(values = calloc(in.n_points, sizeof *values))) {
+        lc_set_err(err, sizeof err, "out of memory for %u points", in.n_points);
+        goto done;
+    }
+    if (lc_ref_mr_truth(r, lc_lcb_get(bake), &frame, &in, &ms, values, &tris, err, sizeof err) != 0) goto done;
+    if (!(text = lc_ref_mr_json(values, in.n_points, ms.spp))) {
+        lc_set_err(err, sizeof err, "out of memory writing %s", o.out);
+        goto done;
+    }
+    if (lc_fs_write_atomic(o.out, text, strlen(text), err, sizeof err) != 0) goto done;
+    fprintf(stderr, "lucent-ref: mr-truth %u points, %u spp, %u occluders, frame %d: %u visible triangles -> %s\n",
+            in.n_points, ms.spp, in.n_occluders, o.frame, tris, o.out);
+    rc = EXIT_OK;
+done:
+    if (rc != EXIT_OK) fprintf(stderr, "lucent-ref: %s\n", err);
+    free(text);
+    free(values);
+    lc_ref_mr_input_free(&in);
+    lc_ref_capture_frame_free(&frame);
+    lc_ref_release(r);
+    lc_ref_state_free(&st);
+    lc_lcb_close(bake);
+    return rc;
+}
+
 int main(int argc, char **argv) {
     if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
         usage(argc < 2 ? stderr : stdout);
@@ -937,6 +1132,11 @@ int main(int argc, char **argv) {
     if (!strcmp(argv[1], "delta")) return cmd_delta(argc, argv);
     if (!strcmp(argv[1], "fidelity")) return cmd_fidelity(argc, argv);
     if (!strcmp(argv[1], "camera")) return cmd_camera(argc, argv);
-    fprintf(stderr, "lucent-ref: unknown command '%s' (render, compare, fidelity, camera; see --help)\n", argv[1]);
+    if (!strcmp(argv[1], "capture")) return cmd_capture(argc, argv);
+    if (!strcmp(argv[1], "mr-truth")) return cmd_mr_truth(argc, argv);
+    fprintf(
+        stderr,
+        "lucent-ref: unknown command '%s' (render, compare, delta, fidelity, camera, capture, mr-truth; see --help)\n",
+        argv[1]);
     return EXIT_USAGE;
 }
