@@ -135,6 +135,7 @@ PY
 expect_exit 2 "--out: required" "$REF" capture "$LCB" --eye $EYE --target $TGT
 expect_exit 2 "--eye: required" "$REF" capture "$LCB" --out "$TMP/x" --target $TGT
 expect_exit 2 "--path: not with" "$REF" capture "$LCB" --out "$TMP/x" --path "$TMP/path.json" --eye $EYE
+expect_exit 2 "--path: not with" "$REF" capture "$LCB" --out "$TMP/x" --path "$TMP/path.json" --jitter-mm 3
 echo '{"frames": [{"eye": [0, 0, 0]}]}' >"$TMP/bad.json"
 expect_exit 2 "/frames/0/target" "$REF" capture "$LCB" --out "$TMP/x" --path "$TMP/bad.json"
 expect_exit 2 "--color" "$REF" capture "$LCB" --out "$TMP/x" --eye $EYE --target $TGT --color hdr

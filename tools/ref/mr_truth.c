@@ -17,6 +17,7 @@
 #include "util/log.h"
 #include "util/parallel.h"
 #include "util/progress.h"
+#include "util/ray_offset.h"
 #include "util/rng.h"
 
 #define MR_GEOM_MESH 0u
@@ -166,6 +167,8 @@ typedef struct {
     uint32_t n_vertices, n_tris;
     float *normal;   /* mesh: per triangle, unit, facing the camera */
     float *radiance; /* mesh: per triangle RGB */
+    double *cdf;     /* mesh: n_tris + 1, by power (radiance summed over RGB x area) */
+    float *area_pdf; /* mesh: per triangle, the light sample's density on it per m^2 */
 } mr_mesh;
 
 static void mr_mesh_free(mr_mesh *m) {
@@ -173,6 +176,8 @@ static void mr_mesh_free(mr_mesh *m) {
     free(m->idx);
     free(m->normal);
     free(m->radiance);
+    free(m->cdf);
+    free(m->area_pdf);
     memset(m, 0, sizeof *m);
 }
 
@@ -231,6 +236,28 @@ static void mr_mesh_tri(const lc_ref_capture_frame *f, const uint32_t *vid, size
     m->n_tris++;
 }
 
+/* The mesh's power CDF and per-triangle area densities (light sampling). */
+static int mr_mesh_lights(mr_mesh *m) {
+    m->cdf = malloc(((size_t)m->n_tris + 1) * sizeof *m->cdf);
+    m->area_pdf = malloc(((size_t)m->n_tris + 1) * sizeof *m->area_pdf);
+    if (!m->cdf || !m->area_pdf) return -1;
+    m->cdf[0] = 0;
+    for (uint32_t t = 0; t < m->n_tris; t++) {
+        const float *a = m->pos + 4 * (size_t)m->idx[3 * t], *b = m->pos + 4 * (size_t)m->idx[3 * t + 1];
+        const float *c = m->pos + 4 * (size_t)m->idx[3 * t + 2];
+        float e1[3], e2[3], n[3];
+        for (int k = 0; k < 3; k++) e1[k] = b[k] - a[k], e2[k] = c[k] - a[k];
+        lc_sm_cross(e1, e2, n);
+        double area = 0.5 * lc_sm_len(n), L = 0;
+        for (int k = 0; k < 3; k++) L += fmax(m->radiance[3 * (size_t)t + k], 0.0f);
+        m->cdf[t + 1] = m->cdf[t] + L * area;
+        m->area_pdf[t] = (float)(L * area > 0 ? L : 0); /* x 1 / total below */
+    }
+    double total = m->cdf[m->n_tris];
+    for (uint32_t t = 0; t < m->n_tris; t++) m->area_pdf[t] = total > 0 ? (float)(m->area_pdf[t] / total) : 0.0f;
+    return 0;
+}
+
 /* The frame's depth map as triangles: a vertex per valid pixel at its centre, unprojected. */
 static int mr_build_mesh(const lc_ref_capture_frame *f, mr_mesh *m) {
     uint32_t w = f->view.width, h = f->view.height;
@@ -263,7 +290,7 @@ static int mr_build_mesh(const lc_ref_capture_frame *f, mr_mesh *m) {
             mr_mesh_tri(f, vid, b, c, d, m);
         }
     free(vid);
-    return 0;
+    return mr_mesh_lights(m);
 }
 
 static void mr_attach(RTCDevice dev, RTCScene sc, const mr_mesh *m, uint32_t id) {
@@ -306,8 +333,8 @@ typedef struct {
     lc_progress *progress;
 } mr_ctx;
 
-/* A cosine-distributed unit direction about unit n. */
-static void mr_cosine_dir(const float n[3], lc_rng *rng, float d[3]) {
+/* A cosine-distributed unit direction about unit n; *cos_out its cosine. */
+static void mr_cosine_dir(const float n[3], lc_rng *rng, float d[3], float *cos_out) {
     float u = lc_rng_float(rng), w = lc_rng_float(rng);
     float r = sqrtf(u), phi = 2.0f * (float)M_PI * w, z = sqrtf(fmaxf(0.0f, 1.0f - u));
     float s = copysignf(1.0f, n[2]), a = -1.0f / (s + n[2]), c = n[0] * n[1] * a;
@@ -316,21 +343,67 @@ static void mr_cosine_dir(const float n[3], lc_rng *rng, float d[3]) {
     for (int k = 0; k < 3; k++) d[k] = x * t[k] + y * b[k] + z * n[k];
     float len = lc_sm_len(d);
     for (int k = 0; k < 3; k++) d[k] /= len;
+    *cos_out = lc_sm_dot(d, n);
 }
 
-/* One direction's radiance, both ways. */
-static void mr_sample(const mr_ctx *c, const float org[3], const float d[3], lc_rng *rng, float full[3], float vis[3],
-                      uint64_t *rays) {
-    float t_occ = INFINITY, t, ng[3];
-    uint32_t geom, prim;
-    full[0] = full[1] = full[2] = vis[0] = vis[1] = vis[2] = 0;
-    if (c->occ && !mr_intersect(c->occ, org, d, &t_occ, &geom, &prim)) t_occ = INFINITY;
+/* The occluders block the segment (full's blocker). */
+static int mr_block(void *ctx, const float org[3], const float dir[3], float tfar) {
+    return lc_embree_occluded((RTCScene)ctx, org, dir, tfar);
+}
+
+/* One light sample of the frame's mesh from org (unit normal n): a triangle by power, a uniform
+ * point on it; its radiance x cos / (pdf_light + pdf_cosine) when its front is unblocked. */
+static void mr_vis_light(const mr_ctx *c, const float org[3], const float n[3], float eps, lc_rng *rng, double E[3],
+                         uint64_t *rays) {
+    const mr_mesh *m = c->mesh;
+    double total = m->n_tris ? m->cdf[m->n_tris] : 0, u = lc_rng_float(rng) * total;
+    if (!(total > 0)) return;
+    uint32_t lo = 0, hi = m->n_tris - 1;
+    while (lo < hi) { /* first t with cdf[t + 1] > u */
+        uint32_t mid = (lo + hi) / 2;
+        if (m->cdf[mid + 1] > u) hi = mid;
+        else lo = mid + 1;
+    }
+    const float *a = m->pos + 4 * (size_t)m->idx[3 * lo], *b = m->pos + 4 * (size_t)m->idx[3 * lo + 1];
+    const float *cc = m->pos + 4 * (size_t)m->idx[3 * lo + 2], *ln = m->normal + 3 * (size_t)lo;
+    float su = sqrtf(lc_rng_float(rng)), w = lc_rng_float(rng), d[3];
+    float b1 = su * (1.0f - w), b2 = su * w, b0 = 1.0f - b1 - b2;
+    for (int k = 0; k < 3; k++) d[k] = b0 * a[k] + b1 * b[k] + b2 * cc[k] - org[k];
+    float d2 = lc_sm_dot(d, d), dist = sqrtf(d2);
+    if (!(d2 > 1e-12f)) return;
+    for (int k = 0; k < 3; k++) d[k] /= dist;
+    float cos_l = -lc_sm_dot(ln, d), cos_x = lc_sm_dot(n, d);
+    if (cos_l <= 1e-6f || cos_x <= 0) return;
     (*rays)++;
-    if (lc_ref_first_hit(c->r, org, d, &t, ng) && t < t_occ)
-        lc_ref_radiance_ex(c->r, org, d, c->s->max_depth, c->s->rr_depth, 0, rng, full, rays);
-    if (c->vis && mr_intersect(c->vis, org, d, &t, &geom, &prim) && geom == MR_GEOM_MESH &&
-        lc_sm_dot(d, c->mesh->normal + 3 * (size_t)prim) < 0)
-        memcpy(vis, c->mesh->radiance + 3 * (size_t)prim, 3 * sizeof(float));
+    if (lc_embree_occluded(c->vis, org, d, lc_ray_shadow_tfar(dist, eps))) return;
+    double pl = m->area_pdf[lo] * (double)d2 / cos_l, g = cos_x / (pl + cos_x / M_PI);
+    for (int k = 0; k < 3; k++) E[k] += m->radiance[3 * (size_t)lo + k] * g;
+}
+
+/* One sample of visible: the light sample and a cosine ray, combined by MIS (balance). */
+static void mr_vis_sample(const mr_ctx *c, const float org[3], const float n[3], float eps, lc_rng *rng, double E[3],
+                          uint64_t *rays) {
+    E[0] = E[1] = E[2] = 0;
+    mr_vis_light(c, org, n, eps, rng, E, rays);
+    float d[3], cs, t;
+    uint32_t geom, prim;
+    mr_cosine_dir(n, rng, d, &cs);
+    (*rays)++;
+    if (!(cs > 0) || !mr_intersect(c->vis, org, d, &t, &geom, &prim) || geom != MR_GEOM_MESH) return;
+    float cos_l = -lc_sm_dot(d, c->mesh->normal + 3 * (size_t)prim);
+    if (cos_l <= 0) return; /* one-sided: the back of the captured surface is black */
+    double pb = cs / M_PI, pl = cos_l > 1e-6f ? c->mesh->area_pdf[prim] * (double)t * t / cos_l : INFINITY;
+    double g = cs / (pb + pl);
+    for (int k = 0; k < 3; k++) E[k] += c->mesh->radiance[3 * (size_t)prim + k] * g;
+}
+
+/* Mean and standard error of n samples from their sums. */
+static void mr_moments(const double s[3], const double q[3], double n, double mean[3], double se[3]) {
+    for (int k = 0; k < 3; k++) {
+        mean[k] = s[k] / n;
+        double var = n > 1 ? (q[k] - n * mean[k] * mean[k]) / (n - 1) : 0;
+        se[k] = sqrt(fmax(var, 0) / n);
+    }
 }
 
 static void mr_points(void *vctx, size_t begin, size_t end, int thread) {
@@ -339,30 +412,26 @@ static void mr_points(void *vctx, size_t begin, size_t end, int thread) {
     float eps = lc_ref_eps(c->r);
     for (size_t i = begin; i < end; i++) {
         const lc_ref_mr_point *p = &c->in->points[i];
-        lc_rng rng = lc_rng_seed(c->s->seed, 0x3D77000000000000ull ^ (uint64_t)i);
+        lc_rng rf = lc_rng_seed(c->s->seed, 0x3D77000000000000ull ^ (uint64_t)i);
+        lc_rng rv = lc_rng_seed(c->s->seed, 0x3D78000000000000ull ^ (uint64_t)i);
         float org[3];
         for (int k = 0; k < 3; k++) org[k] = p->position[k] + p->normal[k] * eps;
         double sf[3] = {0}, qf[3] = {0}, sv[3] = {0}, qv[3] = {0};
         uint64_t rays = 0;
         for (uint32_t j = 0; j < c->s->spp; j++) {
-            float d[3], lf[3], lv[3];
-            mr_cosine_dir(p->normal, &rng, d);
-            mr_sample(c, org, d, &rng, lf, lv, &rays);
+            float ef[3];
+            double ev[3] = {0, 0, 0};
+            lc_ref_irradiance_sample(c->r, org, p->normal, c->s->max_depth, c->s->rr_depth, c->occ ? mr_block : NULL,
+                                     c->occ, &rf, ef, &rays);
+            if (c->vis) mr_vis_sample(c, org, p->normal, eps, &rv, ev, &rays);
             for (int k = 0; k < 3; k++) {
-                double ef = M_PI * lf[k], ev = M_PI * lv[k];
-                sf[k] += ef, qf[k] += ef * ef, sv[k] += ev, qv[k] += ev * ev;
+                sf[k] += ef[k], qf[k] += (double)ef[k] * ef[k];
+                sv[k] += ev[k], qv[k] += ev[k] * ev[k];
             }
         }
-        double n = c->s->spp;
         lc_ref_mr_value *o = &c->out[i];
-        for (int k = 0; k < 3; k++) {
-            o->full[k] = sf[k] / n;
-            o->visible[k] = sv[k] / n;
-            double vf = n > 1 ? (qf[k] - n * o->full[k] * o->full[k]) / (n - 1) : 0;
-            double vv = n > 1 ? (qv[k] - n * o->visible[k] * o->visible[k]) / (n - 1) : 0;
-            o->full_stderr[k] = sqrt(fmax(vf, 0) / n);
-            o->visible_stderr[k] = sqrt(fmax(vv, 0) / n);
-        }
+        mr_moments(sf, qf, c->s->spp, o->full, o->full_stderr);
+        mr_moments(sv, qv, c->s->spp, o->visible, o->visible_stderr);
         lc_progress_add(c->progress, 1);
     }
 }

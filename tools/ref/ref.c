@@ -396,7 +396,7 @@ static void ref_direct(const lc_ref *r, const float org[3], const float n[3], co
  * emitted radiance, and the solid-angle pdf when the sample reaches x unoccluded from its
  * front side; n is the hemisphere (NULL: the full sphere), ng the geometric plane (NULL: none). */
 static int ref_emit_sample(const lc_ref *r, const float org[3], const float *n, const float *ng, lc_rng *rng,
-                           float d[3], const float **le, float *pdf, uint64_t *rays) {
+                           float d[3], const float **le, float *pdf, float *dist_out, uint64_t *rays) {
     if (r->n_emit == 0) return 0;
     double u = lc_rng_float(rng) * r->emit_cdf[r->n_emit];
     uint32_t lo = 0, hi = r->n_emit - 1;
@@ -426,6 +426,7 @@ static int ref_emit_sample(const lc_ref *r, const float org[3], const float *n, 
     if (lc_embree_occluded(r->scene, org, d, lc_ray_shadow_tfar(dist, r->eps))) return 0;
     *le = r->emission + 3 * (size_t)r->v->triangles[t].material;
     *pdf = r->emit_pdf[t] * d2 / cos_l;
+    if (dist_out) *dist_out = dist;
     return 1;
 }
 
@@ -490,7 +491,7 @@ static void ref_trace(const lc_ref *r, const ref_path_cfg *cfg, const float org_
         float ld[3];
         const float *le;
         float pl;
-        if (further && ref_emit_sample(r, x, s.ns, s.ng, rng, ld, &le, &pl, rays)) {
+        if (further && ref_emit_sample(r, x, s.ns, s.ng, rng, ld, &le, &pl, NULL, rays)) {
             float cs = ref_dot(s.ns, ld), pb = cs / (float)M_PI;
             float g = cs / (pl + pb); /* cos * (pl / (pl + pb)) / pl */
             for (int k = 0; k < 3; k++) e[k] += le[k] * g;
@@ -520,14 +521,16 @@ static void ref_trace(const lc_ref *r, const ref_path_cfg *cfg, const float org_
     }
 }
 
-/* One sample of the irradiance at a texel cache (lifted origin org, unit normal n). */
-static void ref_sample_texel(const lc_ref *r, const ref_path_cfg *cfg, const float org[3], const float n[3],
-                             lc_rng *rng, float E[3], uint64_t *rays) {
+/* One sample of the irradiance at lifted origin org (unit normal n): a light sample toward the
+ * emitters and a cosine-sampled path, combined by MIS. block (may be NULL) blocks the first
+ * segment of both: a blocked light sample or first ray gives nothing. */
+static void ref_sample_blocked(const lc_ref *r, const ref_path_cfg *cfg, const float org[3], const float n[3],
+                               lc_ref_block_fn block, void *block_ctx, lc_rng *rng, float E[3], uint64_t *rays) {
     E[0] = E[1] = E[2] = 0;
-    float d[3];
+    float d[3], dist = INFINITY;
     const float *le;
     float pl;
-    if (ref_emit_sample(r, org, n, NULL, rng, d, &le, &pl, rays)) {
+    if (ref_emit_sample(r, org, n, NULL, rng, d, &le, &pl, &dist, rays) && !(block && block(block_ctx, org, d, dist))) {
         float c = ref_dot(n, d), pb = c / (float)M_PI;
         float g = c / (pl + pb);
         for (int k = 0; k < 3; k++) E[k] += le[k] * g;
@@ -535,8 +538,26 @@ static void ref_sample_texel(const lc_ref *r, const ref_path_cfg *cfg, const flo
     float cs, L[3];
     ref_cosine_dir(n, rng, d, &cs);
     if (!(cs > 0)) return;
+    if (block) {
+        ref_hit h;
+        (*rays)++;
+        if (block(block_ctx, org, d, ref_intersect(r, org, d, &h) ? h.t : INFINITY)) return;
+    }
     ref_trace(r, cfg, org, d, cs / (float)M_PI, rng, L, rays);
     for (int k = 0; k < 3; k++) E[k] += (float)M_PI * L[k];
+}
+
+/* One sample of the irradiance at a texel cache (lifted origin org, unit normal n). */
+static void ref_sample_texel(const lc_ref *r, const ref_path_cfg *cfg, const float org[3], const float n[3],
+                             lc_rng *rng, float E[3], uint64_t *rays) {
+    ref_sample_blocked(r, cfg, org, n, NULL, NULL, rng, E, rays);
+}
+
+void lc_ref_irradiance_sample(const lc_ref *r, const float org[3], const float n[3], uint32_t max_bounces,
+                              uint32_t rr_depth, lc_ref_block_fn block, void *block_ctx, lc_rng *rng, float E[3],
+                              uint64_t *rays) {
+    ref_path_cfg cfg = {max_bounces, rr_depth};
+    ref_sample_blocked(r, &cfg, org, n, block, block_ctx, rng, E, rays);
 }
 
 /* One sample of the incident radiance SH (9 x RGB) at a grid point. */
@@ -547,7 +568,7 @@ static void ref_sample_grid(const lc_ref *r, const ref_path_cfg *cfg, const floa
     float d[3], y[9];
     const float *le;
     float pl;
-    if (ref_emit_sample(r, org, NULL, NULL, rng, d, &le, &pl, rays)) {
+    if (ref_emit_sample(r, org, NULL, NULL, rng, d, &le, &pl, NULL, rays)) {
         float g = 1.0f / (pl + pb);
         lc_sh_eval_fast(3, d[0], d[1], d[2], y);
         for (int j = 0; j < 9; j++)
@@ -607,7 +628,7 @@ void lc_ref_radiance_ex(const lc_ref *r, const float org_in[3], const float dir_
         float e[3], ld[3], pl;
         const float *le;
         ref_direct(r, x, s.ns, s.ng, rng, e, rays);
-        if (ref_emit_sample(r, x, s.ns, s.ng, rng, ld, &le, &pl, rays)) {
+        if (ref_emit_sample(r, x, s.ns, s.ng, rng, ld, &le, &pl, NULL, rays)) {
             float cs = ref_dot(s.ns, ld), pb = cs / (float)M_PI;
             float g = cs / (pl + pb);
             for (int k = 0; k < 3; k++) e[k] += le[k] * g;

@@ -218,6 +218,20 @@ void lc_ref_radiance(const lc_ref *r, const float org[3], const float dir[3], ui
 void lc_ref_radiance_ex(const lc_ref *r, const float org[3], const float dir[3], uint32_t max_depth, uint32_t rr_depth,
                         int sky_first, lc_rng *rng, float L[3], uint64_t *rays);
 
+/* Something other than the scene on the segment from org along unit dir up to tfar (INFINITY:
+ * the whole ray): 1 blocks it. */
+typedef int (*lc_ref_block_fn)(void *ctx, const float org[3], const float dir[3], float tfar);
+
+/* One sample of the lightmap's irradiance E(org, n) (ref.h, "WHAT IS COMPUTED"; org already
+ * lifted, n unit): a light sample toward the emissive triangles and a cosine-sampled path
+ * (max_bounces as lc_ref_settings counts them, Russian roulette from rr_depth), combined by
+ * MIS; lc_ref_irradiance averages these. block (may be NULL) tests the first segment of both
+ * (the light sample up to the emitter, the first ray up to its first hit): where it blocks, the
+ * sample gets nothing along it (`mr-truth`'s virtual occluders). */
+void lc_ref_irradiance_sample(const lc_ref *r, const float org[3], const float n[3], uint32_t max_bounces,
+                              uint32_t rr_depth, lc_ref_block_fn block, void *block_ctx, lc_rng *rng, float E[3],
+                              uint64_t *rays);
+
 /* The first surface along a ray (unit dir) from org, any side: 1 with its distance *t and the
  * triangle's winding normal ng (unit; a ray with dot(dir, ng) > 0 sees its back), 0 when the
  * ray escapes. */
@@ -418,18 +432,24 @@ double lc_ref_srgb_eotf(double v);
 
 /* --- MR truths (mr_truth.c, `lucent-ref mr-truth`) ------------------------------------------- */
 
-/* At points x (normal n) near virtual objects, the irradiance from the real room two ways, by
- * cosine-weighted hemisphere rays from x + eps n (each sample pi L of what the ray meets):
+/* At points x (normal n) near virtual objects, the irradiance from the real room two ways,
+ * E = integral over the hemisphere of n of L(x, w) cos dw, estimated from x + eps n:
  *   full:    the real scene (the bake's static geometry and the state's objects with the state's
- *            light, L = lc_ref_radiance_ex of the first surface, all bounces, the sky not seen
- *            directly: what a camera pixel shows of that surface);
+ *            light): L = the radiance leaving the first surface toward x, all bounces, the sky
+ *            not seen directly: what a camera pixel shows of that surface, i.e. the lightmap's
+ *            E (lc_ref_irradiance_sample: a light sample toward the emissive triangles and a
+ *            cosine-sampled path per sample, MIS);
  *   visible: only the patches the camera saw in one frame: a mesh from its depth map (two
  *            triangles per 2x2 block of valid depths, none whose depths differ by more than 5% of
  *            the nearest), one-sided facing the camera, each triangle's radiance the mean linear
- *            colour of its three pixels; its back and everything else are black.
+ *            colour of its three pixels; its back and everything else are black. Per sample a
+ *            light sample (a triangle by power, a uniform point on it) and a cosine ray, MIS.
  * In both the virtual objects (occluders: the bake's assets, placed) block the rays (a hit on
  * them gives 0; they are not real, so they change nothing else). visible isolates LightSkin's own
- * error (the server sees exactly those patches); full - visible is what the capture cannot see. */
+ * error (the server sees exactly those patches); full - visible is what the capture cannot see.
+ * The samples are iid: the standard errors are honest. Note the 5% rule is relative to depth,
+ * not to the pixel footprint: at low resolutions it drops surfaces seen at grazing angles
+ * (floors, ceilings, side walls), whose neighbouring pixels differ by more than 5% in depth. */
 typedef struct lc_ref_mr_point {
     float position[3], normal[3]; /* normal: unit (normalised on load) */
 } lc_ref_mr_point;
@@ -450,7 +470,9 @@ int lc_ref_mr_points_load(const char *path, const lc_lcb_view *v, lc_ref_mr_inpu
 void lc_ref_mr_input_free(lc_ref_mr_input *in);
 
 typedef struct lc_ref_mr_settings {
-    uint32_t spp, max_depth, rr_depth;
+    uint32_t spp;       /* samples per point (each: a light sample and a cosine sample per integral) */
+    uint32_t max_depth; /* full's bounce limit (lc_ref_settings.max_bounces) */
+    uint32_t rr_depth;
     uint64_t seed;
     int quiet;
 } lc_ref_mr_settings;

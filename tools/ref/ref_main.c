@@ -993,8 +993,10 @@ static int capture_poses(const ref_opts *o, int argc, char **argv, lc_ref_captur
     cam.width = (uint32_t)(flag_given(argc, argv, "width") ? o->width : 256);
     cam.height = (uint32_t)(flag_given(argc, argv, "height") ? o->height : 192);
     if (o->path[0]) {
-        if (o->have_eye || o->have_target || flag_given(argc, argv, "frames")) {
-            lc_set_err(err, errlen, "--path: not with --eye/--target/--frames (the path gives every pose)");
+        if (o->have_eye || o->have_target || flag_given(argc, argv, "frames") || flag_given(argc, argv, "jitter-mm") ||
+            flag_given(argc, argv, "jitter-deg")) {
+            lc_set_err(err, errlen,
+                       "--path: not with --eye/--target/--frames/--jitter-mm/--jitter-deg (the path gives every pose)");
             return -1;
         }
         return lc_ref_capture_path_load(o->path, &cam, poses, n, err, errlen);

@@ -9,7 +9,7 @@
  *  - mr-truth visible: a synthetic capture of one uniformly radiant rectangle in front of the
  *    camera gives pi L F(point -> rectangle); nothing from behind it; no triangle across a depth
  *    step; full: pi L_e at the centre of an emissive closed box, pi L_e (1 - F) with a cube
- *    occluder above the point. */
+ *    occluder above the point (both estimators mix light and cosine samples: within 3 stderr). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -437,7 +437,8 @@ static void test_mr_full(void) {
         lc_ref_mr_input none = {in.points, in.n_points, NULL, 0};
         if (lc_ref_mr_truth(r, f.v, NULL, &none, &s, out, NULL, err, sizeof err) != 0) CHECK(0, "mr: %s", err);
         for (int i = 0; i < 2; i++)
-            CHECK(fabs(out[i].full[0] - M_PI) < 1e-4 && out[i].full_stderr[0] < 1e-6 && out[i].visible[0] == 0,
+            CHECK(fabs(out[i].full[0] - M_PI) <= 3 * out[i].full_stderr[0] + 1e-4 && out[i].full_stderr[0] < 0.01 &&
+                      out[i].visible[0] == 0,
                   "full %d without occluders %.6f (stderr %.3g), want pi", i, out[i].full[0], out[i].full_stderr[0]);
         if (lc_ref_mr_truth(r, f.v, NULL, &in, &s, out, NULL, err, sizeof err) != 0) CHECK(0, "mr: %s", err);
         double want = M_PI * (1 - ff_rect(0, 0, -0.1, 0.1, -0.1, 0.1, 0.15));
