@@ -141,10 +141,21 @@ static int session_tx_reserve(lc_session *ss, size_t need) {
 
 /* --- lws callbacks -------------------------------------------------------------------------------- */
 
+/* 1 when stream k has something newer than the client got (or a forced keyframe). The MR
+ * light (server_mr.c) changes the objects stream between publications and is all mr.vpl carries. */
+static int session_stream_pending(const lc_session *ss, int k) {
+    const lc_server *s = ss->srv;
+    if (!ss->stream[k].on) return 0;
+    if (ss->stream[k].force) return 1;
+    if (k == LC_STREAM_MR_VPL) return ss->stream[k].sent_mr_seq < s->mr_seq;
+    if (ss->stream[k].sent_pub_seq < ss->frame_seq) return 1;
+    return k == LC_STREAM_OBJECTS && ss->stream[k].sent_mr_seq < s->mr_seq;
+}
+
 int session_wants_frame(const lc_session *ss) {
     if (!ss->frame) return 0;
     for (int k = 1; k < STREAMS; k++)
-        if (ss->stream[k].on && (ss->stream[k].force || ss->stream[k].sent_pub_seq < ss->frame_seq)) return 1;
+        if (session_stream_pending(ss, k)) return 1;
     return 0;
 }
 
@@ -152,12 +163,23 @@ int session_wants_frame(const lc_session *ss) {
 static int session_frame_due(const lc_session *ss, double now) {
     if (!ss->frame) return 0;
     for (int k = 1; k < STREAMS; k++) {
-        if (!ss->stream[k].on || !(ss->stream[k].force || ss->stream[k].sent_pub_seq < ss->frame_seq)) continue;
+        if (!session_stream_pending(ss, k)) continue;
         if (ss->stream[k].force || ss->stream[k].max_rate <= 0 ||
             now - ss->stream[k].last_ms >= 1000.0 / ss->stream[k].max_rate)
             return 1;
     }
     return 0;
+}
+
+/* The objects stream's MR light for an object (lc_frames_job.mr_light). */
+static const float *session_mr_light(void *ctx, const char *id, int *add) {
+    const lc_server *s = ctx;
+    for (uint32_t i = 0; i < s->n_mr_entries; i++)
+        if (!strcmp(s->mr_entries[i].id, id)) {
+            *add = s->mr_entries[i].add;
+            return s->mr_entries[i].sh;
+        }
+    return NULL;
 }
 
 /* The compute thread could not relight a state that clients were told `ok` about: say so
@@ -180,7 +202,7 @@ static void server_report_relight_failure(lc_server *s) {
  * -1 closes the connection. */
 static int session_write_frame(lc_server *s, lc_session *ss, struct lws *wsi) {
     for (int k = 1; k < STREAMS; k++) {
-        if (!ss->stream[k].on || !(ss->stream[k].force || ss->stream[k].sent_pub_seq < ss->frame_seq)) continue;
+        if (!session_stream_pending(ss, k)) continue;
         double now = lc_clock_ms();
         if (!ss->stream[k].force && ss->stream[k].max_rate > 0 &&
             now - ss->stream[k].last_ms < 1000.0 / ss->stream[k].max_rate)
@@ -195,12 +217,16 @@ static int session_write_frame(lc_server *s, lc_session *ss, struct lws *wsi) {
                              .tile = s->tile,
                              .keyframe_interval = s->cfg->keyframe_interval,
                              .delta_threshold = s->cfg->delta_threshold,
-                             .pre = LWS_PRE};
-        size_t n = lc_frames_encode(s->frames, &ss->copy, &job);
+                             .pre = LWS_PRE,
+                             .mr_light = s->n_mr_entries ? session_mr_light : NULL,
+                             .mr_ctx = s};
+        size_t n = k == LC_STREAM_MR_VPL ? server_mr_encode_vpl(s, ss, job.enc, job.sequence)
+                                         : lc_frames_encode(s->frames, &ss->copy, &job);
         if (n == 0) return -1;
         ss->stream[k].force = 0;
         ss->stream[k].sequence++;
         ss->stream[k].sent_pub_seq = ss->frame_seq;
+        ss->stream[k].sent_mr_seq = s->mr_seq;
         ss->stream[k].last_ms = now;
         if (lws_write(wsi, ss->copy.out + LWS_PRE, n, LWS_WRITE_BINARY) < (int)n) return -1;
         s->frames_sent++;
@@ -252,6 +278,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         s->n_sessions--;
         if (ss->authed) lc_info("server", "client '%s' disconnected", ss->client);
         for (int i = 0; i < ss->outq_n; i++) free(ss->outq[(ss->outq_head + i) % SERVER_OUTQ]);
+        server_mr_end(s, ss);
         lc_published_release(s->compute, ss->frame);
         free(ss->rx);
         free(ss->tx);
@@ -269,8 +296,11 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
              * mid-message must not outgrow the buffer. Before hello only a hello fits. */
             size_t live = (size_t)s->cfg->max_message;
             ss->rx_limit = ss->authed || live < SERVER_HELLO_MAX ? live : SERVER_HELLO_MAX;
+            /* An MR session's upload frames (PROTOCOL.md §8.4) are kept up to --mr-max-frame;
+             * every other binary message is discarded as it arrives. */
+            if (ss->rx_binary && ss->mr) ss->rx_limit = (size_t)s->cfg->mr_max_frame;
         }
-        if (!ss->rx_binary && !ss->rx_oversize) {
+        if ((!ss->rx_binary || ss->mr) && !ss->rx_oversize) {
             if (len > ss->rx_limit - ss->rx_len) {
                 ss->rx_oversize = 1;
             } else {
@@ -281,8 +311,16 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         }
         if (!lws_is_final_fragment(wsi)) return 0;
         lc_proto_id none = {0};
-        if (ss->rx_binary) {
+        if (ss->rx_binary && !ss->mr_granted) {
             session_error(s, ss, &none, LC_ERR_BINARY_NOT_ALLOWED, "", "clients send text (JSON) messages only");
+        } else if (ss->rx_binary && !ss->mr) {
+            server_mr_frame(s, ss, NULL, 0); /* answered: outside an MR session */
+        } else if (ss->rx_binary && ss->rx_oversize) {
+            char msg[96];
+            snprintf(msg, sizeof msg, "upload frame over the session's max_frame (%zu bytes)", ss->rx_limit);
+            session_error(s, ss, &none, LC_ERR_FRAME_TOO_LARGE, "/frame/length", msg);
+        } else if (ss->rx_binary) {
+            server_mr_frame(s, ss, (const uint8_t *)ss->rx, ss->rx_len);
         } else if (ss->rx_oversize) {
             char msg[96];
             snprintf(msg, sizeof msg, "message over the size limit (%zu bytes%s)", ss->rx_limit,
@@ -329,6 +367,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
     case LWS_CALLBACK_EVENT_WAIT_CANCELLED: {
         /* The compute thread published (or failed): hand every session the newest result. */
         if (!s) return 0;
+        server_mr_collect(s);
         server_report_relight_failure(s);
         lc_published *p = lc_compute_take_newer(s->compute, &s->pub_seq);
         if (!p) return 0;
@@ -597,6 +636,7 @@ static void server_release(lc_server *s, int clean) {
      * which must not touch a destroyed context. Sessions then release their frames as the
      * context closes them, and only then is the compute object freed. */
     lc_compute_stop(s->compute);
+    server_mr_stop(s); /* the MR worker's wake too */
     if (s->ctx) {
         lws_sul_cancel(&s->tick);
         lws_context_destroy(s->ctx);
@@ -653,6 +693,10 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     lc_compute_refinement refine = {cfg->refine_passes, cfg->refine_delay, cfg->refine_tolerance};
     s->compute = lc_compute_start(bake, cfg->backend, cfg->threads, &refine, server_wake, s->ctx, err, sizeof err);
     if (!s->compute) {
+        lc_error("server", "%s", err);
+        goto done;
+    }
+    if (server_mr_start(s, err, sizeof err) != 0) {
         lc_error("server", "%s", err);
         goto done;
     }

@@ -359,13 +359,16 @@ size_t lc_frames_encode(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j
     uint8_t *stage = cp->out + j->pre + LC_FRAME_HEADER_SIZE + payload_len + 32, *o = stage;
     const float *src = stream == LC_STREAM_SHGRID ? p->grid_sh : p->object_sh;
     for (size_t k = 0; k < count; k++) {
+        const float *mr = NULL;
+        int add = 0;
         if (stream == LC_STREAM_OBJECTS) {
             memset(o, 0, 64);
             memcpy(o, p->object_ids[k], strnlen(p->object_ids[k], 64));
             o += 64;
+            if (j->mr_light) mr = j->mr_light(j->mr_ctx, p->object_ids[k], &add);
         }
         for (int c = 0; c < 27; c++, o += per) {
-            float v = src[27 * k + c];
+            float v = mr ? mr[c] + (add ? src[27 * k + c] : 0.0f) : src[27 * k + c];
             if (per == 2) {
                 uint16_t hv = lc_half_from_float(v);
                 memcpy(o, &hv, 2);
@@ -375,4 +378,43 @@ size_t lc_frames_encode(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j
         }
     }
     return lc_frame_write(&h, NULL, stage, cp->out + j->pre, LC_FRAME_HEADER_SIZE + payload_len);
+}
+
+size_t lc_frames_encode_vpl(lc_frames_copy *cp, const lc_frames_vpl_object *objects, uint32_t n_objects,
+                            lc_encoding enc, uint64_t revision, uint64_t sequence, uint64_t timestamp_us, size_t pre) {
+    size_t per = lc_frame_sh_value_bytes(enc), points = 0;
+    for (uint32_t i = 0; i < n_objects; i++) points += objects[i].n_points;
+    size_t payload_len = (size_t)n_objects * 72 + points * 12 * per;
+    if (!per || payload_len > UINT32_MAX / 2) return 0;
+    lc_frame_header h = {.version = 1,
+                         .stream = LC_STREAM_MR_VPL,
+                         .encoding = (uint8_t)enc,
+                         .flags = LC_FRAME_KEYFRAME,
+                         .converged = 1,
+                         .revision = revision,
+                         .sequence = sequence,
+                         .timestamp_us = timestamp_us,
+                         .width = n_objects,
+                         .height = (uint32_t)points,
+                         .depth = 1,
+                         .payload_length = (uint32_t)payload_len};
+    if (frames_out_reserve(cp, pre + 2 * (LC_FRAME_HEADER_SIZE + payload_len) + 64) != 0) return 0;
+    uint8_t *stage = cp->out + pre + LC_FRAME_HEADER_SIZE + payload_len + 32, *o = stage;
+    for (uint32_t i = 0; i < n_objects; i++) {
+        memset(o, 0, 72);
+        memcpy(o, objects[i].id, strnlen(objects[i].id, 64));
+        uint32_t n = objects[i].n_points;
+        memcpy(o + 64, &n, 4);
+        o += 72;
+        for (size_t v = 0; v < (size_t)n * 12; v++, o += per) {
+            float x = objects[i].records[v];
+            if (per == 2) {
+                uint16_t hv = lc_half_from_float(x);
+                memcpy(o, &hv, 2);
+            } else {
+                memcpy(o, &x, 4);
+            }
+        }
+    }
+    return lc_frame_write(&h, NULL, stage, cp->out + pre, LC_FRAME_HEADER_SIZE + payload_len);
 }

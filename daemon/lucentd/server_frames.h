@@ -39,6 +39,10 @@ typedef struct lc_frames_job {
     int keyframe_interval;  /* a lightmap keyframe every this many frames */
     double delta_threshold; /* relative texel change that puts a tile in a delta */
     size_t pre;             /* bytes kept free before the frame (LWS_PRE) */
+    /* objects stream: an MR session's light for an object (PROTOCOL.md §8.6), or NULL; *add
+     * says whether it adds to the published SH or replaces it. NULL function: none. */
+    const float *(*mr_light)(void *ctx, const char *id, int *add);
+    void *mr_ctx;
 } lc_frames_job;
 
 lc_frames *lc_frames_create(void);
@@ -48,6 +52,16 @@ void lc_frames_copy_release(lc_frames_copy *cp);
 /* The delta tile side: the configured one, or (0 = auto) the largest of 32, 16, 8 that still
  * cuts the lightmap into at least 64 tiles. */
 uint32_t lc_frames_tile_size(int configured, uint32_t w, uint32_t h);
+
+/* The mr.vpl stream (PROTOCOL.md §8.7): per object, its id, point count and the points'
+ * 12-value records, as one keyframe into cp->out + pre. Returns the length, 0 out of memory. */
+typedef struct lc_frames_vpl_object {
+    const char *id;
+    uint32_t n_points;
+    const float *records; /* n_points * 12 */
+} lc_frames_vpl_object;
+size_t lc_frames_encode_vpl(lc_frames_copy *cp, const lc_frames_vpl_object *objects, uint32_t n_objects,
+                            lc_encoding enc, uint64_t revision, uint64_t sequence, uint64_t timestamp_us, size_t pre);
 
 /* Encodes job's frame into cp->out + job->pre and updates what the copy holds (a lightmap
  * keyframe or delta is assumed delivered). Returns the frame's length, 0 when out of memory. */

@@ -153,6 +153,19 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
                "SIGHUP reloads whose configuration was applied (tests wait on it).", s->reloads);
     metric_u64(body, cap, &n, "lucent_accept_errors_total", "counter",
                "Failed accept() calls (e.g. out of file descriptors).", server_accept_errors_total());
+    uint64_t mr_processed = 0, mr_replaced = 0;
+    if (s->mrw) lc_mrw_counts(s->mrw, &mr_processed, &mr_replaced);
+    uint32_t mr_sessions = 0;
+    for (uint32_t k = 0; k < LC_MRW_SLOTS; k++) mr_sessions += s->mr_slots[k] != NULL;
+    metric_u64(body, cap, &n, "lucent_mr_sessions", "gauge", "Open MR sessions (PROTOCOL.md §8).", mr_sessions);
+    metric_u64(body, cap, &n, "lucent_mr_frames_received_total", "counter", "MR upload frames accepted.",
+               s->mr_frames_in);
+    metric_u64(body, cap, &n, "lucent_mr_received_bytes_total", "counter", "Bytes of accepted MR upload frames.",
+               s->mr_bytes_in);
+    metric_u64(body, cap, &n, "lucent_mr_frames_processed_total", "counter", "MR frames the worker processed.",
+               mr_processed);
+    metric_u64(body, cap, &n, "lucent_mr_frames_replaced_total", "counter",
+               "MR frames dropped unprocessed because a newer one arrived (latest wins).", mr_replaced);
     metric_head(body, cap, &n, "lucent_errors_total", "counter", "Error replies sent, by code.");
     for (int i = 0; i < LC_ERR_COUNT; i++)
         http_append(body, cap, &n, "lucent_errors_total{code=\"%s\"} %llu\n",

@@ -9,6 +9,7 @@
 #include "compute.h"
 #include "config.h"
 #include "journal.h"
+#include "mr_worker.h"
 #include "server_frames.h"
 #include "state.h"
 
@@ -18,15 +19,28 @@
  * (lucent_proto.h), so an unauthenticated peer never gets the full --max-message buffer. */
 #define SERVER_HELLO_MAX 4096
 
-enum { STREAMS = 4 }; /* index = lc_stream (1..3) */
+enum { STREAMS = 5 }; /* index = lc_stream (1..4) */
 
 typedef struct lc_server lc_server;
+struct server_mr_session; /* server_mr.c */
+
+/* The light one MR session gives one of its objects (the objects and mr.vpl streams). */
+typedef struct server_mr_entry {
+    char id[LC_PROTO_ID_MAX + 1];
+    float sh[27]; /* irradiance SH of the capture at the object's centre */
+    int add;      /* 1: added to the object's grid light; 0: replaces it */
+    uint32_t slot;
+    uint32_t n_points;
+    lc_mr_vpl *vpl; /* n_points, malloc'd */
+} server_mr_entry;
 
 typedef struct lc_session {
     struct lws *wsi;
     lc_server *srv;
     struct lc_session *next;
     int authed, controller;
+    int mr_granted;               /* the "mr" capability was asked for and granted (PROTOCOL.md §8.1) */
+    struct server_mr_session *mr; /* the open MR session, or NULL */
     char client[LC_PROTO_NAME_MAX + 1];
     char peer[64]; /* the peer's address, for the failed-hello throttle and the log */
     char *rx;
@@ -48,6 +62,7 @@ typedef struct lc_session {
         int residual;          /* lightmap deltas as compressed residuals (PROTOCOL.md §6.2.1) */
         uint64_t sequence;     /* frames sent on this stream */
         uint64_t sent_pub_seq; /* publication last sent */
+        uint64_t sent_mr_seq;  /* MR light last sent (objects, mr.vpl) */
         double max_rate, last_ms;
     } stream[STREAMS];
     lc_frames_copy copy; /* the client's lightmap copy and frame buffer */
@@ -117,6 +132,16 @@ struct lc_server {
     uint64_t reloads;              /* SIGHUPs whose configuration was applied */
     server_auth_peer auth_peers[SERVER_AUTH_PEERS];
     uint64_t relight_failures_reported; /* compute failures already told to clients */
+    /* MR sessions (server_mr.c) */
+    lc_mrw *mrw; /* NULL: MR off */
+    struct server_mr_session *mr_slots[LC_MRW_SLOTS];
+    server_mr_entry *mr_entries; /* sorted by id */
+    uint32_t n_mr_entries;
+    uint64_t mr_seq;   /* changes of mr_entries */
+    uint64_t mr_epoch; /* mr.begin count */
+    uint64_t mr_frames_in, mr_bytes_in;
+    double mr_last_ms;
+    lc_mr_timings mr_last_timings;
 };
 
 /* server.c */
@@ -134,6 +159,22 @@ uint64_t server_accept_errors_total(void);
 
 /* server_requests.c: one complete text message from the session. */
 void server_request(lc_server *s, lc_session *ss, const char *text, size_t len);
+
+/* server_mr.c */
+/* Main thread, before the loop: starts the MR worker when --mr and the bake has sparse points. */
+int server_mr_start(lc_server *s, char *err, size_t errlen);
+void server_mr_stop(lc_server *s);
+/* 1 when MR sessions can be granted. */
+int server_mr_available(const lc_server *s);
+void server_mr_begin(lc_server *s, lc_session *ss, const lc_proto_request *req);
+/* Ends the session's MR session, if any (mr.end, a second mr.begin, the connection closing). */
+void server_mr_end(lc_server *s, lc_session *ss);
+/* One complete binary message. */
+void server_mr_frame(lc_server *s, lc_session *ss, const uint8_t *data, size_t len);
+/* On wake: the worker's results become acks and stream content. */
+void server_mr_collect(lc_server *s);
+/* The stream's frame from the MR light (mr.vpl) into cp; its length, 0 when out of memory. */
+size_t server_mr_encode_vpl(lc_server *s, lc_session *ss, lc_encoding enc, uint64_t sequence);
 
 /* server_geometry.c */
 /* Main thread, before the loop: builds the scene's and the assets' glTF. 0 or -1 (logged). */

@@ -88,6 +88,7 @@ static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) 
     w.max_lights = (uint32_t)s->cfg->max_lights;
     w.max_objects = (uint32_t)s->cfg->max_objects;
     w.rate = (uint32_t)s->cfg->rate;
+    w.capabilities = ss->mr_granted ? LC_CAP_MR : 0;
     session_send(ss, lc_proto_build_welcome(id, &w));
     free(info);
 }
@@ -178,6 +179,7 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
             goto done;
         }
         ss->authed = 1;
+        ss->mr_granted = (req.capabilities & LC_CAP_MR) && ss->controller && server_mr_available(s);
         snprintf(ss->client, sizeof ss->client, "%s", req.client);
         lc_info("server", "client '%s' connected as %s", ss->client, ss->controller ? "controller" : "viewer");
         server_welcome(s, ss, &req.id);
@@ -238,6 +240,11 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
             lc_proto_build_pong(&req.id, req.ping_t, (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u));
         break;
     }
+    case LC_REQ_MR_BEGIN: server_mr_begin(s, ss, &req); break;
+    case LC_REQ_MR_END:
+        server_mr_end(s, ss);
+        session_send(ss, lc_proto_build_ok(&req.id, s->state.revision));
+        break;
     default: server_change(s, ss, &req); break;
     }
 done:

@@ -41,12 +41,12 @@ SCHEMA_DIR = os.environ.get("LUCENT_CONF_SCHEMA_DIR",
                             os.path.join(HERE, "..", "..", "protocol", "schema"))
 SUBPROTOCOL = "lucent.v1"
 MAGIC = 0x3146434C
-STREAMS = {"lightmap": 1, "shgrid": 2, "objects": 3}
+STREAMS = {"lightmap": 1, "shgrid": 2, "objects": 3, "mr.vpl": 4}
 STREAM_NAMES = {v: k for k, v in STREAMS.items()}
 ENCODINGS = {"rgb9e5": 1, "rgba16f": 2, "f32": 3}
 CHANGE_TYPES = ["light.set", "light.remove", "object.set", "object.remove", "material.set",
                 "environment.set", "settings.set"]
-SERVER_TYPES = ["welcome", "ok", "error", "changed", "state", "pong"]
+SERVER_TYPES = ["welcome", "ok", "error", "changed", "state", "pong", "mr.ack"]
 
 
 # --------------------------------------------------------------------------- configuration
@@ -212,6 +212,26 @@ def _residual_stream_problems(payload, expect):
     return []
 
 
+def _vpl_problems(f, per):
+    """§8.7: width objects, height points in all, each object 64 B id + u32 count + u32 0."""
+    pl, o, points, p = f.payload(), 0, 0, []
+    if f.depth != 1:
+        p.append("mr.vpl frame depth %d (must be 1)" % f.depth)
+    for i in range(f.width):
+        if o + 72 > len(pl):
+            return p + ["mr.vpl payload ends inside object %d's header" % i]
+        n, zero = struct.unpack_from("<II", pl, o + 64)
+        if zero:
+            p.append("mr.vpl object %d: reserved word %d (must be 0)" % (i, zero))
+        o += 72 + n * 12 * per
+        points += n
+    if o != len(pl):
+        p.append("mr.vpl payload %d != the objects' records (%d)" % (len(pl), o))
+    if points != f.height:
+        p.append("mr.vpl header height %d != points in the payload %d" % (f.height, points))
+    return p
+
+
 def frame_problems(f):
     """§6.1-§6.4 consistency of one frame taken on its own."""
     p = []
@@ -230,7 +250,7 @@ def frame_problems(f):
     elif f.flags not in (1, 2):
         p.append("flags 0x%x: exactly one of keyframe/delta must be set (and no other bits; bit 2 residual only "
                  "with delta, §6.2.1)" % f.flags)
-    if f.stream not in (1, 2, 3):
+    if f.stream not in (1, 2, 3, 4):
         p.append("stream %d unknown" % f.stream)
         return p
     if f.encoding not in (1, 2, 3) or (f.stream != 1 and f.encoding == 1):
@@ -273,7 +293,9 @@ def frame_problems(f):
             p.append("%s frames are keyframes only (§6.3/§6.4), got a delta" % STREAM_NAMES[f.stream])
         if f.tile != 0:
             p.append("%s frame with tile size %d (must be 0)" % (STREAM_NAMES[f.stream], f.tile))
-        if f.stream == 2:
+        if f.stream == 4:
+            p.extend(_vpl_problems(f, bpt // 27))
+        elif f.stream == 2:
             if f.payload_len != f.width * f.height * f.depth * bpt:
                 p.append("shgrid payload %d != x*y*z*27*%d" % (f.payload_len, bpt // 27))
         else:

@@ -18,6 +18,7 @@ What is here:
              for lucent_config_reloads_total to count it)
   WebSocket  RawWS (minimal blocking RFC 6455 client: exact control of what is sent and
              read), recv_json(ws, want, timeout) for a `websockets` connection
+  MR         upload_frame(seq, w, h, ...): an LCU1 upload frame (PROTOCOL.md §8.4) of a wall
 
 Only the standard library is needed (python3-websockets only by callers using it)."""
 import base64
@@ -226,6 +227,31 @@ def stop(p, sig=signal.SIGTERM, timeout=20.0):
             p.kill()
             p.wait()
     return p.returncode
+
+# --------------------------------------------------------------------------- MR upload frames (PROTOCOL.md §8.4)
+
+UPLOAD_MAGIC = 0x3155434C  # "LCU1"
+
+
+def upload_frame(seq, w, h, depth_mm=2000, rgb=(0.5, 0.5, 0.5), exposure=100.0, zlib_planes=False,
+                 f=None, translation=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0, 1.0), capture_us=None):
+    """An LCU1 frame of a flat wall facing the camera: every pixel at depth_mm (u16mm), one
+    linear colour (rgb16f_linear) times `exposure` nits; focal length f pixels (0.78 w)."""
+    n = w * h
+    planes = [struct.pack("<%dH" % n, *([depth_mm] * n)), b"", struct.pack("<%de" % (3 * n), *(list(rgb) * n))]
+    if zlib_planes:
+        planes = [zlib.compress(planes[0]), b"", zlib.compress(planes[2])]
+    f = f or 0.78 * w
+    hdr = bytearray(128)
+    struct.pack_into("<IHBBHHIQHHBBBBB", hdr, 0, UPLOAD_MAGIC, 1, 1, 0, 128, 0, seq,
+                     1000 * seq if capture_us is None else capture_us, w, h, 1, 2,
+                     int(zlib_planes), 0, int(zlib_planes))
+    struct.pack_into("<4f3f4ff", hdr, 36, f, f, w / 2, h / 2, *translation, *rotation, exposure)
+    struct.pack_into("<III", hdr, 84, len(planes[0]), 0, len(planes[2]))
+    body = planes[0] + planes[2]
+    struct.pack_into("<I", hdr, 124, zlib.crc32(bytes(hdr[:124]) + body))
+    return bytes(hdr) + body
+
 
 # --------------------------------------------------------------------------- HTTP: /metrics, /healthz
 
