@@ -295,7 +295,7 @@ void server_mr_frame(lc_server *s, lc_session *ss, const uint8_t *data, size_t l
     s->mr_bytes_in += len;
     job->slot = m->slot;
     job->epoch = m->epoch;
-    lc_mr_params_default(&job->params);
+    job->params = lc_mr_params_default();
     job->params.max_lights = (uint32_t)s->cfg->mr_max_lights;
     job->params.min_confidence = m->req.min_confidence;
     job->params.spec_exponent = m->req.specular_exponent;
