@@ -392,6 +392,7 @@ int lc_client_view_apply(lc_client_view *v, const uint8_t *frame, size_t len, lc
 typedef struct client_msg {
     struct client_msg *next;
     size_t len;
+    int binary;         /* an upload frame (lc_client_send_binary), else text */
     unsigned char *buf; /* LWS_PRE + len */
 } client_msg;
 
@@ -418,7 +419,7 @@ struct lc_client {
     int closing;      /* lc_client_close in progress: no callbacks */
 
     /* options (strings owned) */
-    char *url, *token, *name, *ca_file;
+    char *url, *token, *name, *ca_file, *capabilities;
     int timeout_ms, insecure, reconnect, backoff_min_ms, backoff_max_ms, max_retries;
     int tls;
     char host[256], path[512], origin[300];
@@ -481,8 +482,9 @@ static void txq_clear(lc_client *c) {
     c->txq_tail = NULL;
 }
 
-/* Queues a text message; `front` puts it first (hello must precede everything). */
-static int txq_push(lc_client *c, const char *text, size_t n, int front) {
+/* Queues a message (text, or binary when `binary`); `front` puts it first (hello must
+ * precede everything). */
+static int txq_push_kind(lc_client *c, const void *text, size_t n, int front, int binary) {
     client_msg *m = calloc(1, sizeof *m);
     unsigned char *b = m ? malloc(LWS_PRE + n) : NULL;
     if (!b) {
@@ -492,6 +494,7 @@ static int txq_push(lc_client *c, const char *text, size_t n, int front) {
     memcpy(b + LWS_PRE, text, n);
     m->buf = b;
     m->len = n;
+    m->binary = binary;
     if (front) {
         m->next = c->txq;
         c->txq = m;
@@ -504,6 +507,8 @@ static int txq_push(lc_client *c, const char *text, size_t n, int front) {
     if (c->wsi && c->state != CONN_IDLE) lws_callback_on_writable(c->wsi);
     return 0;
 }
+
+static int txq_push(lc_client *c, const char *text, size_t n, int front) { return txq_push_kind(c, text, n, front, 0); }
 
 static int txq_push_json(lc_client *c, cJSON *o, int front) {
     char *t = cJSON_PrintUnformatted(o);
@@ -729,7 +734,7 @@ static int client_lws_callback(struct lws *wsi, enum lws_callback_reasons reason
         if (!m) break;
         c->txq = m->next;
         if (!c->txq) c->txq_tail = NULL;
-        int n = lws_write(wsi, m->buf + LWS_PRE, m->len, LWS_WRITE_TEXT);
+        int n = lws_write(wsi, m->buf + LWS_PRE, m->len, m->binary ? LWS_WRITE_BINARY : LWS_WRITE_TEXT);
         size_t mlen = m->len;
         free(m->buf);
         free(m);
@@ -828,6 +833,13 @@ static int client_start_attempt(lc_client *c) {
     cJSON_AddStringToObject(h, "id", CLIENT_ID_PREFIX "hello");
     cJSON_AddStringToObject(h, "client", c->name[0] ? c->name : "liblucent-client");
     cJSON_AddStringToObject(h, "token", c->token);
+    if (c->capabilities[0]) { /* "mr,other": PROTOCOL.md §8.1 */
+        cJSON *caps = cJSON_AddArrayToObject(h, "capabilities");
+        char buf[256];
+        snprintf(buf, sizeof buf, "%s", c->capabilities);
+        for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save))
+            cJSON_AddItemToArray(caps, cJSON_CreateString(t));
+    }
     if (txq_push_json(c, h, 1) != 0) return -1;
     c->state = CONN_OPENING;
 
@@ -877,6 +889,7 @@ lc_client *lc_client_open(const lc_client_options *o, char *err, size_t errlen) 
     c->url = dupstr(o->url);
     c->token = dupstr(o->token);
     c->name = dupstr(o->name);
+    c->capabilities = dupstr(o->capabilities);
     c->ca_file = o->ca_file ? dupstr(o->ca_file) : NULL;
     c->timeout_ms = o->timeout_ms > 0 ? o->timeout_ms : 5000;
     c->insecure = o->insecure;
@@ -886,7 +899,7 @@ lc_client *lc_client_open(const lc_client_options *o, char *err, size_t errlen) 
     c->backoff_ms = c->backoff_min_ms;
     c->max_retries = o->max_retries;
     c->next_id = 1;
-    if (!c->url || !c->token || !c->name || (o->ca_file && !c->ca_file)) {
+    if (!c->url || !c->token || !c->name || !c->capabilities || (o->ca_file && !c->ca_file)) {
         set_err(err, errlen, "out of memory");
         goto err;
     }
@@ -1075,6 +1088,22 @@ int lc_client_unsubscribe(lc_client *c, int stream, char *err, size_t errlen) {
     return r;
 }
 
+int lc_client_send_binary(lc_client *c, const void *data, size_t len, char *err, size_t errlen) {
+    if (!c || !data || !len) {
+        set_err(err, errlen, "%s", "no data");
+        return -1;
+    }
+    if (c->state != CONN_OPEN) {
+        set_err(err, errlen, "not connected: %s", c->reason[0] ? c->reason : "no welcome yet");
+        return -1;
+    }
+    if (txq_push_kind(c, data, len, 0, 1) != 0) {
+        set_err(err, errlen, "%s", "out of memory");
+        return -1;
+    }
+    return 0;
+}
+
 int lc_client_poll(lc_client *c, int timeout_ms) {
     if (!c || c->pending) return -1;
     long long deadline = client_now_ms() + (timeout_ms > 0 ? timeout_ms : 0);
@@ -1146,6 +1175,7 @@ void lc_client_close(lc_client *c) {
     free(c->url);
     free(c->token);
     free(c->name);
+    free(c->capabilities);
     free(c->ca_file);
     free(c);
 }

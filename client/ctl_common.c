@@ -137,6 +137,15 @@ static const struct {
      "lucentd --rate"},
     {"binary_not_allowed", "clients must send JSON as text frames, never binary frames"},
     {"internal", "the server failed (see its log); retry, and report it if it persists"},
+    {"frame_invalid",
+     "the upload frame breaks PROTOCOL.md §8.4 at the pointer (header field, plane size, zlib stream or CRC); "
+     "check the recording's files"},
+    {"frame_too_large",
+     "the upload frame is over the session's max_frame (mr.begin's reply); compress the planes "
+     "(--zlib) or record at a smaller size"},
+    {"mr_not_enabled",
+     "the server grants MR sessions to controllers only, with lucentd --mr on and a bake with sparse points "
+     "(lucent-bake --mr-points); send mr.begin before upload frames"},
 };
 
 const char *ctl_error_hint(const char *code) {

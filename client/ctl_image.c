@@ -6,6 +6,7 @@
 
 #include <errno.h>
 #include <png.h>
+#include <setjmp.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -144,4 +145,93 @@ int ctl_image_write_png(const char *path, uint32_t width, uint32_t height, const
         return -1;
     }
     return 0;
+}
+
+/* libpng reports errors by longjmp; the message is kept for the caller. */
+typedef struct png_read_ctx {
+    jmp_buf jmp;
+    char msg[160];
+} png_read_ctx;
+
+static void png_read_on_error(png_structp png, png_const_charp msg) {
+    png_read_ctx *ctx = png_get_error_ptr(png);
+    snprintf(ctx->msg, sizeof ctx->msg, "%s", msg);
+    longjmp(ctx->jmp, 1);
+}
+
+static void png_read_on_warning(png_structp png, png_const_charp msg) {
+    (void)png;
+    (void)msg;
+}
+
+int ctl_image_read_png(const char *path, uint32_t max_side, uint32_t *width, uint32_t *height, int *channels,
+                       int *bit_depth, uint16_t **pixels, char *err, size_t errlen) {
+    *pixels = NULL;
+    png_read_ctx ctx = {.msg = ""};
+    png_structp png = NULL;
+    png_infop info = NULL;
+    uint8_t *volatile raw = NULL;
+    uint16_t *volatile out = NULL;
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        snprintf(err, errlen, "cannot read %s: %s", path, strerror(errno));
+        return -1;
+    }
+    png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &ctx, png_read_on_error, png_read_on_warning);
+    info = png ? png_create_info_struct(png) : NULL;
+    if (!info) {
+        snprintf(ctx.msg, sizeof ctx.msg, "out of memory");
+        goto err;
+    }
+    if (setjmp(ctx.jmp)) goto err;
+    png_init_io(png, f);
+    png_read_info(png, info);
+    uint32_t w = png_get_image_width(png, info), h = png_get_image_height(png, info);
+    int type = png_get_color_type(png, info), depth = png_get_bit_depth(png, info);
+    if (!w || !h || w > max_side || h > max_side) {
+        snprintf(ctx.msg, sizeof ctx.msg, "size %ux%u is outside 1..%u", w, h, max_side);
+        goto err;
+    }
+    if (type == PNG_COLOR_TYPE_PALETTE) png_set_palette_to_rgb(png);
+    if (type == PNG_COLOR_TYPE_GRAY && depth < 8) png_set_expand_gray_1_2_4_to_8(png);
+    if (type & PNG_COLOR_MASK_ALPHA) png_set_strip_alpha(png);
+    if (depth == 16) png_set_swap(png); /* host (little-endian) order */
+    png_read_update_info(png, info);
+    int ch = png_get_channels(png, info), bd = png_get_bit_depth(png, info);
+    if ((ch != 1 && ch != 3) || (bd != 8 && bd != 16)) {
+        snprintf(ctx.msg, sizeof ctx.msg, "unsupported layout (%d channels of %d bits)", ch, bd);
+        goto err;
+    }
+    size_t row_bytes = png_get_rowbytes(png, info), n = (size_t)w * h * (size_t)ch;
+    raw = malloc(row_bytes * h);
+    out = malloc(n * sizeof *out);
+    if (!raw || !out) {
+        snprintf(ctx.msg, sizeof ctx.msg, "out of memory");
+        goto err;
+    }
+    for (uint32_t y = 0; y < h; y++) png_read_row(png, raw + (size_t)y * row_bytes, NULL);
+    for (uint32_t y = 0; y < h; y++) {
+        const uint8_t *r = raw + (size_t)y * row_bytes;
+        for (size_t i = 0; i < (size_t)w * (size_t)ch; i++) {
+            uint16_t v = r[i];
+            if (bd == 16) memcpy(&v, r + 2 * i, 2);
+            out[(size_t)y * w * (size_t)ch + i] = v;
+        }
+    }
+    png_destroy_read_struct(&png, &info, NULL);
+    fclose(f);
+    free(raw);
+    *width = w;
+    *height = h;
+    *channels = ch;
+    *bit_depth = bd;
+    *pixels = out;
+    return 0;
+err:
+    snprintf(err, errlen, "%s: not a readable PNG: %s", path, ctx.msg);
+    png_destroy_read_struct(&png, info ? &info : NULL, NULL);
+    fclose(f);
+    free(raw);
+    free(out);
+    return -1;
 }

@@ -46,16 +46,17 @@ enum { LC_CLIENT_RESIDUAL = 0x100 };
 enum { LC_CLIENT_DISCONNECTED = 0, LC_CLIENT_CONNECTED = 1, LC_CLIENT_RECONNECTING = 2 };
 
 typedef struct lc_client_options {
-    const char *url;     /* ws://host[:port][/path] or wss://…; required */
-    const char *token;   /* access token ("" = none) */
-    const char *name;    /* client name shown in `changed` (default "liblucent-client") */
-    int timeout_ms;      /* connect / request timeout (default 5000) */
-    int insecure;        /* wss: accept self-signed certificates and any host name */
-    const char *ca_file; /* wss: PEM CA bundle (NULL = system store) */
-    int reconnect;       /* 1: on connection loss reconnect with back-off and resubscribe */
-    int backoff_min_ms;  /* first retry delay (default 100); doubles up to backoff_max_ms */
-    int backoff_max_ms;  /* default 5000 */
-    int max_retries;     /* consecutive failed attempts before giving up, 0 = forever */
+    const char *url;          /* ws://host[:port][/path] or wss://…; required */
+    const char *token;        /* access token ("" = none) */
+    const char *name;         /* client name shown in `changed` (default "liblucent-client") */
+    int timeout_ms;           /* connect / request timeout (default 5000) */
+    int insecure;             /* wss: accept self-signed certificates and any host name */
+    const char *ca_file;      /* wss: PEM CA bundle (NULL = system store) */
+    int reconnect;            /* 1: on connection loss reconnect with back-off and resubscribe */
+    int backoff_min_ms;       /* first retry delay (default 100); doubles up to backoff_max_ms */
+    int backoff_max_ms;       /* default 5000 */
+    int max_retries;          /* consecutive failed attempts before giving up, 0 = forever */
+    const char *capabilities; /* hello's capabilities, comma-separated ("mr"; NULL = none, §8.1) */
 } lc_client_options;
 
 /* Fills defaults (everything zero/NULL except the defaults above). */
@@ -119,6 +120,11 @@ void lc_client_set_callbacks(lc_client *c, const lc_client_callbacks *cb);
  * A text that is not a JSON object is sent as is and matched with the next reply. */
 int lc_client_request(lc_client *c, const char *json_request, char **reply_json, int timeout_ms, char *err,
                       size_t errlen);
+
+/* Queues one binary message (an MR upload frame, PROTOCOL.md §8.4; lc_upload_encode makes
+ * one) and returns; it goes out in the next servicing call. The data is copied. Returns 0,
+ * or -1 when not connected or out of memory. Replies (mr.ack, error) reach on_message. */
+int lc_client_send_binary(lc_client *c, const void *data, size_t len, char *err, size_t errlen);
 
 /* Subscribes to a stream (LC_CLIENT_LIGHTMAP…) in an encoding (LC_CLIENT_RGB9E5…; 0 = the
  * stream's default; lightmap: | LC_CLIENT_RESIDUAL for residual deltas) with an optional

@@ -1,6 +1,6 @@
 /* lucentctl: command-line control of a running lucentd over lucent/1. This file: global
  * options, the command table (dispatch and the global --help); the commands live in
- * ctl_scene.c, ctl_script.c and ctl_stream.c (see ctl.h). */
+ * ctl_scene.c, ctl_script.c, ctl_stream.c and ctl_mr.c (see ctl.h). */
 #include <stdlib.h>
 #include <string.h>
 
@@ -26,6 +26,7 @@ static const ctl_command ctl_commands[] = {
     {"watch", "...", "subscribe to streams and report frames", ctl_cmd_watch},
     {"snapshot", "...", "save the current lightmap / SH data to files", ctl_cmd_snapshot},
     {"latency", "...", "measure change-to-frame latency", ctl_cmd_latency},
+    {"mr", "replay DIR ...", "play a recorded RGB-D capture as an MR session", ctl_cmd_mr},
 };
 #define CTL_N_COMMANDS (sizeof ctl_commands / sizeof ctl_commands[0])
 
