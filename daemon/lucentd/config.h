@@ -43,11 +43,11 @@ typedef struct lc_config {
     int keyframe_interval;
     double delta_threshold; /* relative change that marks a tile dirty */
     int compact_bytes;      /* journal size that triggers a snapshot */
-    int mr;               /* MR sessions accepted (PROTOCOL.md §8) */
-    int mr_max_frame;     /* bytes per upload frame */
-    int mr_max_lights;    /* area lights per MR frame */
-    int mr_max_sessions;  /* concurrent MR sessions */
-    double mr_max_rate;   /* upload frames per second per session */
+    int mr;                 /* MR sessions accepted (PROTOCOL.md §8) */
+    int mr_max_frame;       /* bytes per upload frame */
+    int mr_max_lights;      /* area lights per MR frame */
+    int mr_max_sessions;    /* concurrent MR sessions */
+    double mr_max_rate;     /* upload frames per second per session */
     int log_level;
     int check_config;
     int recover; /* start from the snapshot + the journal's valid prefix, setting the rest aside */

@@ -22,8 +22,10 @@ struct lc_mrw {
     lc_mrw_result *results[MRW_RESULTS_MAX];
     uint32_t results_head, results_n;
     uint64_t processed, replaced;
-    /* the worker thread's own */
-    lc_mr *mr;
+    /* the worker thread's own: one LightSkin state per slot (its smoothing history belongs to
+     * that slot's session; a new epoch starts it afresh), created on the slot's first frame */
+    lc_mr *mr[LC_MRW_SLOTS];
+    uint64_t mr_epoch[LC_MRW_SLOTS];
     int threads;
     lc_mrw_wake_fn wake;
     void *wake_arg;
@@ -75,11 +77,19 @@ static lc_mrw_result *mrw_process(lc_mrw *w, lc_mrw_job *job) {
     lc_mr_camera cam = {.width = h->width, .height = h->height, .fx = h->fx, .fy = h->fy, .cx = h->cx, .cy = h->cy};
     memcpy(cam.translation, h->translation, sizeof cam.translation);
     memcpy(cam.rotation, h->rotation, sizeof cam.rotation);
-    if (lc_mr_set_frame(w->mr, &cam, depth, rad, conf, &job->params, r->why, sizeof r->why) != 0) {
+    if (!w->mr[job->slot] && !(w->mr[job->slot] = lc_mr_create(w->threads))) {
+        snprintf(r->why, sizeof r->why, "out of memory for the LightSkin state");
         r->failed = 1;
         goto decoded;
     }
-    r->lights = lc_mr_light_count(w->mr);
+    lc_mr *mr = w->mr[job->slot];
+    if (w->mr_epoch[job->slot] != job->epoch) lc_mr_reset_history(mr);
+    w->mr_epoch[job->slot] = job->epoch;
+    if (lc_mr_set_frame(mr, &cam, depth, rad, conf, &job->params, r->why, sizeof r->why) != 0) {
+        r->failed = 1;
+        goto decoded;
+    }
+    r->lights = lc_mr_light_count(mr);
     r->n_objects = job->n_objects;
     r->n_points = job->n_points;
     r->sh = calloc(job->n_objects ? job->n_objects : 1, sizeof *r->sh);
@@ -89,13 +99,14 @@ static lc_mrw_result *mrw_process(lc_mrw *w, lc_mrw_job *job) {
         r->failed = 1;
         goto decoded;
     }
-    if (lc_mr_compute(w->mr, job->points, job->n_points, job->object_of_point, job->n_objects,
-                      (const float(*)[3])job->centres, r->vpl, NULL, r->sh) != 0) {
-        snprintf(r->why, sizeof r->why, "the LightSkin computation failed");
+    char why[200];
+    if (lc_mr_compute(mr, job->points, job->n_points, job->object_of_point, job->n_objects,
+                      (const float(*)[3])job->centres, r->vpl, NULL, r->sh, why, sizeof why) != 0) {
+        snprintf(r->why, sizeof r->why, "the LightSkin computation failed: %s", why);
         r->failed = 1;
         goto decoded;
     }
-    lc_mr_stats(w->mr, &r->timings);
+    lc_mr_stats(mr, &r->timings);
     /* The ids and the point ranges travel on to the result (the service thread matches them). */
     r->ids = job->ids;
     r->first_point = job->first_point;
@@ -254,7 +265,7 @@ void lc_mrw_stop(lc_mrw *w) {
         w->results_head = (w->results_head + 1) % MRW_RESULTS_MAX;
         w->results_n--;
     }
-    lc_mr_release(w->mr);
+    for (uint32_t k = 0; k < LC_MRW_SLOTS; k++) lc_mr_release(w->mr[k]);
     pthread_cond_destroy(&w->cond);
     pthread_mutex_destroy(&w->lock);
     free(w);

@@ -25,8 +25,8 @@ typedef void (*lc_mrw_wake_fn)(void *arg);
 
 /* One frame to process. Ownership of every pointer moves to the worker with lc_mrw_submit. */
 typedef struct lc_mrw_job {
-    uint32_t slot;   /* the session's slot, < LC_MRW_SLOTS */
-    uint64_t epoch;  /* which mr.begin of that slot (results of an older one are dropped) */
+    uint32_t slot;  /* the session's slot, < LC_MRW_SLOTS */
+    uint64_t epoch; /* which mr.begin of that slot (results of an older one are dropped) */
     lc_upload_frame frame;
     lc_mr_params params;
     uint32_t n_objects;

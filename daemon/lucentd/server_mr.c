@@ -29,9 +29,7 @@ struct server_mr_session {
     float prev_t[3], prev_q[4];
 };
 
-static void mr_wake(void *arg) {
-    lws_cancel_service(((lc_server *)arg)->ctx);
-}
+static void mr_wake(void *arg) { lws_cancel_service(((lc_server *)arg)->ctx); }
 
 /* The state's object with this id (objects are sorted by id), or NULL. */
 static const lc_proto_object *mr_find_object(const lc_state *st, const char *id) {
@@ -141,7 +139,7 @@ void server_mr_begin(lc_server *s, lc_session *ss, const lc_proto_request *req) 
     if (!ss->mr_granted) {
         session_error(s, ss, &req->id, LC_ERR_MR_NOT_ENABLED, "/type",
                       s->mrw ? "MR sessions need the \"mr\" capability in hello (controllers only)"
-                             : "this server has MR sessions off (--mr false, or a bake without sparse points)");
+                             : "this server has MR sessions off (--no-mr, or a bake without sparse points)");
         return;
     }
     const char *why = NULL;
@@ -182,12 +180,13 @@ void server_mr_begin(lc_server *s, lc_session *ss, const lc_proto_request *req) 
     s->mr_slots[slot] = m;
     ss->mr = m;
     uint32_t points = 0, first;
-    for (uint32_t i = 0; i < r->n_objects; i++) points += mr_object_points(s, mr_find_object(&s->state, r->objects[i]), &first);
-    lc_info("mr", "client '%s' began MR session %u: %u objects, %ux%u, %.3g frames/s", ss->client, slot,
-            r->n_objects, r->width, r->height, m->rate);
-    session_send(ss, lc_proto_build_ok_mr(&req->id, s->state.revision, (uint32_t)m->epoch,
-                                          (uint64_t)s->cfg->mr_max_frame, m->rate,
-                                          (uint32_t)s->cfg->mr_max_lights, points));
+    for (uint32_t i = 0; i < r->n_objects; i++)
+        points += mr_object_points(s, mr_find_object(&s->state, r->objects[i]), &first);
+    lc_info("mr", "client '%s' began MR session %u: %u objects, %ux%u, %.3g frames/s", ss->client, slot, r->n_objects,
+            r->width, r->height, m->rate);
+    session_send(ss,
+                 lc_proto_build_ok_mr(&req->id, s->state.revision, (uint32_t)m->epoch, (uint64_t)s->cfg->mr_max_frame,
+                                      m->rate, (uint32_t)s->cfg->mr_max_lights, points));
 }
 
 /* World-space sparse points of the session's objects (those still in the state), into job. */
@@ -248,8 +247,7 @@ static int mr_place_points(lc_server *s, const struct server_mr_session *m, lc_m
     return 0;
 }
 
-static void mr_send_ack(lc_session *ss, uint32_t seq, uint64_t capture_us, int replaced, uint32_t lights,
-                        double ms) {
+static void mr_send_ack(lc_session *ss, uint32_t seq, uint64_t capture_us, int replaced, uint32_t lights, double ms) {
     session_send(ss, lc_proto_build_mr_ack(seq, capture_us, replaced, lights, ms));
 }
 
@@ -262,14 +260,6 @@ void server_mr_frame(lc_server *s, lc_session *ss, const uint8_t *data, size_t l
                       "an upload frame outside an MR session: send mr.begin first (PROTOCOL.md §8.2)");
         return;
     }
-    double now = lc_clock_ms();
-    m->tokens = fmin(2.0, m->tokens + (now - m->refill_ms) * 1e-3 * m->rate);
-    m->refill_ms = now;
-    if (m->tokens < 1) {
-        session_error(s, ss, &none, LC_ERR_RATE_LIMITED, "", "upload frames over the session's max_rate; slow down");
-        return;
-    }
-    m->tokens -= 1;
     lc_mrw_job *job = calloc(1, sizeof *job);
     if (!job) {
         session_error(s, ss, &none, LC_ERR_INTERNAL, "", "out of memory");
@@ -290,6 +280,17 @@ void server_mr_frame(lc_server *s, lc_session *ss, const uint8_t *data, size_t l
         session_error(s, ss, &none, LC_ERR_FRAME_INVALID, "/header/sequence", msg);
         return;
     }
+    /* Only frames that pass the checks count against the rate (a bucket of 2): a malformed
+     * one is answered at once and costs no LightSkin work. */
+    double now = lc_clock_ms();
+    m->tokens = fmin(2.0, m->tokens + (now - m->refill_ms) * 1e-3 * m->rate);
+    m->refill_ms = now;
+    if (m->tokens < 1) {
+        lc_mrw_job_free(job);
+        session_error(s, ss, &none, LC_ERR_RATE_LIMITED, "", "upload frames over the session's max_rate; slow down");
+        return;
+    }
+    m->tokens -= 1;
     m->last_seq = job->frame.h.sequence;
     s->mr_frames_in++;
     s->mr_bytes_in += len;

@@ -3,6 +3,7 @@
 acknowledgements, latest-wins, rate limits, and the light a synthetic capture gives an
 object. Skipped on a server that does not grant the `mr` capability (a 1.0 server, or MR
 off) except the cases a 1.0 server must pass too."""
+import asyncio
 import math
 import struct
 import zlib
@@ -279,9 +280,10 @@ async def test_every_frame_acknowledged_once(cfg):
     c = await mr_client(cfg)
     try:
         oid = await placed_object(c, cfg)
-        await begin(c, oid, w=128, h=96)
-        for seq in range(1, 5):
+        m = await begin(c, oid, w=128, h=96)
+        for seq in range(1, 5):  # at the granted rate: a faster client is rate_limited
             await c.send(upload_frame(seq, 128, 96, zlib_planes=(seq % 2 == 0)))
+            await asyncio.sleep(1.0 / m["max_rate"])
         acks = {}
         while len(acks) < 4:
             a = await c.recv_json("mr.ack", timeout=max(cfg.timeout, 60))

@@ -7,12 +7,13 @@ suite sees from outside:
   fanout      a viewer (no MR) subscribed to objects sees the capture's light on the object,
               and its grid light again once the MR client disconnects (the session ends)
   metrics     lucent_mr_* count frames received, processed and replaced (latest wins)
-  mr_off      --mr false: hello's "mr" is not granted, binary frames stay binary_not_allowed"""
+  mr_off      --no-mr: hello's "mr" is not granted, binary frames stay binary_not_allowed"""
 import math
 import os
 import struct
 import sys
 import tempfile
+import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "lib"))
 import lucent_testlib as lt  # noqa: E402
@@ -73,8 +74,9 @@ def run_session(port, frames):
                                                            "max_rate": 60}})
     ok = ws.recv_json()
     check(ok.get("type") == "ok" and "mr" in ok, "mr.begin ok: %r" % ok)
-    for seq, frame in enumerate(frames, 1):
+    for seq, frame in enumerate(frames, 1):  # at the granted rate (a faster client is rate_limited)
         ws.send_frame(2, frame)
+        time.sleep(1.0 / ok.get("mr", {}).get("max_rate", 1))
     acks = {}
     while len(acks) < len(frames):
         m = ws.recv_json()
@@ -126,10 +128,10 @@ def test_privacy_fanout_metrics():
 
 
 def test_mr_off():
-    p, port = lt.start_lucentd(os.path.join(TMP, "off"), "--mr", "false")
+    p, port = lt.start_lucentd(os.path.join(TMP, "off"), "--no-mr")
     try:
         ws, w = mr_hello(port)
-        check("mr" not in w.get("capabilities", []), "--mr false: not granted (%r)" % w.get("capabilities"))
+        check("mr" not in w.get("capabilities", []), "--no-mr: not granted (%r)" % w.get("capabilities"))
         ws.send_frame(2, lt.upload_frame(1, 16, 16))
         e = ws.recv_json("error")
         check(e["code"] == "binary_not_allowed", "binary frame without the grant: %r" % e)

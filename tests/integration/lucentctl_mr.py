@@ -9,7 +9,7 @@ checked against what the server must answer.
               minus the low-confidence pixels
   bad input   a PNG of the wrong size, a frame JSON without a field: exit 2 naming the file
               and the field; no --objects: exit 2; an unknown object: exit 1 (unknown_id)
-  refused     lucentd --mr false: exit 1 (the capability is not granted)"""
+  refused     lucentd --no-mr: exit 1 (the capability is not granted)"""
 import json
 import os
 import struct
@@ -127,10 +127,10 @@ def test_bad_input(port):
 
 
 def test_refused():
-    p, port = lt.start_lucentd(os.path.join(TMP, "off"), "--mr", "false")
+    p, port = lt.start_lucentd(os.path.join(TMP, "off"), "--no-mr")
     try:
         rc, s, out, err = ctl(port, os.path.join(TMP, "lin"), "--objects", "mrcube")
-        check(rc == 1 and "\"mr\" capability" in err, "--mr false: rc %d %s" % (rc, err))
+        check(rc == 1 and "\"mr\" capability" in err, "--no-mr: rc %d %s" % (rc, err))
     finally:
         stop(p)
 
