@@ -4,7 +4,8 @@
  *    the centre ray's z within 0.5 mm, and unprojecting it with the written intrinsics and pose
  *    lands on the surface the ray hit (and on a wall of the box, checked without the ray code);
  *  - colour: an emissive closed box of albedo 0 shows L_e at every pixel; of albedo rho,
- *    L_e / (1 - rho) (all bounces), identical on 1 and 2 threads;
+ *    L_e / (1 - rho) (all bounces), identical on 1 and 2 threads; on the Cornell bake (with
+ *    its lights) it is the camera view (lc_ref_camera_render) per pixel within the noise;
  *  - PATH.json and --frames/--jitter poses: times, bounds, errors naming the JSON pointer;
  *  - mr-truth visible: a synthetic capture of one uniformly radiant rectangle in front of the
  *    camera gives pi L F(point -> rectangle); nothing from behind it; no triangle across a depth
@@ -228,6 +229,62 @@ static void test_capture_bounces(void) {
     lc_ref_release(r1);
     lc_ref_release(r2);
     fixture_release(&f);
+}
+
+/* The capture's colour is the camera view (lc_ref_camera_render) of the embedded Cornell bake,
+ * with the bake's lights as `lucent-ref camera` and `capture` load them: per pixel within the
+ * two estimates' noise, independent random streams. Skipped without build/cornell.lcb. */
+static void test_capture_vs_camera(void) {
+    const char *bin = getenv("LUCENT_BINARY_DIR");
+    char path[512], err[512];
+    snprintf(path, sizeof path, "%s/cornell.lcb", bin ? bin : ".");
+    lc_lcb *bake = NULL;
+    if (access(path, R_OK) != 0 || lc_lcb_open(path, &bake, err, sizeof err) != 0) {
+        fprintf(stderr, "capture vs camera: skipped (%s not readable)\n", path);
+        return;
+    }
+    lc_ref_state st;
+    lc_ref *r = NULL;
+    if (lc_ref_state_load(bake, NULL, 1, &st, err, sizeof err) != 0 ||
+        !(r = lc_ref_create(bake, &st.st, 0, err, sizeof err))) {
+        CHECK(0, "cornell: %s", err);
+        lc_lcb_close(bake);
+        return;
+    }
+    enum { W = 40, H = 30, N = W * H };
+    lc_ref_camera cam = {{0.278f, 0.273f, -0.8f}, {0.278f, 0.273f, 0.0f}, {0, 1, 0}, 60.0, W, H};
+    lc_ref_camera_settings cs = {64, 32, 3, 1, 1};
+    lc_ref_capture_settings s = {64, 32, 3, 2, 0, 1};
+    lc_ref_rgbd_view view;
+    lc_ref_image img;
+    memset(&img, 0, sizeof img);
+    static float rgb[3 * N], depth[N];
+    if (lc_ref_rgbd_lookat(&cam, &view, err, sizeof err) != 0 ||
+        lc_ref_camera_render(r, &cam, &cs, &img, err, sizeof err) != 0 ||
+        lc_ref_rgbd_render(r, &view, &s, 0, rgb, depth, NULL, err, sizeof err) != 0) {
+        CHECK(0, "cornell renders: %s", err);
+    } else {
+        double sum_d = 0, sum_var = 0, sum_y = 0;
+        int beyond = 0, empty = 0;
+        for (int i = 0; i < N; i++) {
+            double yc = 0.2126 * rgb[3 * i] + 0.7152 * rgb[3 * i + 1] + 0.0722 * rgb[3 * i + 2];
+            double yr = 0.2126 * img.rgb[3 * i] + 0.7152 * img.rgb[3 * i + 1] + 0.0722 * img.rgb[3 * i + 2];
+            double se = sqrt(2.0) * img.stderr_y[i]; /* the same estimator at the same spp, twice */
+            sum_d += yc - yr, sum_var += se * se, sum_y += yr;
+            if (fabs(yc - yr) > 5 * se + 1e-6) beyond++; /* silhouette pixels: partly covered, few hits */
+            if (!depth[i]) empty += yc == 0;
+        }
+        CHECK(fabs(sum_d) <= 3 * sqrt(sum_var) + 1e-4 * sum_y,
+              "capture - camera luminance %.5f over %d pixels (3 sigma %.5f)", sum_d, N, 3 * sqrt(sum_var));
+        CHECK(beyond <= N / 100, "%d of %d pixels differ by more than 5 sigma", beyond, N);
+        CHECK(empty > 0, "no pixel without a surface (and colour) around the open box");
+        fprintf(stderr, "capture vs camera (Cornell %dx%d, 64 spp): mean luminance %.5f vs %.5f, %d pixels > 5 sigma\n",
+                W, H, (sum_y + sum_d) / N, sum_y / N, beyond);
+    }
+    lc_ref_image_free(&img);
+    lc_ref_release(r);
+    lc_ref_state_free(&st);
+    lc_lcb_close(bake);
 }
 
 static int write_text(const char *path, const char *text) {
@@ -480,6 +537,7 @@ int main(void) {
     test_poses();
     test_capture_box();
     test_capture_bounces();
+    test_capture_vs_camera();
     test_mr_full();
     CHECK_DONE();
 }
