@@ -80,15 +80,18 @@ static int ref_opt_up(void *o, const char *v, char *err, size_t errlen) {
 #define OFF(f) offsetof(ref_opts, f)
 static const lc_opt ref_options[] = {
     {"state", LC_OPT_STRING, OFF(state), 0, REF_PATH_MAX, NULL, NULL,
-     "[render, fidelity, camera] daemon state JSON (`lucentctl state --json`, a snapshot); default: the daemon's "
-     "initial state (render, fidelity: the bake's emission, no lights; camera: with the bake's own lights, as a "
-     "fresh lucentd starts)",
+     "[render, fidelity, camera, capture, mr-truth] daemon state JSON (`lucentctl state --json`, a snapshot); "
+     "default: the daemon's initial state (render, fidelity: the bake's emission, no lights; camera, capture, "
+     "mr-truth: with the bake's own lights, as a fresh lucentd starts)",
      "PATH", NULL},
     {"out", LC_OPT_STRING, OFF(out), 0, REF_PATH_MAX, NULL, NULL,
-     "output directory (render: required; compare/fidelity: default none / fidelity-out)", "DIR", NULL},
+     "output (render, capture: a directory, required; mr-truth: TRUTH.json, required; compare/fidelity: default "
+     "none / fidelity-out)",
+     "DIR", NULL},
     {"spp", LC_OPT_INT, OFF(spp), 1, 1 << 24, NULL, NULL,
      "[render] paths per cache, default 4096 (the cap with --target-stderr); [camera] paths per pixel, default 64; "
-     "[capture] default 16; [mr-truth] rays per point, default 4096",
+     "[capture] per pixel, default 16; [mr-truth] samples per point (each a light and a cosine sample), default "
+     "4096",
      "N", NULL},
     {"batch", LC_OPT_INT, OFF(batch), 1, 1 << 20, "256", NULL, "[render] paths per cache per pass", "N", NULL},
     {"target-stderr", LC_OPT_FLOAT, OFF(target_stderr), 0, 1, "0", NULL,
@@ -98,10 +101,10 @@ static const lc_opt ref_options[] = {
      NULL},
     {"max-bounces", LC_OPT_INT, OFF(max_bounces), 8, 1024, "32", NULL,
      "[render] surface reflections per path (Russian roulette cuts most paths earlier)", "N", NULL},
-    {"rr-depth", LC_OPT_INT, OFF(rr_depth), 1, 1024, "3", NULL, "[render, camera] Russian roulette from this bounce on",
-     "N", NULL},
-    {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "[render, camera] random seed (same seed, same result)",
-     "S", NULL},
+    {"rr-depth", LC_OPT_INT, OFF(rr_depth), 1, 1024, "3", NULL,
+     "[render, camera, capture, mr-truth] Russian roulette from this bounce on", "N", NULL},
+    {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL,
+     "[render, camera, capture, mr-truth] random seed (same seed, same result; capture: also the jitter)", "S", NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", "N", NULL},
     {"texels", LC_OPT_BOOL, OFF(texels), 0, 1, "true", NULL, "[render] compute the lightmap texels (--no-texels)", NULL,
      NULL},
