@@ -17,7 +17,11 @@
  *
  * An asset: its vertices in asset-local metres (POSITION, NORMAL, COLOR_0 = per-vertex
  * albedo, linear RGB float VEC3) and triangles, one material (baseColorFactor 1: the colour
- * is COLOR_0), one node named after the asset.
+ * is COLOR_0), one node named after the asset. With LightSkin sparse points (lcb ASPT/AVNN)
+ * each vertex also carries its 8 nearest points and eq. 12 weights (PROTOCOL.md §8.7):
+ * _LUCENT_SP_INDEX0/1 (VEC4 UNSIGNED_SHORT, indices among the asset's points) and
+ * _LUCENT_SP_WEIGHT0/1 (VEC4 FLOAT, summing to 1), and the mesh's extras.lucent holds
+ * {"sparse_points": N}.
  *
  * Outputs over the GLB format's 4 GiB limit are refused. */
 #ifndef LC_LCB_GLB_H
