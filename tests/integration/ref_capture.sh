@@ -3,7 +3,8 @@
 # checked file by file (names, PNG sizes / bit depths / colour types, every JSON field, the
 # exposure mapping the brightest channel to 65535, depth in the box's range); mr-truth on it
 # (fields, an occluder cube lowers `full`, `visible` within what the scene gives); bad flags
-# exit 2 naming the flag or field. The closed forms are in tests/unit/ref/test_capture.c.
+# exit 2 naming the flag or field; the recordings play through `lucentctl mr replay` to lucentd
+# (when built). The closed forms are in tests/unit/ref/test_capture.c.
 . "$(dirname "$0")/lib.sh"
 REF="${LUCENT_BINARY_DIR:?run through ctest}/bin/lucent-ref"
 LCB="$LUCENT_BINARY_DIR/cornell.lcb"
@@ -132,12 +133,41 @@ for c in range(3):
     assert 0.8 * up0["full"][c] < up0["visible"][c] < 1.05 * up0["full"][c] + 5 * up0["visible_stderr"][c], up0
 PY
 
+# The recording plays through `lucentctl mr replay` (the reader of this format, client/README.md)
+# to lucentd on the same bake: every frame acknowledged, none refused. Needs lucentd and lucentctl
+# built (else this part is left out, said so).
+if [ -x "$LUCENT_BINARY_DIR/bin/lucentd" ] && [ -x "$LUCENT_BINARY_DIR/bin/lucentctl" ]; then
+  if start_lucentd "$TMP/d" --bake "$LCB"; then
+    DPID=$LUCENTD_PID
+    trap 'kill "$DPID" 2>/dev/null; wait "$DPID" 2>/dev/null; rm -rf "$TMP"' EXIT
+    export LUCENT_URL="ws://127.0.0.1:$LUCENTD_PORT/"
+    CTL="$LUCENT_BINARY_DIR/bin/lucentctl"
+    expect_exit 0 "" "$CTL" object set mrcube --asset cube --position 0.278,0,0.28
+    for rec in cap path; do
+      rc=0
+      "$CTL" mr replay "$TMP/$rec" --objects mrcube --rate 0 --max-rate 60 --quiet >"$TMP/replay.out" \
+        2>"$TMP/replay.err" || rc=$?
+      [ "$rc" = 0 ] || fail "mr replay $rec exited $rc: $(head -c 400 "$TMP/replay.err")"
+      want=$([ $rec = cap ] && echo 4 || echo 2)
+      grep '^{"frames_sent"' "$TMP/replay.out" >"$TMP/replay.json" || fail "mr replay $rec: no summary"
+      json_check "$TMP/replay.json" "j['frames_sent'] == $want and j['processed'] + j['replaced'] == $want and \
+j['errors'] == 0 and j['lights_mean'] > 0"
+    done
+  else
+    fail "lucentd did not start"
+  fi
+else
+  echo "lucentd/lucentctl not built: the replay round trip is left out"
+fi
+
 expect_exit 2 "--out: required" "$REF" capture "$LCB" --eye $EYE --target $TGT
 expect_exit 2 "--eye: required" "$REF" capture "$LCB" --out "$TMP/x" --target $TGT
 expect_exit 2 "--path: not with" "$REF" capture "$LCB" --out "$TMP/x" --path "$TMP/path.json" --eye $EYE
 expect_exit 2 "--path: not with" "$REF" capture "$LCB" --out "$TMP/x" --path "$TMP/path.json" --jitter-mm 3
 echo '{"frames": [{"eye": [0, 0, 0]}]}' >"$TMP/bad.json"
 expect_exit 2 "/frames/0/target" "$REF" capture "$LCB" --out "$TMP/x" --path "$TMP/bad.json"
+expect_exit 2 "outside the replay format's 8..1024" "$REF" capture "$LCB" --out "$TMP/x" --eye $EYE --target $TGT \
+  --width 4 --height 4
 expect_exit 2 "--color" "$REF" capture "$LCB" --out "$TMP/x" --eye $EYE --target $TGT --color hdr
 expect_exit 1 "--frame: 5 is not a frame" "$REF" mr-truth "$LCB" --capture "$TMP/cap" --frame 5 \
   --points "$TMP/pts.json" --out "$TMP/t.json"

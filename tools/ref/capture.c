@@ -386,6 +386,12 @@ int lc_ref_capture_run(lc_ref *r, const char *dir, const lc_ref_capture_pose *po
         return -1;
     }
     uint32_t w = poses[0].view.width, h = poses[0].view.height;
+    if (w < LC_REF_CAPTURE_MIN_SIDE || h < LC_REF_CAPTURE_MIN_SIDE || w > LC_REF_CAPTURE_MAX_SIDE ||
+        h > LC_REF_CAPTURE_MAX_SIDE) {
+        lc_set_err(err, errlen, "--width/--height: %ux%u is outside the replay format's %u..%u (PROTOCOL.md 8.2)", w, h,
+                   LC_REF_CAPTURE_MIN_SIDE, LC_REF_CAPTURE_MAX_SIDE);
+        return -1;
+    }
     size_t px = (size_t)w * h;
     float *rgb = malloc(px * 3 * sizeof *rgb + 1), *depth = malloc(px * sizeof *depth + 1);
     char path[CAP_PATH_MAX];

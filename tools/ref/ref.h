@@ -346,6 +346,9 @@ int lc_ref_image_write_png(const char *path, const lc_ref_image *img, lc_ref_ton
  * first hit (front or back). */
 #define LC_REF_CAPTURE_FORMAT "lucent-rgbd/1"
 #define LC_REF_CAPTURE_MAX_FRAMES 99999u /* five digits in the file names */
+/* Image sides a capture is written with: an MR session's (PROTOCOL.md 8.2, client/README.md). */
+#define LC_REF_CAPTURE_MIN_SIDE 8u
+#define LC_REF_CAPTURE_MAX_SIDE 1024u
 
 typedef struct lc_ref_rgbd_view {
     uint32_t width, height;

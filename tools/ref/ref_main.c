@@ -157,9 +157,9 @@ static const lc_opt ref_options[] = {
      "default camera 50, capture 60",
      "DEG", NULL},
     {"width", LC_OPT_INT, OFF(width), 1, LC_REF_CAMERA_MAX_SIDE, "640", NULL,
-     "[camera, capture] image width, default camera 640, capture 256", "N", NULL},
+     "[camera, capture] image width, default camera 640, capture 256 (capture: 8..1024)", "N", NULL},
     {"height", LC_OPT_INT, OFF(height), 1, LC_REF_CAMERA_MAX_SIDE, "480", NULL,
-     "[camera, capture] image height, default camera 480, capture 192", "N", NULL},
+     "[camera, capture] image height, default camera 480, capture 192 (capture: 8..1024)", "N", NULL},
     {"max-depth", LC_OPT_INT, OFF(max_depth), 0, 1024, "8", NULL,
      "[camera, capture, mr-truth] reflections per path (0 = emitters and the environment seen directly, 1 = direct "
      "light); default camera 8, capture and mr-truth 32 (Russian roulette from --rr-depth)",
@@ -995,6 +995,12 @@ static int capture_poses(const ref_opts *o, int argc, char **argv, lc_ref_captur
     cam.fov_deg = flag_given(argc, argv, "fov") ? o->fov : 60;
     cam.width = (uint32_t)(flag_given(argc, argv, "width") ? o->width : 256);
     cam.height = (uint32_t)(flag_given(argc, argv, "height") ? o->height : 192);
+    if (cam.width < LC_REF_CAPTURE_MIN_SIDE || cam.height < LC_REF_CAPTURE_MIN_SIDE ||
+        cam.width > LC_REF_CAPTURE_MAX_SIDE || cam.height > LC_REF_CAPTURE_MAX_SIDE) {
+        lc_set_err(err, errlen, "--width/--height: %ux%u is outside the replay format's %u..%u (PROTOCOL.md 8.2)",
+                   cam.width, cam.height, LC_REF_CAPTURE_MIN_SIDE, LC_REF_CAPTURE_MAX_SIDE);
+        return -1;
+    }
     if (o->path[0]) {
         if (o->have_eye || o->have_target || flag_given(argc, argv, "frames") || flag_given(argc, argv, "jitter-mm") ||
             flag_given(argc, argv, "jitter-deg")) {
