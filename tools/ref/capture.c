@@ -165,7 +165,11 @@ int lc_ref_rgbd_render(lc_ref *r, const lc_ref_rgbd_view *view, const lc_ref_cap
         return -1;
     }
     cap_ctx ctx = {r, view, s, frame, rgb, depth, row_rays, NULL};
+    /* A bar within the frame only for big ones (over 16M paths); each frame also gets a line. */
+    if (!s->quiet && (uint64_t)view->width * view->height * s->spp > (16u << 20))
+        ctx.progress = lc_progress_begin("capture rows", view->height);
     lc_parallel_for(lc_ref_threads(r), view->height, 1, cap_rows, &ctx);
+    lc_progress_end(ctx.progress);
     if (rays) {
         *rays = 0;
         for (uint32_t j = 0; j < view->height; j++) *rays += row_rays[j];
