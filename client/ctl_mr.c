@@ -31,6 +31,7 @@ typedef struct mr_opts {
     double speed;   /* --rate: 1 = recorded times, 2 = twice as fast, 0 = as fast as granted */
     long loops;
     int zlib, half_depth;
+    const char *vpl_out; /* --vpl-out: every mr.vpl frame as a JSON line */
 } mr_opts;
 
 /* One recorded frame, ready to encode. */
@@ -49,6 +50,10 @@ typedef struct mr_tally {
     double lights, server_ms;
     uint64_t bytes_raw, bytes_sent;
     int quiet;
+    uint32_t last_processed; /* the latest processed sequence (an mr.vpl frame follows its ack) */
+    FILE *vpl;               /* --vpl-out */
+    uint32_t vpl_after;      /* after_seq of the latest mr.vpl frame written */
+    int vpl_done;            /* set before mr.end: its empty frame is not written */
 } mr_tally;
 
 static double mr_now_ms(void) {
@@ -267,6 +272,7 @@ static void mr_on_message(lc_client *c, const char *json, void *user) {
             t->replaced++;
         } else {
             t->ack_ms[t->processed++] = lat;
+            if (k > t->last_processed) t->last_processed = k;
             t->lights += cJSON_IsNumber(lights) ? lights->valuedouble : 0;
             t->server_ms += cJSON_IsNumber(ms) ? ms->valuedouble : 0;
         }
@@ -281,6 +287,26 @@ static void mr_on_message(lc_client *c, const char *json, void *user) {
         ctl_print_server_error(json);
     }
     cJSON_Delete(o);
+}
+
+/* on_frame: an mr.vpl frame as one JSON line {"after_seq": the upload frame it follows,
+ * "revision", "objects": [{"id", "points", "records": [12 values per point]}]}. */
+static void mr_on_frame(lc_client *c, const lc_client_frame *f, void *user) {
+    (void)c;
+    mr_tally *t = user;
+    if (f->stream != LC_CLIENT_MR_VPL || !t->vpl || t->vpl_done) return;
+    fprintf(t->vpl, "{\"after_seq\":%u,\"revision\":%llu,\"objects\":[", t->last_processed,
+            (unsigned long long)f->revision);
+    size_t at = 0;
+    for (uint32_t i = 0; i < f->width; i++) {
+        fprintf(t->vpl, "%s{\"id\":\"%s\",\"points\":%u,\"records\":[", i ? "," : "", f->object_ids[i],
+                f->object_points[i]);
+        for (size_t v = 0; v < (size_t)f->object_points[i] * 12 && at < f->value_count; v++, at++)
+            fprintf(t->vpl, "%s%.9g", v ? "," : "", f->values[at]);
+        fputs("]}", t->vpl);
+    }
+    fputs("]}\n", t->vpl);
+    t->vpl_after = t->last_processed;
 }
 
 /* hello with "mr" must have been granted; then mr.begin. *granted_rate from the reply. */
@@ -429,6 +455,8 @@ static const ctl_flag mr_replay_flags[] = {
     {"--zlib", "_zlib", CTL_FLAG_SWITCH, 0, 0, NULL, NULL, "zlib-compress the planes"},
     {"--half-depth", "_half", CTL_FLAG_SWITCH, 0, 0, NULL, NULL, "send depth as binary16 metres (f16m), not u16mm"},
     {"--quiet", "_quiet", CTL_FLAG_SWITCH, 0, 0, NULL, NULL, "no line per acknowledgement, only the summary"},
+    {"--vpl-out", "_vpl", CTL_FLAG_STRING, 0, 0, NULL, "FILE",
+     "subscribe to mr.vpl (f32) and write every frame as a JSON line (after_seq, revision, objects' records)"},
     {"--max-rate", "max_rate", CTL_FLAG_NUM, 0, 0, NULL, "F", "frames per second to ask for (0.1..60, default 10)"},
     {"--glossy", "glossy", CTL_FLAG_BOOL, 0, 0, NULL, "true|false", "glossy VPLs (default true)"},
     {"--specular-exponent", "specular_exponent", CTL_FLAG_NUM, 0, 0, NULL, "K", "Phong exponent (default 16)"},
@@ -466,7 +494,8 @@ static int mr_take_options(cJSON *flags, mr_opts *o) {
     snprintf(buf, sizeof buf, "%s", ids->valuestring);
     for (char *save = NULL, *id = strtok_r(buf, ",", &save); id; id = strtok_r(NULL, ",", &save))
         cJSON_AddItemToArray(list, cJSON_CreateString(id));
-    static const char *const mine[] = {"_objects", "_rate", "_loop", "_zlib", "_half", "_quiet"};
+    if ((v = cJSON_GetObjectItemCaseSensitive(flags, "_vpl"))) o->vpl_out = strdup(v->valuestring);
+    static const char *const mine[] = {"_objects", "_rate", "_loop", "_zlib", "_half", "_quiet", "_vpl"};
     for (size_t i = 0; i < sizeof mine / sizeof mine[0]; i++) cJSON_DeleteItemFromObjectCaseSensitive(flags, mine[i]);
     o->session = flags;
     return CTL_EXIT_OK;
@@ -524,15 +553,34 @@ int ctl_cmd_mr(int argc, char **argv) {
     co.timeout_ms = CTL_TIMEOUT_MS;
     co.capabilities = "mr";
     if (!(c = ctl_connect(&co, &rc))) goto out;
-    lc_client_set_callbacks(c, &(lc_client_callbacks){.on_message = mr_on_message, .user = &t});
+    lc_client_set_callbacks(c,
+                            &(lc_client_callbacks){.on_message = mr_on_message, .on_frame = mr_on_frame, .user = &t});
     double granted = 1, start = mr_now_ms();
     if ((rc = mr_begin(c, &o, &granted)) != CTL_EXIT_OK) goto out;
+    if (o.vpl_out) {
+        if (!(t.vpl = fopen(o.vpl_out, "w"))) {
+            fprintf(stderr, "lucentctl: --vpl-out %s: %s\n", o.vpl_out, strerror(errno));
+            rc = CTL_EXIT_USAGE;
+            goto out;
+        }
+        if (lc_client_subscribe(c, LC_CLIENT_MR_VPL, LC_CLIENT_F32, 0, err, sizeof err) != 0) {
+            fprintf(stderr, "lucentctl: subscribe mr.vpl: %s\n", err);
+            rc = CTL_EXIT_REFUSED;
+            goto out;
+        }
+    }
     rc = mr_stream(c, &o, w, h, frames, granted, srgb8, &t);
+    if (t.vpl) /* the last result's mr.vpl frame follows its ack */
+        for (double until = mr_now_ms() + 2000; t.vpl_after < t.last_processed && mr_now_ms() < until;)
+            if (lc_client_poll(c, 10) != 0) break;
+    t.vpl_done = 1;
     int end_rc = ctl_request(c, "{\"type\":\"mr.end\"}", NULL);
     mr_print_summary(&t, (mr_now_ms() - start) * 1e-3);
     if (rc == CTL_EXIT_OK) rc = end_rc != CTL_EXIT_OK ? end_rc : t.errors ? CTL_EXIT_REFUSED : CTL_EXIT_OK;
 out:
     lc_client_close(c);
+    if (t.vpl && fclose(t.vpl) != 0 && rc == CTL_EXIT_OK) rc = CTL_EXIT_USAGE;
+    free((char *)o.vpl_out);
     cJSON_Delete(flags);
     free(t.sent_ms);
     free(t.ack_ms);

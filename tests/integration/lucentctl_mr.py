@@ -4,7 +4,9 @@ format"): a synthetic recording of a wall is played as an MR session and the sum
 checked against what the server must answer.
 
   replay      linear16 colour, u16mm depth: every frame acknowledged, no error, one light
-              per pixel (a flat wall has no rejected pixel), the upload bytes are the raw size
+              per pixel (a flat wall has no rejected pixel), the upload bytes are the raw size;
+              --vpl-out: the last mr.vpl frame follows the last upload, 256 points of the cube,
+              unlit exactly where the points face away from the wall
   variants    srgb8 colour + confidence, --zlib and --half-depth: fewer bytes, same lights
               minus the low-confidence pixels
   bad input   a PNG of the wrong size, a frame JSON without a field: exit 2 naming the file
@@ -96,6 +98,23 @@ def test_replays(port):
         check(s["bytes_raw_per_frame"] == raw and s["bytes_sent_per_frame"] == raw, "uncompressed size %r" % s)
         check(s["ack_ms"]["p95"] >= s["ack_ms"]["p50"] > 0, "ack latencies %r" % s["ack_ms"])
         check(out.count(" processed: ") == s["processed"], "one line per processed ack")
+    vpl = os.path.join(TMP, "vpl.jsonl")
+    rc, s, out, err = ctl(port, d, "--objects", "mrcube", "--quiet", "--vpl-out", vpl)
+    if check(rc == 0 and s and os.path.exists(vpl), "--vpl-out replay: rc %d %s" % (rc, err)):
+        lines = [json.loads(x) for x in open(vpl)]
+        last = lines[-1]
+        check(last["after_seq"] == N, "the last mr.vpl frame follows the last frame: %r" % last["after_seq"])
+        objs = {o["id"]: o for o in last["objects"]}
+        if check("mrcube" in objs and objs["mrcube"]["points"] == 256, "256 sparse points of the cube: %r"
+                 % {k: v["points"] for k, v in objs.items()}):
+            rec = objs["mrcube"]["records"]
+            check(len(rec) == 256 * 12, "12 values per point")
+            dark = sum(1 for i in range(256) if rec[12 * i:12 * i + 3] == [0, 0, 0])
+            # the wall is behind the cube (seen from the camera): only the face towards the
+            # camera (about a sixth of the points) gets no light at all
+            check(20 <= dark <= 70, "points without light %d (the cube's +Z face)" % dark)
+            lit = [rec[12 * i + 1] for i in range(256) if rec[12 * i + 1] > 0]
+            check(lit and all(v == v and v < 1e6 for v in lit), "finite intensities")
     d = write_capture(os.path.join(TMP, "srgb"), color="srgb8", confidence=True)
     rc, s, out, err = ctl(port, d, "--objects", "mrcube", "--rate", "4", "--zlib", "--half-depth", "--loop", "2",
                           "--quiet")
