@@ -122,8 +122,10 @@ t0, t1 = (json.load(open(p)) for p in sys.argv[1:3])
 for t in (t0, t1):
     assert t["spp"] == 2048 and len(t["points"]) == 2, t
     for p in t["points"]:
-        assert set(p) == {"full", "full_stderr", "visible", "visible_stderr"}, p
-        assert all(len(p[k]) == 3 and all(v >= 0 for v in p[k]) for k in p), p
+        assert set(p) == {"position", "normal", "full", "full_stderr", "visible", "visible_stderr"}, p
+        assert all(len(p[k]) == 3 and all(v >= 0 for v in p[k]) for k in p if k not in ("position", "normal")), p
+    q = t["points"][1]
+    assert max(abs(a - b) for a, b in zip(q["position"] + q["normal"], [0.278, 0.3, 0.28, 0, 0, -1])) < 1e-6, q
 up0, up1 = t0["points"][0], t1["points"][0]
 for c in range(3):
     se = (up0["full_stderr"][c] ** 2 + up1["full_stderr"][c] ** 2) ** 0.5
@@ -131,6 +133,28 @@ for c in range(3):
     assert up1["visible"][c] < up0["visible"][c], (up0["visible"], up1["visible"])
     # the camera sees the ceiling and its lamp from below the front: nearly all of full
     assert 0.8 * up0["full"][c] < up0["visible"][c] < 1.05 * up0["full"][c] + 5 * up0["visible_stderr"][c], up0
+PY
+
+# An occluder with "sparse_points": true adds its asset's baked sparse points, placed: the 10 cm
+# cube (256 points; its base at y = 0, centred in x and z) turned 90 degrees about y and doubled.
+cat >"$TMP/pts_sp.json" <<'EOF'
+{"occluders": {"objects": [{"asset": "cube", "translation": [0.278, 0.2, 0.28], "rotation": [0, 0.7071068, 0, 0.7071068],
+                            "scale": 2, "sparse_points": true}]}}
+EOF
+expect_exit 0 "mr-truth 256 points" "$REF" mr-truth "$LCB" --capture "$TMP/big" --points "$TMP/pts_sp.json" \
+  --out "$TMP/t2.json" --spp 16 --quiet
+$PY - "$TMP/t2.json" <<'PY' || fail "mr-truth sparse points"
+import json, sys
+pts = json.load(open(sys.argv[1]))["points"]
+assert len(pts) == 256, len(pts)
+c = (0.278, 0.3, 0.28)  # the 20 cm cube's centre
+for p in pts:
+    d = [p["position"][k] - c[k] for k in range(3)]
+    n = p["normal"]
+    assert max(abs(x) for x in d) <= 0.1 + 1e-5, p  # on the 20 cm cube's surface
+    assert abs(sum(x * x for x in n) - 1) < 1e-5, p
+    k = max(range(3), key=lambda i: abs(n[i]))  # axis-aligned faces: the normal picks the face
+    assert abs(abs(n[k]) - 1) < 1e-4 and abs(abs(d[k]) - 0.1) < 1e-4 and d[k] * n[k] > 0, p
 PY
 
 # The recording plays through `lucentctl mr replay` (the reader of this format, client/README.md)

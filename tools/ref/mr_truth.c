@@ -46,15 +46,19 @@ static int mr_vec(const cJSON *obj, const char *name, int n, float *out) {
     return 0;
 }
 
-static int mr_load_points(const char *path, const cJSON *root, lc_ref_mr_input *out, char *err, size_t errlen) {
+/* reserve: room for that many more points (an occluder's sparse points come after). */
+static int mr_load_points(const char *path, const cJSON *root, uint32_t reserve, lc_ref_mr_input *out, char *err,
+                          size_t errlen) {
     const cJSON *pts = cJSON_GetObjectItemCaseSensitive(root, "points");
-    int n = cJSON_IsArray(pts) ? cJSON_GetArraySize(pts) : -1;
-    if (n < 1 || n > (int)LC_REF_MR_MAX_POINTS) {
-        lc_set_err(err, errlen, "%s: /points: required, an array of 1 to %u {\"position\", \"normal\"}", path,
-                   LC_REF_MR_MAX_POINTS);
+    int n = cJSON_IsArray(pts) ? cJSON_GetArraySize(pts) : pts || !reserve ? -1 : 0;
+    if (n < (reserve ? 0 : 1) || n > (int)LC_REF_MR_MAX_POINTS - (int)reserve) {
+        lc_set_err(err, errlen,
+                   "%s: /points: an array of 1 to %u {\"position\", \"normal\"} (required unless an occluder has "
+                   "\"sparse_points\": true)",
+                   path, LC_REF_MR_MAX_POINTS - reserve);
         return -1;
     }
-    out->points = calloc((size_t)n, sizeof *out->points);
+    out->points = calloc((size_t)n + reserve + 1, sizeof *out->points);
     if (!out->points) {
         lc_set_err(err, errlen, "%s: out of memory for %d points", path, n);
         return -1;
@@ -122,6 +126,41 @@ static int mr_load_object(const char *path, int i, const cJSON *o, const lc_lcb_
     return 0;
 }
 
+/* The sparse points (lcb ASPT) of the occluders marked "sparse_points": true. */
+static uint32_t mr_sparse_count(const cJSON *objs, const lc_lcb_view *v) {
+    uint32_t total = 0;
+    const cJSON *o;
+    cJSON_ArrayForEach(o, objs) {
+        const cJSON *name = cJSON_GetObjectItemCaseSensitive(o, "asset");
+        if (!cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(o, "sparse_points")) || !cJSON_IsString(name)) continue;
+        for (uint32_t a = 0; a < v->n_assets; a++) {
+            uint32_t first, count = 0;
+            if (!strncmp(v->assets[a].name, name->valuestring, sizeof v->assets[a].name))
+                total += lc_lcb_asset_sparse(v, a, &first, &count);
+        }
+    }
+    return total > LC_REF_MR_MAX_POINTS ? LC_REF_MR_MAX_POINTS : total;
+}
+
+/* Appends an object's sparse points placed in the world as lucentd places them for an MR
+ * session (PROTOCOL §8.6): positions by the object's matrix, normals by its inverse transpose. */
+static void mr_add_sparse_points(const lc_lcb_view *v, const lc_engine_object *o, lc_ref_mr_input *out) {
+    uint32_t first, count = 0;
+    lc_lcb_asset_sparse(v, o->asset, &first, &count);
+    float mtx[12];
+    lc_sm_object_matrix(o, mtx);
+    for (uint32_t p = 0; p < count && out->n_points < LC_REF_MR_MAX_POINTS; p++) {
+        const lc_lcb_sparse_point *sp = &v->sparse_points[first + p];
+        lc_ref_mr_point *q = &out->points[out->n_points++];
+        lc_sm_transform_point(mtx, sp->position, q->position);
+        float nn[3] = {0, 0, 0};
+        for (int col = 0; col < 3; col++)
+            for (int d = 0; d < 3; d++) nn[d] += mtx[col * 3 + d] * sp->normal[col] / (o->scale[col] * o->scale[col]);
+        float len = lc_sm_len(nn);
+        for (int d = 0; d < 3; d++) q->normal[d] = len > 0 ? nn[d] / len : 0;
+    }
+}
+
 int lc_ref_mr_points_load(const char *path, const lc_lcb_view *v, lc_ref_mr_input *out, char *err, size_t errlen) {
     memset(out, 0, sizeof *out);
     size_t len = 0;
@@ -133,7 +172,6 @@ int lc_ref_mr_points_load(const char *path, const lc_lcb_view *v, lc_ref_mr_inpu
         lc_set_err(err, errlen, "%s: not a JSON object", path);
         goto err;
     }
-    if (mr_load_points(path, root, out, err, errlen) != 0) goto err;
     const cJSON *occ = cJSON_GetObjectItemCaseSensitive(root, "occluders");
     const cJSON *objs = occ ? cJSON_GetObjectItemCaseSensitive(occ, "objects") : NULL;
     int n = cJSON_IsArray(objs) ? cJSON_GetArraySize(objs) : -1;
@@ -141,6 +179,7 @@ int lc_ref_mr_points_load(const char *path, const lc_lcb_view *v, lc_ref_mr_inpu
         lc_set_err(err, errlen, "%s: /occluders/objects: an array of 0 to %u objects", path, LC_REF_MR_MAX_OCCLUDERS);
         goto err;
     }
+    if (mr_load_points(path, root, mr_sparse_count(objs, v), out, err, errlen) != 0) goto err;
     if (n > 0) {
         out->occluders = calloc((size_t)n, sizeof *out->occluders);
         if (!out->occluders) {
@@ -150,6 +189,9 @@ int lc_ref_mr_points_load(const char *path, const lc_lcb_view *v, lc_ref_mr_inpu
         for (int i = 0; i < n; i++)
             if (mr_load_object(path, i, cJSON_GetArrayItem(objs, i), v, &out->occluders[i], err, errlen) != 0) goto err;
         out->n_occluders = (uint32_t)n;
+        for (int i = 0; i < n; i++)
+            if (cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(objs, i), "sparse_points")))
+                mr_add_sparse_points(v, &out->occluders[i], out);
     }
     cJSON_Delete(root);
     return 0;
@@ -500,10 +542,14 @@ static cJSON *mr_rgb(const double v[3]) {
     return a;
 }
 
-char *lc_ref_mr_json(const lc_ref_mr_value *values, uint32_t n, uint32_t spp) {
+char *lc_ref_mr_json(const lc_ref_mr_point *points, const lc_ref_mr_value *values, uint32_t n, uint32_t spp) {
     cJSON *root = cJSON_CreateObject(), *pts = cJSON_CreateArray();
     for (uint32_t i = 0; i < n; i++) {
         cJSON *p = cJSON_CreateObject();
+        double pos[3], nrm[3];
+        for (int k = 0; k < 3; k++) pos[k] = points[i].position[k], nrm[k] = points[i].normal[k];
+        cJSON_AddItemToObject(p, "position", mr_rgb(pos));
+        cJSON_AddItemToObject(p, "normal", mr_rgb(nrm));
         cJSON_AddItemToObject(p, "full", mr_rgb(values[i].full));
         cJSON_AddItemToObject(p, "full_stderr", mr_rgb(values[i].full_stderr));
         cJSON_AddItemToObject(p, "visible", mr_rgb(values[i].visible));

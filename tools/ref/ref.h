@@ -468,7 +468,10 @@ typedef struct lc_ref_mr_input {
 #define LC_REF_MR_MAX_OCCLUDERS 1024u
 
 /* POINTS.json {"points": [{"position": [3], "normal": [3]}...], "occluders": {"objects": [{"asset":
- * NAME, "translation"?, "rotation"?, "scale"?}...]}?}. Errors name the file and JSON pointer. */
+ * NAME, "translation"?, "rotation"?, "scale"?, "sparse_points"?}...]}?}. An occluder with
+ * "sparse_points": true adds its asset's LightSkin sparse points (lcb ASPT), placed as lucentd
+ * places them for an MR session, after the listed points ("points" is then optional): the
+ * truth at exactly the points a session gathers at. Errors name the file and JSON pointer. */
 int lc_ref_mr_points_load(const char *path, const lc_lcb_view *v, lc_ref_mr_input *out, char *err, size_t errlen);
 void lc_ref_mr_input_free(lc_ref_mr_input *in);
 
@@ -489,8 +492,9 @@ typedef struct lc_ref_mr_value {
 int lc_ref_mr_truth(lc_ref *r, const lc_lcb_view *v, const lc_ref_capture_frame *frame, const lc_ref_mr_input *in,
                     const lc_ref_mr_settings *s, lc_ref_mr_value *out, uint32_t *visible_triangles, char *err,
                     size_t errlen);
-/* {"points": [{"full", "full_stderr", "visible", "visible_stderr"}...], "spp": N} (malloc'd). */
-char *lc_ref_mr_json(const lc_ref_mr_value *values, uint32_t n, uint32_t spp);
+/* {"points": [{"position", "normal", "full", "full_stderr", "visible", "visible_stderr"}...], "spp": N}
+ * (malloc'd). */
+char *lc_ref_mr_json(const lc_ref_mr_point *points, const lc_ref_mr_value *values, uint32_t n, uint32_t spp);
 
 /* --- comparison ------------------------------------------------------------------------------ */
 

@@ -1113,7 +1113,7 @@ static int cmd_mr_truth(int argc, char **argv) {
         goto done;
     }
     if (lc_ref_mr_truth(r, lc_lcb_get(bake), &frame, &in, &ms, values, &tris, err, sizeof err) != 0) goto done;
-    if (!(text = lc_ref_mr_json(values, in.n_points, ms.spp))) {
+    if (!(text = lc_ref_mr_json(in.points, values, in.n_points, ms.spp))) {
         lc_set_err(err, sizeof err, "out of memory writing %s", o.out);
         goto done;
     }
