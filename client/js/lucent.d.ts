@@ -3,7 +3,7 @@
 /** Subprotocol offered in the WebSocket handshake (PROTOCOL.md §1.1). */
 export declare const PROTOCOL: 'lucent.v1';
 
-export type StreamName = 'lightmap' | 'shgrid' | 'objects';
+export type StreamName = 'lightmap' | 'shgrid' | 'objects' | 'mr.vpl';
 export type Encoding = 'rgb9e5' | 'rgba16f' | 'f32';
 export type DeltaMode = 'tiles' | 'residual';
 export type Role = 'viewer' | 'controller';
@@ -168,6 +168,81 @@ export interface LucentClientOptions {
   timeout?: number;
   /** Largest server text while a state.get is in flight (default 16 MiB; otherwise welcome.limits.max_message). */
   maxStateBytes?: number;
+  /** Capabilities asked for in hello (§8.1, 0..8 strings of 1..32), e.g. ['mr']. */
+  capabilities?: string[];
+}
+
+/** mr.begin's session (PROTOCOL.md §8.2). */
+export interface MrSession {
+  objects: string[];
+  width: number;
+  height: number;
+  depth: 'u16mm' | 'f16m';
+  color: 'rgb8_srgb' | 'rgb16f_linear';
+  max_rate?: number;
+  glossy?: boolean;
+  specular_exponent?: number;
+  min_confidence?: number;
+  smoothing?: number;
+  light?: 'replace' | 'add';
+}
+
+/** ok.mr: the server's limits for the session (§8.2). */
+export interface MrGrant { session: number; max_frame: number; max_rate: number; max_lights: number; points: number }
+
+/** mr.ack (§8.5). */
+export interface MrAck { type: 'mr.ack'; seq: number; capture_us: number; status: 'processed' | 'replaced'; lights: number; ms: number }
+
+/** encodeUploadFrame's input (§8.4). */
+export interface UploadFrameInput {
+  /** ≥ 1, strictly increasing within the session. */
+  sequence: number;
+  /** Capture time, µs (the client's clock). */
+  captureUs: number;
+  width: number;
+  height: number;
+  depthEncoding: 'u16mm' | 'f16m';
+  /** width·height: millimetres (u16mm) or binary16 metres (f16m). */
+  depth: Uint16Array;
+  colorEncoding: 'rgb8_srgb' | 'rgb16f_linear';
+  /** 3·width·height: sRGB bytes, or binary16 linear. */
+  color: Uint8Array | Uint16Array;
+  /** width·height, 0..255. */
+  confidence?: Uint8Array | null;
+  fx: number; fy: number; cx: number; cy: number;
+  translation: ArrayLike<number>;
+  /** Unit quaternion x, y, z, w. */
+  rotation: ArrayLike<number>;
+  exposure: number;
+  /** zlib every plane (default false). */
+  compress?: boolean;
+}
+
+/** An upload frame's header as decodeUploadHeader reads it. */
+export interface UploadHeader {
+  magic: number; version: number; kind: number; flags: number; headerSize: number; sequence: number; captureUs: number;
+  width: number; height: number; depthEncodingId: number; colorEncodingId: number;
+  depthEncoding: 'u16mm' | 'f16m' | null; colorEncoding: 'rgb8_srgb' | 'rgb16f_linear' | null;
+  /** Depth, confidence, colour: 0 none, 1 zlib. */
+  compression: [number, number, number];
+  fx: number; fy: number; cx: number; cy: number; translation: Vec3; rotation: [number, number, number, number]; exposure: number;
+  planeBytes: [number, number, number];
+  crc: number;
+}
+
+/** One session object's VPLs (§8.7): count records of 12 values I_d, l_d, I_s, l_s. */
+export interface MrVplObject { id: string; count: number; records: Float32Array }
+
+/** The mr.vpl copy. */
+export interface MrVplCopy {
+  objects: MrVplObject[];
+  byId: Map<string, MrVplObject>;
+  encoding: 'f32' | 'rgba16f';
+  /** Points over all objects (the header's height). */
+  points: number;
+  revision: number;
+  sequence: number;
+  timestamp_us: number;
 }
 
 export interface SubscribeOptions {
@@ -211,6 +286,9 @@ export interface LucentEvents {
   lightmap: (copy: LightmapCopy, header: FrameHeader) => void;
   shgrid: (copy: ShGridCopy, header: FrameHeader) => void;
   objects: (copy: ObjectsCopy, header: FrameHeader) => void;
+  'mr.vpl': (copy: MrVplCopy, header: FrameHeader) => void;
+  /** Every mr.ack (also those whose send already rejected or timed out). */
+  'mr.ack': (ack: MrAck) => void;
   /** Every frame whose header parsed, after it was handled (header.applied), with its bytes. */
   frame: (header: FrameHeader, bytes: Uint8Array) => void;
 }
@@ -226,6 +304,12 @@ export declare class LucentClient {
   lightmap: LightmapCopy | null;
   shgrid: ShGridCopy | null;
   objects: ObjectsCopy | null;
+  /** mr.vpl copy (null until its first frame). */
+  mrVpl: MrVplCopy | null;
+  /** The capabilities the welcome granted ([] when none). */
+  capabilities: string[];
+  /** The welcome's version ('1.0' when it has none; null before the first welcome). */
+  protocolVersion: string | null;
   stats: ClientStats;
   readonly connected: boolean;
   on<K extends keyof LucentEvents>(event: K, fn: LucentEvents[K]): this;
@@ -242,6 +326,11 @@ export declare class LucentClient {
   /** Applies a frame as if received (tests, replays); resolves whether it was applied. */
   handleFrame(data: ArrayBuffer | ArrayBufferView): Promise<boolean>;
   close(): void;
+  /** Opens (replaces) the MR session; resolves ok.mr; rejects LucentError (mr_not_enabled, unknown_id, invalid, out_of_range). */
+  mrBegin(session: MrSession, options?: { timeout?: number }): Promise<MrGrant>;
+  mrEnd(options?: { timeout?: number }): Promise<OkMessage>;
+  /** Sends an upload frame (at most 2 unacknowledged; more wait); resolves its mr.ack; an upload error rejects the oldest. */
+  sendUploadFrame(bytes: Uint8Array, options?: { timeout?: number }): Promise<MrAck>;
 }
 
 /** CRC-32 (IEEE, as zlib), continuing from `crc`. */
@@ -261,3 +350,7 @@ export declare function shToThreeCoefficients(coeffs: ArrayLike<number>): RGB[];
 export declare function parseFrame(data: ArrayBuffer | ArrayBufferView): { header: FrameHeader; tiles: Uint32Array; payload: Uint8Array };
 /** Inflates a zlib stream to exactly `expected` bytes or rejects. */
 export declare function inflateExact(data: Uint8Array, expected: number, options?: { decompressionStream?: boolean }): Promise<Uint8Array>;
+/** Encodes an RGB-D upload frame exactly per §8.4; rejects LucentError 'invalid' with pointer '/field'. */
+export declare function encodeUploadFrame(frame: UploadFrameInput): Promise<Uint8Array>;
+/** Reads an upload frame's 128-byte header (no checks beyond its length). */
+export declare function decodeUploadHeader(bytes: ArrayBuffer | ArrayBufferView): UploadHeader;

@@ -27,7 +27,7 @@ const HEADER_SIZE = 64;
 const CRC_OFFSET = 60;
 const OBJECT_ID_BYTES = 64;
 const SH_VALUES = 27;
-const STREAM_NAMES = [null, 'lightmap', 'shgrid', 'objects'];
+const STREAM_NAMES = [null, 'lightmap', 'shgrid', 'objects', 'mr.vpl'];
 const ENCODING_NAMES = [null, 'rgb9e5', 'rgba16f', 'f32'];
 const TEXEL_BYTES = [0, 4, 8, 12]; // lightmap texel size per encoding
 const SH_VALUE_BYTES = [0, 0, 2, 4]; // one SH value per encoding (rgb9e5 is lightmap only)
@@ -39,6 +39,12 @@ const OWN_ID = 'lc~'; // ids of the library's own requests (hello, resubscriptio
 const DEFAULT_MAX_MESSAGE = 65536; // §1.3, until the welcome states the server's limit
 const MAX_QUEUED_FRAMES = 64; // frames waiting behind an asynchronous inflate
 const TWO_32 = 4294967296;
+const UPLOAD_MAGIC = 0x3155434c; // "LCU1" (§8.4)
+const UPLOAD_HEADER_SIZE = 128;
+const UPLOAD_CRC_OFFSET = 124;
+const VPL_VALUES = 12; // I_d, l_d, I_s, l_s (§8.7)
+const UPLOAD_ERRORS = new Set(['frame_invalid', 'frame_too_large', 'rate_limited', 'mr_not_enabled']);
+const MAX_UPLOADS_IN_FLIGHT = 2; // §8.5
 const LITTLE_ENDIAN = new Uint8Array(new Uint16Array([1]).buffer)[0] === 1;
 
 // ------------------------------------------------------------------------------------------
@@ -301,6 +307,10 @@ function checkPayload(hd, tiles) {
     }
     return;
   }
+  if (hd.streamId === 4) {
+    checkVplPayload(hd);
+    return;
+  }
   if (hd.streamId !== 2 && hd.streamId !== 3) throw badFrame(`unknown stream ${hd.streamId}`);
   const vb = SH_VALUE_BYTES[hd.encodingId] || 0;
   if (!vb) throw badFrame('bad SH encoding', hd.stream);
@@ -315,6 +325,39 @@ function checkPayload(hd, tiles) {
     expect = hd.width * (OBJECT_ID_BYTES + SH_VALUES * vb);
   }
   if (expect !== hd.payloadLength) throw badFrame('payload length does not match the stream', hd.stream);
+}
+
+// mr.vpl (§8.7): width objects, height points in all; per object 64 id bytes, u32 P, u32 0,
+// P records of 12 values. Only the header's numbers are checked here; the records are walked
+// in checkVplRecords once the payload is at hand.
+function checkVplPayload(hd) {
+  const vb = SH_VALUE_BYTES[hd.encodingId] || 0;
+  if (!vb) throw badFrame('bad mr.vpl encoding (f32 or rgba16f)', hd.stream);
+  if (!hd.keyframe) throw badFrame('mr.vpl sends keyframes only', hd.stream);
+  if (hd.tileSize) throw badFrame('tile size must be 0 for mr.vpl', hd.stream);
+  if (hd.depth !== 1) throw badFrame('mr.vpl: depth must be 1', hd.stream);
+  if (hd.payloadLength !== hd.width * (OBJECT_ID_BYTES + 8) + hd.height * VPL_VALUES * vb)
+    throw badFrame('mr.vpl payload length does not match objects and points', hd.stream);
+}
+
+// Walks the mr.vpl objects: each count within what is left, the counts summing to height.
+function checkVplRecords(hd, payload) {
+  const vb = SH_VALUE_BYTES[hd.encodingId], dv = new DataView(payload.buffer, payload.byteOffset, payload.byteLength);
+  const out = [];
+  let at = 0, total = 0;
+  for (let i = 0; i < hd.width; i++) {
+    if (at + OBJECT_ID_BYTES + 8 > payload.length) throw badFrame(`mr.vpl object ${i} runs past the payload`, hd.stream);
+    const count = dv.getUint32(at + OBJECT_ID_BYTES, true), rsv = dv.getUint32(at + OBJECT_ID_BYTES + 4, true);
+    if (rsv !== 0) throw badFrame(`mr.vpl object ${i}: reserved word is not 0`, hd.stream);
+    const bytes = count * VPL_VALUES * vb, rec = at + OBJECT_ID_BYTES + 8;
+    if (count > hd.height - total || rec + bytes > payload.length)
+      throw badFrame(`mr.vpl object ${i}: ${count} points run past the payload`, hd.stream);
+    out.push({ idAt: at, count, recAt: rec, bytes });
+    total += count;
+    at = rec + bytes;
+  }
+  if (total !== hd.height || at !== payload.length) throw badFrame(`mr.vpl point counts sum to ${total}, the header says ${hd.height}`, hd.stream);
+  return out;
 }
 
 /**
@@ -495,7 +538,7 @@ function listen(ws, type, fn) {
 }
 
 function validStream(s) {
-  return s === 'lightmap' || s === 'shgrid' || s === 'objects';
+  return s === 'lightmap' || s === 'shgrid' || s === 'objects' || s === 'mr.vpl';
 }
 
 /**
@@ -526,6 +569,15 @@ export class LucentClient {
     this._maxRetries = options.maxRetries > 0 ? options.maxRetries : 0;
     this._timeoutMs = options.timeout > 0 ? options.timeout : 5000;
     this._maxStateBytes = options.maxStateBytes > 0 ? options.maxStateBytes : 16 << 20;
+    this._capabilities = Array.isArray(options.capabilities) ? options.capabilities.map(String) : [];
+    if (this._capabilities.length > 8 || this._capabilities.some((c) => !c.length || c.length > 32))
+      throw new LucentError('invalid', 'capabilities: 0..8 strings of 1..32 characters', { pointer: '/capabilities' });
+    /** The capabilities the welcome granted ([] when it names none). @type {string[]} */
+    this.capabilities = [];
+    /** The welcome's protocol version ("1.0" when it has none). @type {string|null} */
+    this.protocolVersion = null;
+    /** The mr.vpl copy (null until its first frame). @type {MrVplCopy|null} */
+    this.mrVpl = null;
     /** The current connection's welcome message (null before the first). @type {object|null} */
     this.welcome = null;
     /** 'viewer' or 'controller' (from the welcome). @type {string|null} */
@@ -549,7 +601,7 @@ export class LucentClient {
     this._nextId = 1;
     this._ownSeq = 0;
     this._subs = new Map(); // stream -> the subscribe message's settings
-    this._stale = { lightmap: true, shgrid: true, objects: true }; // needs a keyframe before deltas
+    this._stale = { lightmap: true, shgrid: true, objects: true, 'mr.vpl': true }; // needs a keyframe before deltas
     this._resyncPending = false;
     this._refused = false;
     this._closedByUser = false;
@@ -559,6 +611,8 @@ export class LucentClient {
     this._retryTimer = null;
     this._frames = []; // {data, done} in arrival order
     this._framesBusy = false;
+    this._uploads = []; // {seq, resolve, reject, timer} sent, awaiting their mr.ack (oldest first)
+    this._uploadQueue = []; // {bytes, seq, resolve, reject} waiting for a free slot
   }
 
   /** True while a welcome was received on the open connection. @type {boolean} */
@@ -681,7 +735,8 @@ export class LucentClient {
         if (this._ws !== ws) return;
         this._emit('open');
         this._sendRaw({ type: 'hello', id: this._hello ? this._hello.id : `${OWN_ID}hello`, client: this._name,
-          token: this._token, encodings: ['rgb9e5', 'rgba16f', 'f32'] });
+          token: this._token, encodings: ['rgb9e5', 'rgba16f', 'f32'],
+          ...(this._capabilities.length ? { capabilities: this._capabilities } : {}) });
       });
       listen(ws, 'message', (ev) => {
         if (this._ws === ws) this._onMessage(ev.data);
@@ -721,6 +776,7 @@ export class LucentClient {
       this._failHello(h.error || new LucentError('connect_failed', `cannot connect to ${this.url}: ${reason} (${code})`));
     }
     this._rejectPending(reason);
+    this._rejectUploads(reason);
     if (this._state === 'closed') return;
     if (this._initial) {
       this._state = 'idle';
@@ -775,6 +831,7 @@ export class LucentClient {
     this._ws = null;
     this._failHello(new LucentError('disconnected', 'closed by the client'));
     this._rejectPending('closed by the client');
+    this._rejectUploads('closed by the client');
     if (ws) {
       try {
         ws.close(1000, 'bye');
@@ -828,6 +885,17 @@ export class LucentClient {
     if ((type === 'ok' || type === 'changed' || type === 'state') && Number.isSafeInteger(msg.revision))
       this.revision = Math.max(this.revision, msg.revision);
     if (type === 'changed') this._emit('changed', msg);
+    if (type === 'mr.ack') {
+      this._onAck(msg);
+      return;
+    }
+    if (type === 'error' && id === undefined && UPLOAD_ERRORS.has(msg.code) && this._uploads.length) {
+      const u = this._uploads.shift();
+      clearTimeout(u.timer);
+      u.reject(errorFromReply(msg));
+      this._pumpUploads();
+      return;
+    }
     if (type === 'state') this._emit('state', msg);
     if (typeof id === 'string' && id.startsWith(OWN_ID)) {
       if (id.startsWith(`${OWN_ID}resync-`)) this._resyncPending = false;
@@ -852,11 +920,13 @@ export class LucentClient {
     clearTimeout(h.timer);
     this.welcome = msg;
     this.role = typeof msg.role === 'string' ? msg.role : null;
+    this.capabilities = Array.isArray(msg.capabilities) ? msg.capabilities.filter((c) => typeof c === 'string') : [];
+    this.protocolVersion = typeof msg.version === 'string' ? msg.version : '1.0';
     this.revision = Number.isSafeInteger(msg.revision) ? msg.revision : 0;
     this._state = 'open';
     this._attempts = 0;
     this._resyncPending = false;
-    this._stale = { lightmap: true, shgrid: true, objects: true }; // sequences start again at 1
+    this._stale = { lightmap: true, shgrid: true, objects: true, 'mr.vpl': true }; // sequences start again at 1
     for (const [stream, settings] of this._subs)
       this._sendRaw({ type: 'subscribe', id: `${OWN_ID}sub-${stream}-${++this._ownSeq}`, stream, ...settings });
     this._emit('welcome', msg);
@@ -917,14 +987,14 @@ export class LucentClient {
    * Subscribes to a stream (PROTOCOL.md §4.1) and resolves with the server's ok; a keyframe
    * follows. The settings are remembered and sent again after a reconnect; subscribing again
    * replaces them.
-   * @param {'lightmap'|'shgrid'|'objects'} stream
+   * @param {'lightmap'|'shgrid'|'objects'|'mr.vpl'} stream
    * @param {{encoding?: 'rgb9e5'|'rgba16f'|'f32', delta?: 'tiles'|'residual', max_rate?: number, timeout?: number}} [options]
    *   encoding: the server's default when absent (lightmap rgb9e5, SH f32); delta: lightmap only
    * @returns {Promise<object>}
    */
   async subscribe(stream, options = {}) {
     if (!validStream(stream))
-      throw new LucentError('invalid', `stream '${stream}' is not lightmap, shgrid or objects`, { pointer: '/stream' });
+      throw new LucentError('invalid', `stream '${stream}' is not lightmap, shgrid, objects or mr.vpl`, { pointer: '/stream' });
     const settings = {};
     if (options.encoding !== undefined) settings.encoding = options.encoding;
     if (options.delta !== undefined) settings.delta = options.delta;
@@ -936,12 +1006,12 @@ export class LucentClient {
 
   /**
    * Ends a subscription (its copy stays as it was) and resolves with the ok.
-   * @param {'lightmap'|'shgrid'|'objects'} stream
+   * @param {'lightmap'|'shgrid'|'objects'|'mr.vpl'} stream
    * @returns {Promise<object>}
    */
   async unsubscribe(stream) {
     if (!validStream(stream))
-      throw new LucentError('invalid', `stream '${stream}' is not lightmap, shgrid or objects`, { pointer: '/stream' });
+      throw new LucentError('invalid', `stream '${stream}' is not lightmap, shgrid, objects or mr.vpl`, { pointer: '/stream' });
     this._subs.delete(stream);
     return this.request({ type: 'unsubscribe', stream });
   }
@@ -983,7 +1053,7 @@ export class LucentClient {
   _queueFrame(data, done) {
     if (this._frames.length >= MAX_QUEUED_FRAMES) {
       for (const f of this._frames.splice(0)) if (f.done) f.done(false);
-      this._stale = { lightmap: true, shgrid: true, objects: true };
+      this._stale = { lightmap: true, shgrid: true, objects: true, 'mr.vpl': true };
       this._resync(new LucentError('resync', `over ${MAX_QUEUED_FRAMES} frames waiting: dropped, keyframes requested`));
     }
     this._frames.push({ data, done });
@@ -1026,14 +1096,14 @@ export class LucentClient {
       this.stats.badFrames++;
       const s = STREAM_NAMES[bytes.length > 6 ? bytes[6] : 0];
       if (s) this._stale[s] = true;
-      else this._stale = { lightmap: true, shgrid: true, objects: true };
+      else this._stale = { lightmap: true, shgrid: true, objects: true, 'mr.vpl': true };
       this._resync(e instanceof LucentError ? e : badFrame(String(e)), s || undefined);
       return false;
     }
     const hd = parsed.header;
     let ok;
     try {
-      ok = hd.streamId === 1 ? await this._applyLightmap(parsed) : this._applySh(parsed);
+      ok = hd.streamId === 1 ? await this._applyLightmap(parsed) : hd.streamId === 4 ? this._applyVpl(parsed) : this._applySh(parsed);
     } catch (e) {
       if (!(e instanceof LucentError)) throw e;
       if (e.code === 'bad_frame') this.stats.badFrames++;
@@ -1050,7 +1120,7 @@ export class LucentClient {
       this.revision = Math.max(this.revision, hd.revision);
     }
     this._emit('frame', hd, bytes);
-    if (ok) this._emit(hd.stream, this[hd.stream], hd);
+    if (ok) this._emit(hd.stream, hd.streamId === 4 ? this.mrVpl : this[hd.stream], hd);
     return ok;
   }
 
@@ -1154,4 +1224,259 @@ export class LucentClient {
     this._stale[hd.stream] = false;
     return true;
   }
+
+  // ----------------------------------------------------------------------------------------
+  // MR sessions (PROTOCOL.md §8)
+  // ----------------------------------------------------------------------------------------
+
+  /**
+   * Opens (or replaces) the connection's MR session (§8.2) and resolves with the ok's `mr`:
+   * {session, max_frame, max_rate, max_lights, points}. Rejects with LucentError
+   * (mr_not_enabled, unknown_id, invalid / out_of_range with a pointer, …).
+   * @param {object} session {objects, width, height, depth, color, max_rate?, glossy?, …}
+   * @param {{timeout?: number}} [options]
+   * @returns {Promise<object>}
+   */
+  async mrBegin(session, options = {}) {
+    if (!session || typeof session !== 'object' || Array.isArray(session))
+      throw new LucentError('invalid', 'session is an object', { pointer: '/session' });
+    const ok = await this.request({ type: 'mr.begin', session }, options);
+    if (!ok.mr || typeof ok.mr !== 'object') throw new LucentError('bad_reply', 'mr.begin ok without "mr"', { pointer: '/mr' });
+    return ok.mr;
+  }
+
+  /** Ends the MR session (§8.3); resolves with the ok (also when none was open). @returns {Promise<object>} */
+  mrEnd(options = {}) {
+    return this.request({ type: 'mr.end' }, options);
+  }
+
+  /**
+   * Sends one upload frame (§8.4, e.g. from encodeUploadFrame) and resolves with its mr.ack
+   * ({seq, capture_us, status, lights, ms}). At most 2 frames are unacknowledged: a third
+   * waits here until an ack frees a slot. An error without id for an upload (frame_invalid,
+   * frame_too_large, rate_limited, mr_not_enabled) rejects the oldest unacknowledged send.
+   * @param {Uint8Array} bytes
+   * @param {{timeout?: number}} [options] ms to wait for the ack once sent (default the client's)
+   * @returns {Promise<object>}
+   */
+  sendUploadFrame(bytes, options = {}) {
+    let b;
+    try {
+      b = toBytes(bytes);
+    } catch (e) {
+      return Promise.reject(new LucentError('invalid', 'an upload frame is a typed array or ArrayBuffer', { pointer: '/frame' }));
+    }
+    if (b.length < UPLOAD_HEADER_SIZE || new DataView(b.buffer, b.byteOffset, 8).getUint32(0, true) !== UPLOAD_MAGIC)
+      return Promise.reject(new LucentError('invalid', 'not an LCU1 upload frame', { pointer: '/frame/magic' }));
+    if (this._state !== 'open' || !this._ws) return Promise.reject(new LucentError('disconnected', 'not connected'));
+    const seq = new DataView(b.buffer, b.byteOffset, 16).getUint32(12, true);
+    const timeoutMs = options.timeout > 0 ? options.timeout : this._timeoutMs;
+    return new Promise((resolve, reject) => {
+      this._uploadQueue.push({ bytes: b, seq, resolve, reject, timeoutMs });
+      this._pumpUploads();
+    });
+  }
+
+  _pumpUploads() {
+    while (this._uploads.length < MAX_UPLOADS_IN_FLIGHT && this._uploadQueue.length) {
+      const q = this._uploadQueue.shift();
+      if (this._state !== 'open' || !this._ws) {
+        q.reject(new LucentError('disconnected', 'not connected'));
+        continue;
+      }
+      const u = { seq: q.seq, resolve: q.resolve, reject: q.reject, timer: null };
+      u.timer = setTimeout(() => {
+        const i = this._uploads.indexOf(u);
+        if (i >= 0) this._uploads.splice(i, 1);
+        u.reject(new LucentError('timeout', `no mr.ack for upload ${u.seq} within ${q.timeoutMs} ms`));
+        this._pumpUploads();
+      }, q.timeoutMs);
+      this._uploads.push(u);
+      try {
+        this._ws.send(q.bytes);
+      } catch (e) {
+        this._uploads.pop();
+        clearTimeout(u.timer);
+        u.reject(new LucentError('disconnected', `cannot send: ${e && e.message}`));
+      }
+    }
+  }
+
+  _onAck(msg) {
+    const i = this._uploads.findIndex((u) => u.seq === msg.seq);
+    if (i >= 0) {
+      const [u] = this._uploads.splice(i, 1);
+      clearTimeout(u.timer);
+      u.resolve(msg);
+    }
+    this._emit('mr.ack', msg);
+    this._pumpUploads();
+  }
+
+  _rejectUploads(reason) {
+    const all = [...this._uploads, ...this._uploadQueue];
+    this._uploads = [];
+    this._uploadQueue = [];
+    for (const u of all) {
+      clearTimeout(u.timer);
+      u.reject(new LucentError('disconnected', `connection closed before the mr.ack: ${reason}`));
+    }
+  }
+
+  _applyVpl({ header: hd, payload }) {
+    const prev = this.mrVpl;
+    if (prev && !this._stale['mr.vpl'] && hd.revision < prev.revision)
+      throw badFrame(`revision went back from ${prev.revision} to ${hd.revision}`, hd.stream);
+    const parts = checkVplRecords(hd, payload), dec = new TextDecoder('utf-8'), objects = [], byId = new Map();
+    for (const p of parts) {
+      const idBytes = payload.subarray(p.idAt, p.idAt + OBJECT_ID_BYTES), end = idBytes.indexOf(0);
+      const id = dec.decode(end < 0 ? idBytes : idBytes.subarray(0, end));
+      const o = { id, count: p.count, records: this._shValues(payload.subarray(p.recAt, p.recAt + p.bytes), hd.encodingId) };
+      objects.push(o);
+      byId.set(id, o);
+    }
+    this.mrVpl = { objects, byId, encoding: hd.encoding, points: hd.height, revision: hd.revision, sequence: hd.sequence,
+      timestamp_us: hd.timestamp_us };
+    this._stale['mr.vpl'] = false;
+    return true;
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// Upload frames (PROTOCOL.md §8.4)
+// ------------------------------------------------------------------------------------------
+
+const DEPTH_ENCODINGS = { u16mm: 1, f16m: 2 };
+const COLOR_ENCODINGS = { rgb8_srgb: 1, rgb16f_linear: 2 };
+
+function badField(field, why) {
+  return new LucentError('invalid', `upload frame: ${field} ${why}`, { pointer: `/${field}` });
+}
+
+function finiteIn(f, name, lo, hi, openLo = false) {
+  const v = f[name];
+  if (typeof v !== 'number' || !Number.isFinite(v) || (openLo ? v <= lo : v < lo) || v > hi)
+    throw badField(name, `must be a number in ${openLo ? '(' : '['}${lo}, ${hi}]`);
+  return v;
+}
+
+async function deflateBytes(raw) {
+  const zlib = await nodeZlib();
+  if (zlib) {
+    const out = zlib.deflateSync(raw);
+    return new Uint8Array(out.buffer, out.byteOffset, out.length);
+  }
+  const cs = new CompressionStream('deflate');
+  const writer = cs.writable.getWriter();
+  writer.write(raw).catch(() => {});
+  writer.close().catch(() => {});
+  return new Uint8Array(await new Response(cs.readable).arrayBuffer());
+}
+
+// Raw little-endian bytes of a plane.
+function planeBytes(arr) {
+  if (arr instanceof Uint8Array) return arr;
+  if (LITTLE_ENDIAN) return new Uint8Array(arr.buffer, arr.byteOffset, arr.byteLength);
+  const out = new Uint8Array(arr.length * 2), dv = new DataView(out.buffer);
+  for (let i = 0; i < arr.length; i++) dv.setUint16(2 * i, arr[i], true);
+  return out;
+}
+
+function checkUploadFields(f) {
+  if (!f || typeof f !== 'object') throw badField('frame', 'is an object');
+  if (!Number.isInteger(f.sequence) || f.sequence < 1 || f.sequence > 0xffffffff) throw badField('sequence', 'must be an integer in [1, 2^32)');
+  if (!Number.isSafeInteger(f.captureUs) || f.captureUs < 0) throw badField('captureUs', 'must be an integer >= 0');
+  for (const k of ['width', 'height'])
+    if (!Number.isInteger(f[k]) || f[k] < 8 || f[k] > 1024) throw badField(k, 'must be an integer in [8, 1024]');
+  const n = f.width * f.height;
+  if (n > 1048576) throw badField('width', 'times height is over 1048576');
+  const de = DEPTH_ENCODINGS[f.depthEncoding], ce = COLOR_ENCODINGS[f.colorEncoding];
+  if (!de) throw badField('depthEncoding', "must be 'u16mm' or 'f16m'");
+  if (!ce) throw badField('colorEncoding', "must be 'rgb8_srgb' or 'rgb16f_linear'");
+  if (!(f.depth instanceof Uint16Array) || f.depth.length !== n) throw badField('depth', `must be a Uint16Array of width*height = ${n}`);
+  const CT = ce === 1 ? Uint8Array : Uint16Array;
+  if (!(f.color instanceof CT) || f.color.length !== 3 * n)
+    throw badField('color', `must be a ${CT.name} of 3*width*height = ${3 * n}`);
+  if (f.confidence != null && (!(f.confidence instanceof Uint8Array) || f.confidence.length !== n))
+    throw badField('confidence', `must be a Uint8Array of width*height = ${n}`);
+  finiteIn(f, 'fx', 0, 1e5, true);
+  finiteIn(f, 'fy', 0, 1e5, true);
+  finiteIn(f, 'cx', -f.width, 2 * f.width);
+  finiteIn(f, 'cy', -f.height, 2 * f.height);
+  finiteIn(f, 'exposure', 0, 1e7, true);
+  const t = f.translation, r = f.rotation;
+  if (!Array.isArray(t) && !ArrayBuffer.isView(t)) throw badField('translation', 'must be 3 numbers');
+  if (t.length !== 3 || ![...t].every((v) => Number.isFinite(v) && Math.abs(v) <= 1e6)) throw badField('translation', 'must be 3 numbers with |t| <= 1e6');
+  if ((!Array.isArray(r) && !ArrayBuffer.isView(r)) || r.length !== 4 || ![...r].every(Number.isFinite)) throw badField('rotation', 'must be 4 numbers (x, y, z, w)');
+  const norm = Math.hypot(...r);
+  if (norm < 0.9 || norm > 1.1) throw badField('rotation', `norm ${norm} is not in [0.9, 1.1]`);
+  return { de, ce };
+}
+
+/**
+ * Encodes one RGB-D upload frame exactly per PROTOCOL.md §8.4: the 128-byte little-endian
+ * header (reserved bytes 0, CRC-32 of header bytes 0..123 and every plane byte at 124), then
+ * depth, confidence (when given), colour. `compress: true` deflates each plane (zlib, RFC
+ * 1950). Throws LucentError `invalid` naming the field (pointer `/field`).
+ * @param {UploadFrameInput} f
+ * @returns {Promise<Uint8Array>}
+ */
+export async function encodeUploadFrame(f) {
+  const { de, ce } = checkUploadFields(f);
+  const raw = [planeBytes(f.depth), f.confidence != null ? f.confidence : null, planeBytes(f.color)];
+  const planes = [];
+  for (const p of raw) planes.push(p === null ? null : f.compress ? await deflateBytes(p) : p);
+  const sizes = planes.map((p) => (p ? p.length : 0));
+  const out = new Uint8Array(UPLOAD_HEADER_SIZE + sizes[0] + sizes[1] + sizes[2]);
+  const dv = new DataView(out.buffer);
+  dv.setUint32(0, UPLOAD_MAGIC, true);
+  dv.setUint16(4, 1, true);
+  out[6] = 1;
+  out[7] = planes[1] ? 1 : 0;
+  dv.setUint16(8, UPLOAD_HEADER_SIZE, true);
+  dv.setUint32(12, f.sequence, true);
+  dv.setUint32(16, f.captureUs % TWO_32, true);
+  dv.setUint32(20, Math.floor(f.captureUs / TWO_32), true);
+  dv.setUint16(24, f.width, true);
+  dv.setUint16(26, f.height, true);
+  out[28] = de;
+  out[29] = ce;
+  const z = f.compress ? 1 : 0;
+  out[30] = z;
+  out[31] = planes[1] ? z : 0;
+  out[32] = z;
+  [f.fx, f.fy, f.cx, f.cy, ...f.translation, ...f.rotation, f.exposure].forEach((v, i) => dv.setFloat32(36 + 4 * i, v, true));
+  dv.setUint32(84, sizes[0], true);
+  dv.setUint32(88, sizes[1], true);
+  dv.setUint32(92, sizes[2], true);
+  let at = UPLOAD_HEADER_SIZE;
+  for (const p of planes) {
+    if (!p) continue;
+    out.set(p, at);
+    at += p.length;
+  }
+  dv.setUint32(UPLOAD_CRC_OFFSET, crc32(out.subarray(UPLOAD_HEADER_SIZE), crc32(out.subarray(0, UPLOAD_CRC_OFFSET))), true);
+  return out;
+}
+
+/**
+ * Reads an upload frame's header (PROTOCOL.md §8.4) without checking it beyond its length:
+ * for tests and tools. Field names as encodeUploadFrame's input, plus the plane sizes.
+ * @param {Uint8Array} bytes
+ * @returns {object}
+ */
+export function decodeUploadHeader(bytes) {
+  const b = toBytes(bytes);
+  if (b.length < UPLOAD_HEADER_SIZE) throw new LucentError('invalid', 'shorter than the 128-byte upload header', { pointer: '/frame/length' });
+  const dv = new DataView(b.buffer, b.byteOffset, b.byteLength), f32 = (i) => dv.getFloat32(36 + 4 * i, true);
+  return {
+    magic: dv.getUint32(0, true), version: dv.getUint16(4, true), kind: b[6], flags: b[7], headerSize: dv.getUint16(8, true),
+    sequence: dv.getUint32(12, true), captureUs: dv.getUint32(20, true) * TWO_32 + dv.getUint32(16, true),
+    width: dv.getUint16(24, true), height: dv.getUint16(26, true), depthEncodingId: b[28], colorEncodingId: b[29],
+    depthEncoding: b[28] === 1 ? 'u16mm' : b[28] === 2 ? 'f16m' : null,
+    colorEncoding: b[29] === 1 ? 'rgb8_srgb' : b[29] === 2 ? 'rgb16f_linear' : null,
+    compression: [b[30], b[31], b[32]], fx: f32(0), fy: f32(1), cx: f32(2), cy: f32(3),
+    translation: [f32(4), f32(5), f32(6)], rotation: [f32(7), f32(8), f32(9), f32(10)], exposure: f32(11),
+    planeBytes: [dv.getUint32(84, true), dv.getUint32(88, true), dv.getUint32(92, true)], crc: dv.getUint32(124, true),
+  };
 }

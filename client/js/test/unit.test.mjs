@@ -297,7 +297,7 @@ test('parseFrame rejects what lc_frame_parse rejects, naming it', () => {
   bad({ stream: 'shgrid', encoding: 'f32', flags: 2, tile: 0, width: 1, height: 1, payload: new Uint8Array(27 * 4) }, /keyframes only/);
   bad({ stream: 'shgrid', encoding: 'f32', tile: 4, width: 1, height: 1, payload: new Uint8Array(27 * 4) }, /tile size must be 0/);
   bad({ stream: 'objects', encoding: 'f32', tile: 0, width: 1, height: 2, payload: new Uint8Array(64 + 27 * 4) }, /height and depth must be 1/);
-  bad({ stream: 4, payload: new Uint8Array(W * H * 4) }, /unknown stream 4/);
+  bad({ stream: 5, payload: new Uint8Array(W * H * 4) }, /unknown stream 5/);
 });
 
 test('parseFrame reads the pass (bits 8-15) and converged (bit 3), ignoring reserved bits 4-7', () => {
