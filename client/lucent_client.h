@@ -21,7 +21,13 @@
  *
  * Errors: functions return 0 on success, 1 when the server refused (an `error` reply; the
  * reply text says which code and field), -1 on connection failure, timeout or bad
- * arguments; `err` (may be NULL) receives a one-line reason. */
+ * arguments; `err` (may be NULL) receives a one-line reason.
+ *
+ * MR sessions (PROTOCOL.md §8, lucentctl's ctl_mr.c does all of it): open with
+ * options.capabilities = "mr" and check the welcome's "capabilities"; lc_client_request an
+ * `mr.begin`; encode each RGB-D frame with lc_upload_encode (lucent_upload.h) and queue it with
+ * lc_client_send_binary, keeping at most 2 unacknowledged; `mr.ack` and the frames' errors
+ * (no id) arrive through on_message; the per-point VPLs through LC_CLIENT_MR_VPL frames. */
 #ifndef LUCENT_CLIENT_H
 #define LUCENT_CLIENT_H
 
