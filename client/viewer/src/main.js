@@ -17,6 +17,7 @@ import { Hud, toast, banner } from './hud.js';
 import { CameraRig } from './camera.js';
 import { Editor } from './edit.js';
 import { Latency } from './latency.js';
+import { MrPanel, urlSource } from './mr.js';
 
 const TONEMAPS = { none: THREE.LinearToneMapping, neutral: THREE.NeutralToneMapping, aces: THREE.ACESFilmicToneMapping };
 const $ = (id) => document.getElementById(id);
@@ -49,7 +50,8 @@ class Viewer {
   async start() {
     this.initRenderer();
     const wsUrl = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/`;
-    this.client = new LucentClient(wsUrl, { token: this.url.token || '', client: 'lucent-viewer/0.1', reconnect: true });
+    this.client = new LucentClient(wsUrl, { token: this.url.token || '', client: 'lucent-viewer/0.1', reconnect: true,
+      capabilities: ['mr'] });
     this.bindClient();
     this.hud.connection('connecting');
     const welcome = await this.client.connect();
@@ -71,6 +73,10 @@ class Viewer {
     if (this.mode === 'probes') await this.subscribeGrid();
     if (this.url.overlay) await this.loadOverlay(() => fetchOverlay(this.url.overlay), !this.url.mode);
     this.applyMode();
+    this.mr = new MrPanel({ client: this.client, scene: this.scene, objects: this.objects, errors: this.errors,
+      size: this.staticScene.size, render: () => this.requestRender() });
+    const mrUrl = new URLSearchParams(location.search).get('mr');
+    if (mrUrl) this.mr.open(urlSource(mrUrl));
     await this.firstFrame;
   }
 
@@ -381,6 +387,8 @@ class Viewer {
       camera: () => (v.rig ? { ...v.rig.view(), aspect: v.camera.aspect, width: v.renderer.domElement.clientWidth,
         height: v.renderer.domElement.clientHeight } : null),
       frameCount: () => v.frames,
+      mr: () => (v.mr ? v.mr.snapshot() : null),
+      mrPoint: (i) => (v.mr ? v.mr.point(i) : null),
       overlay: () => ({ shown: v.mode === 'heatmap', max: v.overlayMax, nearest: v.overlayNearest,
         image: v.overlay ? { name: v.overlay.name, kind: v.overlay.kind, width: v.overlay.width, height: v.overlay.height,
           scalar: v.overlay.scalar } : null }),
