@@ -3,6 +3,8 @@
 // role and ui=0 for a clean canvas (no HUD, panel or light gizmos: screenshots, comparisons),
 // overlay=URL (heatmap=URL, the older name) for an image on the lightmap's UVs (overlay.js)
 // and overlay_max=PERCENT for its legend's scale (-max..0..+max; default 100).
+// mr=URL plays an RGB-D recording (lucent-rgbd/1 directory) as the page's MR session (mr.js;
+// read there, not here: it is not part of the view and stays in the URL as it was).
 // Reading the URL back reproduces the view exactly: the numbers are written with enough digits.
 
 export const MODES = ['full', 'direct', 'indirect', 'texels', 'probes', 'heatmap'];
