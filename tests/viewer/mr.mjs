@@ -145,6 +145,13 @@ await run('viewer.mr', async ({ d, browser }) => {
   console.log(`screenshot ${shot} (${img.width}x${img.height})`);
   await page.evaluate(() => document.getElementById('mr-lines').click());
   await screenshot(page, 'mr_lines');
+  // Per-vertex shading from the VPLs (§8.7's glTF tables): the cube's vertices get I_d and l_d.
+  await page.evaluate(() => document.getElementById('mr-shade').click());
+  await page.waitForFunction(() => window.lucentViewer.mr().shadedVertices > 0, null, { timeout: 10000, polling: 50 }).catch(() => {});
+  const sv = await page.evaluate(() => window.lucentViewer.mr().shadedVertices);
+  check(sv > 0, `per-vertex VPL shading set I_d and l_d on ${sv} vertices of the cube`);
+  await page.waitForTimeout(300);
+  await screenshot(page, 'mr_shaded');
   const bad = errors.filter((e) => !/favicon/.test(e));
   check(bad.length === 0, `no console errors (${bad.length ? bad.join(' | ') : 'none'})`);
   await page.close();

@@ -224,6 +224,7 @@ export class MrPanel {
     $('mr-cloud').addEventListener('change', (e) => { this.cloud.visible = this.frustum.visible = e.target.checked; this.render(); });
     $('mr-vpl').addEventListener('change', (e) => { this.vpl.visible = e.target.checked; this.render(); });
     $('mr-lines').addEventListener('change', (e) => { this.lines.visible = e.target.checked; this.render(); });
+    $('mr-shade').addEventListener('change', (e) => this.setVertexShading(e.target.checked));
   }
 
   status(text) {
@@ -420,7 +421,64 @@ export class MrPanel {
     this.stats.vplPoints = total;
     this.stats.vplLines = lp.length / 6;
     this.stats.vplObjects = v.objects.map((o) => ({ id: o.id, count: o.count }));
+    this.lastVpl = v;
+    if (this.vertexShading) this.shadeVertices(v);
     this.render();
+  }
+
+  /** Per-vertex VPL shading on (the objects' SH is then off for the session's objects) or off. */
+  setVertexShading(on) {
+    this.vertexShading = on;
+    if (on && this.lastVpl) this.shadeVertices(this.lastVpl);
+    for (const id of this.sessionObjects || []) {
+      const it = this.objects.get(id);
+      if (!it) continue;
+      for (const m of it.materials) {
+        if (m.userData.mrGain) m.userData.mrGain.value = on ? 1 : 0;
+        m.userData.shGain.value = on ? 0 : this.objects.shGain;
+      }
+    }
+    this.render();
+  }
+
+  // Each vertex's I_d and l_d: its 8 sparse points' records averaged with the glTF's weights
+  // (_LUCENT_SP_INDEX0/1, _LUCENT_SP_WEIGHT0/1; three's loader lower-cases the names).
+  shadeVertices(v) {
+    let shaded = 0;
+    for (const o of v.objects) {
+      const it = this.objects.get(o.id);
+      if (!it) continue;
+      it.root.traverse((mesh) => {
+        if (!mesh.isMesh) return;
+        // Instances of one asset share its geometry: each object gets its own copy first.
+        if (mesh.geometry.userData.mrOwner !== o.id) {
+          mesh.geometry = mesh.geometry.clone();
+          mesh.geometry.userData.mrOwner = o.id;
+        }
+        const g = mesh.geometry, a = g.attributes;
+        const idx = a && [a._lucent_sp_index0, a._lucent_sp_index1], w = a && [a._lucent_sp_weight0, a._lucent_sp_weight1];
+        if (!idx || !idx[0] || !idx[1] || !w[0] || !w[1]) return;
+        const n = a.position.count, I = new Float32Array(3 * n), L = new Float32Array(3 * n);
+        for (let i = 0; i < n; i++) {
+          let sw = 0;
+          for (let k = 0; k < 8; k++) {
+            const j = idx[k >> 2].getComponent(i, k & 3), wt = w[k >> 2].getComponent(i, k & 3);
+            if (!(wt > 0) || j >= o.count) continue;
+            const r = VPL_VALUES * j;
+            for (let c = 0; c < 3; c++) {
+              I[3 * i + c] += wt * o.records[r + c];
+              L[3 * i + c] += wt * o.records[r + 3 + c];
+            }
+            sw += wt;
+          }
+          if (sw > 0) for (let c = 0; c < 3; c++) L[3 * i + c] /= sw, I[3 * i + c] /= sw;
+        }
+        g.setAttribute('lucentMrI', new THREE.BufferAttribute(I, 3));
+        g.setAttribute('lucentMrL', new THREE.BufferAttribute(L, 3));
+        shaded += n;
+      });
+    }
+    this.stats.shadedVertices = shaded;
   }
 
   /** For tests: the cloud's point i (world space), or null. */

@@ -58,6 +58,35 @@ vec3 lucentShIrradiance( const in vec3 c[ 9 ], const in vec3 n ) {
 }
 `;
 
+// LightSkin's per-pixel diffuse term (PROTOCOL.md §8.7, the paper's interpolation): each vertex
+// carries the weighted average of its 8 sparse points' records, I_d (attribute lucentMrI) and
+// l_d (lucentMrL, world), set by mr.js; per pixel E = I_d cos(theta) / |x - l_d|^2 with x the
+// world position, so that L = albedo / pi * E. Without the attributes (WebGL's default 0)
+// or with lucentMrGain 0 it adds nothing.
+const MR_VERTEX_PARS = /* glsl */ `
+attribute vec3 lucentMrI;
+attribute vec3 lucentMrL;
+varying vec3 vLucentMrI;
+varying vec3 vLucentMrL;
+varying vec3 vLucentMrWorld;
+`;
+const MR_VERTEX = /* glsl */ `
+vLucentMrI = lucentMrI;
+vLucentMrL = lucentMrL;
+vLucentMrWorld = ( modelMatrix * vec4( transformed, 1.0 ) ).xyz;
+`;
+const MR_FRAGMENT_PARS = /* glsl */ `
+uniform float lucentMrGain;
+varying vec3 vLucentMrI;
+varying vec3 vLucentMrL;
+varying vec3 vLucentMrWorld;
+vec3 lucentMrIrradiance( const in vec3 n ) {
+  vec3 d = vLucentMrL - vLucentMrWorld;
+  float r2 = max( dot( d, d ), 1e-6 );
+  return max( vLucentMrI, vec3( 0.0 ) ) * max( dot( n, d * inversesqrt( r2 ) ), 0.0 ) / r2;
+}
+`;
+
 function patchArea(shader) {
   shader.fragmentShader = shader.fragmentShader.replace(
     '#include <lights_lambert_pars_fragment>', `#include <lights_lambert_pars_fragment>\n${AREA_GLSL}`);
@@ -77,17 +106,24 @@ export function objectMaterial() {
   const m = new THREE.MeshLambertMaterial({ vertexColors: true });
   const sh = { value: Array.from({ length: 9 }, () => new THREE.Vector3()) };
   const gain = { value: 1 };
+  const mrGain = { value: 0 };
   m.userData.sh = sh;
   m.userData.shGain = gain;
+  m.userData.mrGain = mrGain;
   m.onBeforeCompile = (shader) => {
     patchArea(shader);
     shader.uniforms.lucentSH = sh;
     shader.uniforms.lucentSHGain = gain;
+    shader.uniforms.lucentMrGain = mrGain;
+    shader.vertexShader = shader.vertexShader
+      .replace('#include <common>', `#include <common>\n${MR_VERTEX_PARS}`)
+      .replace('#include <project_vertex>', `#include <project_vertex>\n${MR_VERTEX}`);
     shader.fragmentShader = shader.fragmentShader
-      .replace('#include <common>', `#include <common>\nuniform vec3 lucentSH[ 9 ];\nuniform float lucentSHGain;\n${SH_GLSL}`)
+      .replace('#include <common>', `#include <common>\nuniform vec3 lucentSH[ 9 ];\nuniform float lucentSHGain;\n${SH_GLSL}\n${MR_FRAGMENT_PARS}`)
       .replace('#include <lights_fragment_maps>', `#include <lights_fragment_maps>
 #if defined( RE_IndirectDiffuse )
   irradiance += lucentSHGain * max( lucentShIrradiance( lucentSH, inverseTransformDirection( geometryNormal, viewMatrix ) ), vec3( 0.0 ) );
+  irradiance += lucentMrGain * lucentMrIrradiance( inverseTransformDirection( geometryNormal, viewMatrix ) );
 #endif`);
   };
   m.customProgramCacheKey = () => 'lucent-object';
