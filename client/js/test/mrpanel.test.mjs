@@ -86,3 +86,28 @@ test('unproject places each valid pixel per §8.4 (R·p + t) and drops depth 0',
   for (let c = 0; c < 3; c++) assert.ok(Math.abs(pc.positions[3 * k + c] - world[c]) < 1e-5, `coordinate ${c}`);
   assert.equal(pc.colors[3 * k], 0.25);
 });
+
+test('per-vertex shading averages the 8 sparse points\' records with the glTF weights (§8.7)', { skip }, async () => {
+  const THREE = await import('three');
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.BufferAttribute(new Float32Array(6), 3));
+  // vertex 0: points 0 and 2 with weights 0.25 / 0.75; vertex 1: point 1 (and an index past the
+  // object's points, weight 0.5, which is ignored and renormalised away)
+  g.setAttribute('_lucent_sp_index0', new THREE.BufferAttribute(new Uint16Array([0, 2, 0, 0, 1, 9, 0, 0]), 4));
+  g.setAttribute('_lucent_sp_index1', new THREE.BufferAttribute(new Uint16Array(8), 4));
+  g.setAttribute('_lucent_sp_weight0', new THREE.BufferAttribute(new Float32Array([0.25, 0.75, 0, 0, 0.5, 0.5, 0, 0]), 4));
+  g.setAttribute('_lucent_sp_weight1', new THREE.BufferAttribute(new Float32Array(8), 4));
+  const mesh = new THREE.Mesh(g), root = new THREE.Group();
+  root.add(mesh);
+  const rec = (I, l) => [...I, ...l, 0, 0, 0, 0, 0, 0];
+  const records = new Float32Array([...rec([4, 0, 0], [1, 0, 0]), ...rec([0, 2, 0], [0, 5, 0]), ...rec([8, 4, 0], [0, 0, 1])]);
+  const ctx = { objects: { get: (id) => (id === 'a' ? { root } : null) }, stats: {} };
+  mr.MrPanel.prototype.shadeVertices.call(ctx, { objects: [{ id: 'a', count: 3, records }] });
+  const m = root.children[0].geometry, I = m.attributes.lucentMrI.array, L = m.attributes.lucentMrL.array;
+  assert.notEqual(m, g, 'the object got its own copy of the shared geometry');
+  assert.deepEqual([...I.subarray(0, 3)], [0.25 * 4 + 0.75 * 8, 0.75 * 4, 0]);
+  assert.deepEqual([...L.subarray(0, 3)], [0.25, 0, 0.75]);
+  assert.deepEqual([...I.subarray(3, 6)], [0, 2, 0]);
+  assert.deepEqual([...L.subarray(3, 6)], [0, 5, 0]);
+  assert.equal(ctx.stats.shadedVertices, 2);
+});

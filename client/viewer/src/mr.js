@@ -213,6 +213,13 @@ export class MrPanel {
     this.lines.visible = false;
     this.client.on('mr.ack', (a) => this.onAck(a));
     this.client.on('mr.vpl', (v) => this.onVpl(v));
+    // Sessions end with the connection (§8.2): after a reconnect, begin again and go on playing.
+    this.client.on('welcome', () => {
+      if (!this.playing) return;
+      this.playing = false;
+      this.runId++;
+      this.play();
+    });
     this.bind();
   }
 
