@@ -128,17 +128,20 @@ await run('viewer.mr', async ({ d, browser }) => {
   check(m.vplFrames >= 1 && m.vplObjects.some((o) => o.id === 'mrcube' && o.count > 0), `mr.vpl delivered records for mrcube (${JSON.stringify(m.vplObjects)})`);
   check(m.lights > 0, `the server made area lights from the wall (${m.lights})`);
 
-  // The cloud of frame 1 or 3 has W*H points; frame 2 one fewer. Positions per §8.4.
+  // The cloud of frame 1 or 3 has W*H points; frame 2 one fewer (its pixel (0, 0) has no
+  // depth, so its first point is pixel (1, 0)). Positions per §8.4. One evaluate: the shown
+  // frame changes as the recording plays.
   const cloud = await page.evaluate(() => {
     const v = window.lucentViewer, s = v.mr();
-    return { shown: s.shownFrame, points: s.cloudPoints };
+    return { shown: s.shownFrame, points: s.cloudPoints, first: v.mrPoint && v.mrPoint(0) };
   });
   check(cloud.points === (cloud.shown === 2 ? W * H - 1 : W * H), `the point cloud has ${cloud.points} points for frame ${cloud.shown} (W*H = ${W * H}${cloud.shown === 2 ? ' less the one without depth' : ''})`);
-  const lucentd = await page.evaluate(() => window.lucentViewer.mrPoint && window.lucentViewer.mrPoint(0));
+  const lucentd = cloud.first;
   if (lucentd) {
-    const z = DEPTH_MM / 1000, x = (0.5 - CAM.cx) * z / CAM.fx + CAM.t[0], y = -(0.5 - CAM.cy) * z / CAM.fy + CAM.t[1];
+    const u = cloud.shown === 2 ? 1.5 : 0.5;
+    const z = DEPTH_MM / 1000, x = (u - CAM.cx) * z / CAM.fx + CAM.t[0], y = -(0.5 - CAM.cy) * z / CAM.fy + CAM.t[1];
     const dz = Math.max(Math.abs(lucentd[0] - x), Math.abs(lucentd[1] - y), Math.abs(lucentd[2] - (CAM.t[2] - z)));
-    check(dz < 1e-5, `pixel (0, 0) unprojects to (${lucentd.map((v) => v.toFixed(4))}) = §8.4's (${[x, y, CAM.t[2] - z].map((v) => v.toFixed(4))})`);
+    check(dz < 1e-5, `frame ${cloud.shown}'s first pixel unprojects to (${lucentd.map((v) => v.toFixed(4))}) = §8.4's (${[x, y, CAM.t[2] - z].map((v) => v.toFixed(4))})`);
   }
   const shot = await screenshot(page, 'mr');
   const img = readPng(shot);
