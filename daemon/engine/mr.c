@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "gpu/mr_gl.h"
 #include "util/clock.h"
 #include "util/parallel.h"
 #include "util/sh.h"
@@ -86,6 +87,11 @@ struct lc_mr {
     float *hist_sh; /* 27 per object */
     float hist_t[3], hist_q[4];
     lc_mr_timings t;
+    /* GL gather (lc_mr_set_gl): not owned; gl_dirty: the lights changed since their upload */
+    lc_mr_gl *gl;
+    int gl_dirty;
+    size_t gl_cap; /* points in gl_buf */
+    float *gl_buf; /* LC_MR_GL_POINT + LC_MR_GL_SUMS floats per point */
 };
 
 static int mr_fail(char *err, size_t errlen, const char *fmt, ...) {
@@ -134,10 +140,16 @@ void lc_mr_release(lc_mr *m) {
     free(m->occ);
     free(m->hist_pt);
     free(m->hist_sh);
+    free(m->gl_buf);
     free(m);
 }
 
 void lc_mr_reset_history(lc_mr *m) { m->hist_valid = 0; }
+
+void lc_mr_set_gl(lc_mr *m, lc_mr_gl *g) {
+    m->gl = g;
+    m->gl_dirty = 1;
+}
 
 uint32_t lc_mr_light_count(const lc_mr *m) { return m->n_lights; }
 
@@ -479,6 +491,7 @@ err:
 int lc_mr_set_frame(lc_mr *m, const lc_mr_camera *cam, const float *depth_m, const float *radiance_rgb,
                     const float *confidence, const lc_mr_params *p, char *err, size_t errlen) {
     m->n_lights = 0;
+    m->gl_dirty = 1;
     if (!cam || !depth_m || !radiance_rgb || !p)
         return mr_fail(err, errlen, "frame: missing camera, depth or radiance");
     if (mr_check_params(p, err, errlen) || mr_set_camera(m, cam, 1, err, errlen)) return -1;
@@ -512,6 +525,7 @@ int lc_mr_set_frame(lc_mr *m, const lc_mr_camera *cam, const float *depth_m, con
 int lc_mr_set_lights(lc_mr *m, const lc_mr_camera *cam, const lc_mr_light *lights, uint32_t n, const lc_mr_params *p,
                      char *err, size_t errlen) {
     m->n_lights = 0;
+    m->gl_dirty = 1;
     if (!cam || !p || (n && !lights)) return mr_fail(err, errlen, "lights: missing camera, params or lights");
     if (mr_check_params(p, err, errlen) || mr_set_camera(m, cam, 0, err, errlen)) return -1;
     if (n > LC_MR_MAX_LIGHTS) return mr_fail(err, errlen, "lights: %u over %u", n, LC_MR_MAX_LIGHTS);
@@ -612,12 +626,8 @@ MR_CLONES static void mr_gather_tile_s(float *const *soa, uint32_t j0, uint32_t 
     mr_gather_body(soa, j0, nj, p, k, 1, acc);
 }
 
-/* Lane sums -> the point's E, l and S_o radius (one channel set: base A_EDR or A_ESR). */
-static void mr_reduce(const float acc[MR_ACC][MR_LANES], int base, const float x[3], float scale, float e[3],
-                      float l[3], float *radius) {
-    double s[10] = {0};
-    for (int a = 0; a < 10; a++)
-        for (int i = 0; i < MR_LANES; i++) s[a] += acc[base + a][i];
+/* Sums (E rgb, W, sum W d, sum W d^2) -> the point's E, l and S_o radius. */
+static void mr_reduce_sums(const double s[10], const float x[3], float scale, float e[3], float l[3], float *radius) {
     double wsum = s[3] > 0.0 ? s[3] : 1.0, sig = 0.0;
     for (int k = 0; k < 3; k++) {
         e[k] = (float)(s[k] * scale);
@@ -626,6 +636,59 @@ static void mr_reduce(const float acc[MR_ACC][MR_LANES], int base, const float x
         if (var > sig) sig = var;
     }
     *radius = (float)(2.0 * sqrt(sig));
+}
+
+/* Lane sums -> the point's E, l and S_o radius (one channel set: base A_EDR or A_ESR). */
+static void mr_reduce(const float acc[MR_ACC][MR_LANES], int base, const float x[3], float scale, float e[3],
+                      float l[3], float *radius) {
+    double s[10] = {0};
+    for (int a = 0; a < 10; a++)
+        for (int i = 0; i < MR_LANES; i++) s[a] += acc[base + a][i];
+    mr_reduce_sums(s, x, scale, e, l, radius);
+}
+
+/* Step 3 on the GL backend: the lights uploaded when they changed, the points packed, the raw
+ * sums reduced as mr_reduce does. -1 with err on a GL failure. */
+static int mr_gather_gl(lc_mr *m, uint32_t n, char *err, size_t errlen) {
+    if (m->gl_dirty) {
+        lc_mr_lights_view v = lc_mr_lights(m);
+        if (lc_mr_gl_set_lights(m->gl, &v, err, errlen)) return -1;
+        m->gl_dirty = 0;
+    }
+    if (n > m->gl_cap) {
+        float *b = malloc((size_t)n * (LC_MR_GL_POINT + LC_MR_GL_SUMS) * sizeof(float));
+        if (!b) return mr_fail(err, errlen, "points: out of memory for %u (GL gather)", n);
+        free(m->gl_buf);
+        m->gl_buf = b, m->gl_cap = n;
+    }
+    float *pk = m->gl_buf, *sums = m->gl_buf + (size_t)n * LC_MR_GL_POINT;
+    for (uint32_t i = 0; i < n; i++) {
+        const mr_pt *p = &m->pts[i];
+        float *o = pk + (size_t)i * LC_MR_GL_POINT;
+        o[0] = p->x[0], o[1] = p->x[1], o[2] = p->x[2], o[3] = p->nv;
+        o[4] = p->n[0], o[5] = p->n[1], o[6] = p->n[2], o[7] = 0.0f;
+        o[8] = p->v[0], o[9] = p->v[1], o[10] = p->v[2], o[11] = 0.0f;
+    }
+    const float k = m->p.spec_exponent, ck = (k + 1.0f) / (2.0f * MR_PI);
+    if (lc_mr_gl_gather(m->gl, pk, n, k, m->p.glossy, LC_MR_EPSILON, sums, err, errlen)) {
+        m->gl_dirty = 1; /* the context may have lost the lights */
+        return -1;
+    }
+    for (uint32_t i = 0; i < n; i++) {
+        const float *f = sums + (size_t)i * LC_MR_GL_SUMS;
+        double s[LC_MR_GL_SUMS];
+        for (int a = 0; a < LC_MR_GL_SUMS; a++) s[a] = f[a];
+        mr_gathered *g = &m->g[i];
+        mr_reduce_sums(s, m->pts[i].x, 1.0f, g->e_d, g->l_d, &g->rad_d);
+        if (m->p.glossy) {
+            mr_reduce_sums(s + 10, m->pts[i].x, ck, g->e_s, g->l_s, &g->rad_s);
+        } else {
+            memset(g->e_s, 0, sizeof g->e_s);
+            memcpy(g->l_s, g->l_d, sizeof g->l_s);
+            g->rad_s = g->rad_d;
+        }
+    }
+    return 0;
 }
 
 typedef struct {
@@ -912,7 +975,9 @@ int lc_mr_compute(lc_mr *m, const lc_mr_point *pts, uint32_t n, const uint32_t *
     if (mr_prepare_points(m, pts, n, object_of_point, n_objects, centres, err, errlen)) return -1;
     double t0 = lc_clock_ms();
     mr_gather_job job = {m, (m->n_lights + LC_MR_TILE - 1) / LC_MR_TILE * LC_MR_TILE};
-    if (job.padded) lc_parallel_for(m->threads, n, LC_MR_POINT_BLOCK, mr_gather_range, &job);
+    if (job.padded && m->gl) {
+        if (mr_gather_gl(m, n, err, errlen)) return -1;
+    } else if (job.padded) lc_parallel_for(m->threads, n, LC_MR_POINT_BLOCK, mr_gather_range, &job);
     else
         for (uint32_t i = 0; i < n; i++) {
             mr_gathered *g = &m->g[i];

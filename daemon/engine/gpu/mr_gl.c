@@ -1,0 +1,145 @@
+/* mr_gl: LightSkin's gather on GL compute (see mr_gl.h). */
+#include "gpu/mr_gl.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gpu/egl_context.h"
+#include "gpu/gl_util.h"
+
+#define MR_GL_LOCAL 64 /* the shader's local_size_x */
+
+struct lc_mr_gl {
+    lc_egl_context *ctx;
+    GLuint prog, lights_buf, points_buf, sums_buf;
+    size_t lights_cap, points_cap, sums_cap; /* bytes */
+    uint32_t n_lights;
+    int fail_next;
+    char desc[512];
+};
+
+static int mr_gl_fail(char *err, size_t errlen, const char *fmt, ...) {
+    if (err && errlen) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(err, errlen, fmt, ap);
+        va_end(ap);
+    }
+    return -1;
+}
+
+lc_mr_gl *lc_mr_gl_create(char *err, size_t errlen) {
+    lc_mr_gl *g = calloc(1, sizeof *g);
+    if (!g) {
+        mr_gl_fail(err, errlen, "mr_gl: out of memory");
+        return NULL;
+    }
+    g->ctx = lc_egl_create(err, errlen);
+    if (!g->ctx) goto err;
+    const char *src = lc_gl_shader_source("mr_gather");
+    if (!src) {
+        mr_gl_fail(err, errlen, "mr_gather: shader not embedded");
+        goto err;
+    }
+    char defs[64];
+    snprintf(defs, sizeof defs, "#define TILE %d\n", LC_MR_TILE);
+    g->prog = lc_gl_compile_program_defs("mr_gather.comp", src, defs, err, errlen);
+    if (!g->prog) goto err;
+    snprintf(g->desc, sizeof g->desc, "mr_gather on %s%s", lc_egl_description(g->ctx),
+             lc_egl_is_software(g->ctx) ? " (software)" : "");
+    return g;
+err:
+    lc_mr_gl_release(g);
+    return NULL;
+}
+
+void lc_mr_gl_release(lc_mr_gl *g) {
+    if (!g) return;
+    if (g->ctx && lc_egl_make_current(g->ctx, NULL, 0) == 0) {
+        if (g->prog) glDeleteProgram(g->prog);
+        GLuint bufs[3] = {g->lights_buf, g->points_buf, g->sums_buf};
+        for (int i = 0; i < 3; i++)
+            if (bufs[i]) glDeleteBuffers(1, &bufs[i]);
+    }
+    if (g->ctx) lc_egl_release(g->ctx);
+    free(g);
+}
+
+const char *lc_mr_gl_description(const lc_mr_gl *g) { return g->desc; }
+
+void lc_mr_gl_inject_failure(lc_mr_gl *g) { g->fail_next = 1; }
+
+/* buf holds at least bytes (grown, contents lost); 0 or -1 with err. */
+static int mr_gl_reserve(GLuint *buf, size_t *cap, size_t bytes, const char *what, char *err, size_t errlen) {
+    if (*buf && bytes <= *cap) return 0;
+    if (*buf) glDeleteBuffers(1, buf);
+    *buf = 0, *cap = 0;
+    size_t want = bytes < 16 ? 16 : bytes;
+    *buf = lc_gl_buffer(want, NULL, what, err, errlen);
+    if (!*buf) return -1;
+    *cap = want;
+    return 0;
+}
+
+int lc_mr_gl_set_lights(lc_mr_gl *g, const lc_mr_lights_view *v, char *err, size_t errlen) {
+    if (v->count > LC_MR_MAX_LIGHTS)
+        return mr_gl_fail(err, errlen, "mr_gl/lights: %u over %u", v->count, LC_MR_MAX_LIGHTS);
+    if (lc_egl_make_current(g->ctx, err, errlen)) return -1;
+    g->n_lights = 0;
+    if (v->count == 0) return 0;
+    size_t bytes = (size_t)v->count * 12 * sizeof(float);
+    float *host = malloc(bytes);
+    if (!host) return mr_gl_fail(err, errlen, "mr_gl/lights: out of memory for %u", v->count);
+    for (uint32_t j = 0; j < v->count; j++) {
+        float *o = host + 12 * (size_t)j;
+        o[0] = v->px[j], o[1] = v->py[j], o[2] = v->pz[j], o[3] = v->r2[j];
+        o[4] = v->nx[j], o[5] = v->ny[j], o[6] = v->nz[j], o[7] = 0.0f;
+        o[8] = v->br[j], o[9] = v->bg[j], o[10] = v->bb[j], o[11] = 0.0f;
+    }
+    int rc = -1;
+    if (mr_gl_reserve(&g->lights_buf, &g->lights_cap, bytes, "mr_gl/lights", err, errlen)) goto err;
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, g->lights_buf);
+    glBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)bytes, host);
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    if (lc_gl_check("mr_gl/lights upload", err, errlen)) goto err;
+    g->n_lights = v->count;
+    rc = 0;
+err:
+    free(host);
+    return rc;
+}
+
+int lc_mr_gl_gather(lc_mr_gl *g, const float *points, uint32_t n, float k, int glossy, float eps, float *sums,
+                    char *err, size_t errlen) {
+    if (n > LC_MR_MAX_POINTS) return mr_gl_fail(err, errlen, "mr_gl/points: %u over %u", n, LC_MR_MAX_POINTS);
+    if (g->fail_next) {
+        g->fail_next = 0;
+        return mr_gl_fail(err, errlen, "mr_gl/gather: injected GL failure");
+    }
+    if (n == 0) return 0;
+    if (lc_egl_make_current(g->ctx, err, errlen)) return -1;
+    size_t pbytes = (size_t)n * LC_MR_GL_POINT * sizeof(float), sbytes = (size_t)n * LC_MR_GL_SUMS * sizeof(float);
+    if (mr_gl_reserve(&g->points_buf, &g->points_cap, pbytes, "mr_gl/points", err, errlen)) return -1;
+    if (mr_gl_reserve(&g->sums_buf, &g->sums_cap, sbytes, "mr_gl/sums", err, errlen)) return -1;
+    if (mr_gl_reserve(&g->lights_buf, &g->lights_cap, 16, "mr_gl/lights", err, errlen)) return -1;
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, g->points_buf);
+    glBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)pbytes, points);
+    glUseProgram(g->prog);
+    lc_gl_bind(0, g->lights_buf, 0, (size_t)g->n_lights * 12 * sizeof(float));
+    lc_gl_bind(1, g->points_buf, 0, pbytes);
+    lc_gl_bind(2, g->sums_buf, 0, sbytes);
+    glUniform1ui(0, n);
+    glUniform1ui(1, g->n_lights);
+    glUniform1f(2, k);
+    glUniform1i(3, glossy ? 1 : 0);
+    glUniform1f(4, eps);
+    lc_gl_dispatch_1d(n, MR_GL_LOCAL);
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, g->sums_buf);
+    glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)sbytes, sums);
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    glUseProgram(0);
+    return lc_gl_check("mr_gl/gather", err, errlen);
+}

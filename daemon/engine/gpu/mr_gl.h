@@ -1,0 +1,37 @@
+/* mr_gl: LightSkin's gather (engine/mr.h step 3) on GL 4.3 compute (EGL), shaders/mr_gather.comp.
+ * lc_mr_set_gl (mr.h) hands one to an lc_mr; lc_mr_compute then uploads the frame's lights once
+ * (lc_mr_gl_set_lights), runs lc_mr_gl_gather for the points and reduces the raw sums on the CPU
+ * exactly as its own gather's (double), so everything after the gather is the CPU's code.
+ *
+ * Threads: lc_mr_gl_create makes its own EGL context current on the calling thread (in lucentd
+ * the MR worker); every call below re-makes it current on the calling thread, one at a time.
+ * Ownership: the caller owns the lc_mr_gl; lc_mr_set_gl does not take it. */
+#ifndef LC_MR_GL_H
+#define LC_MR_GL_H
+#include <stddef.h>
+#include <stdint.h>
+
+#include "engine/mr.h"
+
+#define LC_MR_GL_SUMS 20  /* raw sums per point: E_d rgb, W_d, sum W d (3), sum W d^2 (3), then the glossy 10 */
+#define LC_MR_GL_POINT 12 /* floats per point: x, n.v, n, 0, v, 0 (the shader's Point) */
+
+typedef struct lc_mr_gl lc_mr_gl;
+
+/* NULL with err when no EGL display / GL 4.3 context can be had or the shader does not build. */
+lc_mr_gl *lc_mr_gl_create(char *err, size_t errlen);
+void lc_mr_gl_release(lc_mr_gl *g);
+/* "mr_gather on <GL_RENDERER (GL_VERSION) via ...>[ (software)]". */
+const char *lc_mr_gl_description(const lc_mr_gl *g);
+
+/* Uploads the lights (v.count <= LC_MR_MAX_LIGHTS). 0, or -1 with err. */
+int lc_mr_gl_set_lights(lc_mr_gl *g, const lc_mr_lights_view *v, char *err, size_t errlen);
+/* The gather at n points (LC_MR_GL_POINT floats each, n <= LC_MR_MAX_POINTS) against the uploaded
+ * lights: sums[n][LC_MR_GL_SUMS] (glossy 0: the glossy 10 are 0). eps per light, k the exponent.
+ * 0, or -1 with err. */
+int lc_mr_gl_gather(lc_mr_gl *g, const float *points, uint32_t n, float k, int glossy, float eps, float *sums,
+                    char *err, size_t errlen);
+/* Test hook: the next gather fails as a GL error would (once). */
+void lc_mr_gl_inject_failure(lc_mr_gl *g);
+
+#endif
