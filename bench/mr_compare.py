@@ -80,6 +80,17 @@ def main():
            "i_server_vs_visible": stats(server, vis, [p["visible_stderr"] for p in pts]),
            "ii_visible_vs_full": stats(vis, full, [p["full_stderr"] for p in pts]),
            "server_vs_full": stats(server, full, [p["full_stderr"] for p in pts])}
+    # per face of the cube (the axis of each point's normal): server / visible / full means
+    faces = {}
+    for p, e in zip(pts, server):
+        k = max(range(3), key=lambda c: abs(p["normal"][c]))
+        f = faces.setdefault(("+" if p["normal"][k] > 0 else "-") + "xyz"[k], [0, 0.0, 0.0, 0.0])
+        f[0] += 1
+        f[1] += lum(e)
+        f[2] += lum(p["visible"])
+        f[3] += lum(p["full"])
+    res["faces"] = {k: {"points": v[0], "server": v[1] / v[0], "visible": v[2] / v[0], "full": v[3] / v[0]}
+                    for k, v in sorted(faces.items())}
     nomerge = vpl_lines(os.path.join(out, "still-nomerge.vpl.jsonl"))
     res["i_nomerge_vs_visible"] = stats(client_irradiance(nomerge[max(nomerge)], pts), vis,
                                         [p["visible_stderr"] for p in pts])
@@ -110,6 +121,8 @@ def main():
         print("%-30s %5d %6d %7.1f%% %7.1f%% %7.1f%% %+7.1f%% %8.2f%%" % (
             label, s["n"], s["n_dark"], 100 * s["mean"], 100 * s["p50"], 100 * s["p95"], 100 * s["bias"],
             100 * s.get("ref_noise", 0)))
+    print("per face (mean E, W/m^2): " + ", ".join("%s %.3f/%.3f/%.3f" % (k, f["server"], f["visible"], f["full"])
+                                                   for k, f in res["faces"].items()) + "  (server/visible/full)")
     j, js = res["jitter"], res["jitter-smooth"]
     print("\ntemporal stability, %d frames jittered 5 mm / 0.5 deg (coefficient of variation of E per point):" % j["frames"])
     print("  server %.2f%%, smoothing 0.5 %.2f%%, visible truth %.2f%% (noise removed); per-frame error vs visible %.1f%%"
