@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "gpu/mr_gl.h"
 #include "util/clock.h"
 #include "util/log.h"
 
@@ -26,6 +27,10 @@ struct lc_mrw {
      * that slot's session; a new epoch starts it afresh), created on the slot's first frame */
     lc_mr *mr[LC_MRW_SLOTS];
     uint64_t mr_epoch[LC_MRW_SLOTS];
+    lc_mr_gl *gl; /* the gather on GL compute (NULL: CPU); its EGL context is the worker's */
+    int backend;  /* 0 auto (EGL on a hardware device only), 1 cpu, 2 egl */
+    int gl_ready; /* mrw.lock: 0 while the worker sets up its backend, 1 done, -1 failed (gl_err) */
+    char gl_err[256];
     int threads;
     lc_mrw_wake_fn wake;
     void *wake_arg;
@@ -50,6 +55,8 @@ void lc_mrw_result_free(lc_mrw_result *r) {
     free(r->vpl);
     free(r);
 }
+
+static void mrw_drop_gl(lc_mrw *w);
 
 /* Worker thread: one frame through the LightSkin stages. The job's frame is released here,
  * whatever happens. */
@@ -83,6 +90,7 @@ static lc_mrw_result *mrw_process(lc_mrw *w, lc_mrw_job *job) {
         goto decoded;
     }
     lc_mr *mr = w->mr[job->slot];
+    lc_mr_set_gl(mr, w->gl);
     if (w->mr_epoch[job->slot] != job->epoch) lc_mr_reset_history(mr);
     w->mr_epoch[job->slot] = job->epoch;
     if (lc_mr_set_frame(mr, &cam, depth, rad, conf, &job->params, r->why, sizeof r->why) != 0) {
@@ -100,8 +108,15 @@ static lc_mrw_result *mrw_process(lc_mrw *w, lc_mrw_job *job) {
         goto decoded;
     }
     char why[200];
-    if (lc_mr_compute(mr, job->points, job->n_points, job->object_of_point, job->n_objects,
-                      (const float(*)[3])job->centres, r->vpl, NULL, r->sh, why, sizeof why) != 0) {
+    int rc = lc_mr_compute(mr, job->points, job->n_points, job->object_of_point, job->n_objects,
+                           (const float(*)[3])job->centres, r->vpl, NULL, r->sh, why, sizeof why);
+    if (rc != 0 && w->gl) { /* GL failed: the CPU from now on, this frame included */
+        lc_warn("mr", "the GL gather failed (%s): MR sessions use the CPU from now on", why);
+        mrw_drop_gl(w);
+        rc = lc_mr_compute(mr, job->points, job->n_points, job->object_of_point, job->n_objects,
+                           (const float(*)[3])job->centres, r->vpl, NULL, r->sh, why, sizeof why);
+    }
+    if (rc != 0) {
         snprintf(r->why, sizeof r->why, "the LightSkin computation failed: %s", why);
         r->failed = 1;
         goto decoded;
@@ -145,9 +160,44 @@ static lc_mrw_job *mrw_next_job(lc_mrw *w) {
     return NULL;
 }
 
+/* Worker thread: detaches the GL gather from every slot's state and frees it (its context is
+ * current on this thread). */
+static void mrw_drop_gl(lc_mrw *w) {
+    for (uint32_t k = 0; k < LC_MRW_SLOTS; k++)
+        if (w->mr[k]) lc_mr_set_gl(w->mr[k], NULL);
+    lc_mr_gl_release(w->gl);
+    w->gl = NULL;
+}
+
+/* Worker thread: the backend, as the relight's --backend (auto: EGL on a hardware device only,
+ * llvmpipe being slower than the CPU). 0, or -1 with w->gl_err (egl asked for and not had). */
+static int mrw_setup_backend(lc_mrw *w) {
+    if (w->backend == 1) return 0;
+    w->gl = lc_mr_gl_create(w->gl_err, sizeof w->gl_err);
+    if (!w->gl) {
+        if (w->backend == 2) return -1;
+        lc_info("mr", "MR gather: cpu (auto: %s)", w->gl_err);
+        return 0;
+    }
+    if (w->backend == 0 && lc_mr_gl_is_software(w->gl)) {
+        lc_info("mr", "MR gather: cpu (auto: %s is a software rasterizer)", lc_mr_gl_description(w->gl));
+        mrw_drop_gl(w);
+        return 0;
+    }
+    lc_info("mr", "MR gather: %s", lc_mr_gl_description(w->gl));
+    return 0;
+}
+
 static void *mrw_main(void *arg) {
     lc_mrw *w = arg;
+    int ok = mrw_setup_backend(w) == 0;
     pthread_mutex_lock(&w->lock);
+    w->gl_ready = ok ? 1 : -1;
+    pthread_cond_broadcast(&w->cond);
+    if (!ok) {
+        pthread_mutex_unlock(&w->lock);
+        return NULL;
+    }
     for (;;) {
         lc_mrw_job *job = NULL;
         while (!w->stop && !(job = mrw_next_job(w))) pthread_cond_wait(&w->cond, &w->lock);
@@ -168,10 +218,11 @@ static void *mrw_main(void *arg) {
         pthread_mutex_lock(&w->lock);
     }
     pthread_mutex_unlock(&w->lock);
+    mrw_drop_gl(w);
     return NULL;
 }
 
-lc_mrw *lc_mrw_start(int threads, lc_mrw_wake_fn wake, void *wake_arg, char *err, size_t errlen) {
+lc_mrw *lc_mrw_start(int threads, int backend, lc_mrw_wake_fn wake, void *wake_arg, char *err, size_t errlen) {
     lc_mrw *w = calloc(1, sizeof *w);
     if (!w) {
         snprintf(err, errlen, "out of memory");
@@ -180,6 +231,7 @@ lc_mrw *lc_mrw_start(int threads, lc_mrw_wake_fn wake, void *wake_arg, char *err
     pthread_mutex_init(&w->lock, NULL);
     pthread_cond_init(&w->cond, NULL);
     w->threads = threads;
+    w->backend = backend;
     w->wake = wake;
     w->wake_arg = wake_arg;
     if (pthread_create(&w->thread, NULL, mrw_main, w) != 0) {
@@ -187,6 +239,14 @@ lc_mrw *lc_mrw_start(int threads, lc_mrw_wake_fn wake, void *wake_arg, char *err
         goto err;
     }
     w->started = 1;
+    pthread_mutex_lock(&w->lock); /* the worker's backend is set up before the first frame */
+    while (!w->gl_ready) pthread_cond_wait(&w->cond, &w->lock);
+    int failed = w->gl_ready < 0;
+    pthread_mutex_unlock(&w->lock);
+    if (failed) {
+        snprintf(err, errlen, "MR sessions with --backend egl: %s", w->gl_err);
+        goto err;
+    }
     return w;
 err:
     lc_mrw_stop(w);

@@ -59,8 +59,10 @@ typedef struct lc_mrw_result {
 
 typedef struct lc_mrw lc_mrw;
 
-/* Starts the worker (threads: the parallel loops' thread count, 0 = all cores). NULL + err. */
-lc_mrw *lc_mrw_start(int threads, lc_mrw_wake_fn wake, void *wake_arg, char *err, size_t errlen);
+/* Starts the worker (threads: the parallel loops' thread count, 0 = all cores; backend as the
+ * relight's: 0 auto = the GL gather on a hardware EGL device, else the CPU; 1 cpu; 2 egl, where
+ * no GL is an error). Returns once the worker has its backend; NULL + err. */
+lc_mrw *lc_mrw_start(int threads, int backend, lc_mrw_wake_fn wake, void *wake_arg, char *err, size_t errlen);
 /* Service thread: queues the job (ownership moves, also on failure). When a job of the same
  * slot was still pending it is dropped and its sequence/capture time returned in *replaced_seq
  * / *replaced_capture (0 when none). Returns 0, or -1 when stopping. */

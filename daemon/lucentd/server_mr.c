@@ -72,7 +72,7 @@ int server_mr_start(lc_server *s, char *err, size_t errlen) {
         lc_info("mr", "MR sessions off: the bake has no sparse points (bake with --mr-points, the default 256)");
         return 0;
     }
-    s->mrw = lc_mrw_start(s->cfg->threads, mr_wake, s, err, errlen);
+    s->mrw = lc_mrw_start(s->cfg->threads, s->cfg->backend, mr_wake, s, err, errlen);
     return s->mrw ? 0 : -1;
 }
 

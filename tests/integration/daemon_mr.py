@@ -7,6 +7,7 @@ suite sees from outside:
   fanout      a viewer (no MR) subscribed to objects sees the capture's light on the object,
               and its grid light again once the MR client disconnects (the session ends)
   metrics     lucent_mr_* count frames received, processed and replaced (latest wins)
+  egl         --backend egl (the gather on GL compute): the viewer's light = the CPU's within 0.1%
   mr_off      --no-mr: hello's "mr" is not granted, binary frames stay binary_not_allowed"""
 import math
 import os
@@ -127,6 +128,40 @@ def test_privacy_fanout_metrics():
     check(marker not in log, "frame bytes in the log")
 
 
+def session_c0(backend):
+    """The object's green c0 a viewer sees after a 3-frame session on this backend, or None
+    when lucentd cannot start with it (no EGL)."""
+    try:
+        p, port = lt.start_lucentd(os.path.join(TMP, "be-" + backend), backend=backend)
+    except lt.LucentdStartError:
+        return None
+    try:
+        viewer = RawWS(port, timeout=60)
+        viewer.hello(client="viewer")
+        viewer.send_json({"type": "subscribe", "id": 2, "stream": "objects", "encoding": "f32"})
+        viewer.recv_json("ok")
+        frames = [lt.upload_frame(k, W, H, rgb=(0.3, 0.5, 0.2)) for k in range(1, 4)]
+        ws, w, acks = run_session(port, frames)
+        check(len(acks) == 3, "%s: every frame acknowledged: %r" % (backend, sorted(acks)))
+        c0 = next_objects_c0(viewer, "mrcube", lambda v: v > 1.0)
+        ws.close()
+        viewer.close()
+        return c0
+    finally:
+        stop(p)
+
+
+def test_egl_matches_cpu():
+    """--backend egl runs the gather on GL compute (the MR worker's own EGL context): the light
+    a viewer gets agrees with the CPU's."""
+    egl = session_c0("egl")
+    if egl is None:
+        print("egl: lucentd --backend egl does not start here (no EGL): case left out")
+        return
+    cpu = session_c0("cpu")
+    check(cpu is not None and abs(egl - cpu) <= 1e-3 * abs(cpu), "egl c0 %r = cpu c0 %r within 0.1%%" % (egl, cpu))
+
+
 def test_mr_off():
     p, port = lt.start_lucentd(os.path.join(TMP, "off"), "--no-mr")
     try:
@@ -149,6 +184,7 @@ if __name__ == "__main__":
         print("SKIP: lucentd or the Cornell bake is not built")
         sys.exit(77)
     test_privacy_fanout_metrics()
+    test_egl_matches_cpu()
     test_mr_off()
     if FAILS:
         print("%d failure(s)" % len(FAILS))

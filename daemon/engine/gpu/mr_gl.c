@@ -143,3 +143,5 @@ int lc_mr_gl_gather(lc_mr_gl *g, const float *points, uint32_t n, float k, int g
     glUseProgram(0);
     return lc_gl_check("mr_gl/gather", err, errlen);
 }
+
+int lc_mr_gl_is_software(const lc_mr_gl *g) { return g && g->ctx && lc_egl_is_software(g->ctx); }

@@ -23,6 +23,8 @@ lc_mr_gl *lc_mr_gl_create(char *err, size_t errlen);
 void lc_mr_gl_release(lc_mr_gl *g);
 /* "mr_gather on <GL_RENDERER (GL_VERSION) via ...>[ (software)]". */
 const char *lc_mr_gl_description(const lc_mr_gl *g);
+/* 1 when the EGL device is a software rasterizer (llvmpipe): slower than the CPU gather. */
+int lc_mr_gl_is_software(const lc_mr_gl *g);
 
 /* Uploads the lights (v.count <= LC_MR_MAX_LIGHTS). 0, or -1 with err. */
 int lc_mr_gl_set_lights(lc_mr_gl *g, const lc_mr_lights_view *v, char *err, size_t errlen);
