@@ -6,7 +6,8 @@
 // and writes the 20 raw sums per point (E_d rgb, sum wd, sum wd d, sum wd d^2 per axis, the
 // same for the glossy channel); the host reduces them as mr.c's mr_reduce. One invocation
 // per point; the lights are read through shared memory in tiles of TILE (K_cache = 128),
-// each invocation of the workgroup loading TILE / 64 of them. The host prepends TILE.
+// each invocation of the workgroup loading TILE / 64 of them (SHARED 1), or straight from the
+// SSBO (SHARED 0: the lights stream through the caches). The host prepends TILE and SHARED.
 layout(local_size_x = 64) in;
 
 struct Light { vec4 p_r2; vec4 n; vec4 b; }; // position, r2 = area / pi; normal; radiosity
@@ -20,9 +21,11 @@ layout(location = 2) uniform float u_k;     // Phong exponent
 layout(location = 3) uniform int u_glossy;
 layout(location = 4) uniform float u_eps;   // LC_MR_EPSILON
 
+#if SHARED
 shared vec4 s_p[TILE];
 shared vec4 s_n[TILE];
 shared vec4 s_b[TILE];
+#endif
 
 // mr.c's mr_exp2_neg and mr_pow01, operation for operation (GLSL's pow differs by ~1e-4 at
 // k = 16 on llvmpipe, which the glossy sums then carry).
@@ -56,6 +59,7 @@ void main() {
     float nv2 = 2.0 * pt.x_nv.w;
     vec3 ed = vec3(0.0), ld = vec3(0.0), md = vec3(0.0), es = vec3(0.0), ls = vec3(0.0), ms = vec3(0.0);
     float wd_sum = 0.0, ws_sum = 0.0;
+#if SHARED
     for (uint j0 = 0u; j0 < u_lights; j0 += uint(TILE)) {
         barrier();
         for (uint t = gl_LocalInvocationID.x; t < uint(TILE); t += 64u) {
@@ -69,17 +73,23 @@ void main() {
         barrier();
         uint nj = min(uint(TILE), u_lights - j0);
         for (uint t = 0u; t < nj; t++) {
-            vec3 d = s_p[t].xyz - x;
+            vec4 lp = s_p[t], ln = s_n[t], lb = s_b[t];
+#else
+    if (live) {
+        for (uint t = 0u; t < u_lights; t++) {
+            vec4 lp = lights[t].p_r2, ln = lights[t].n, lb = lights[t].b;
+#endif
+            vec3 d = lp.xyz - x;
             float d2 = dot(d, d);
             float inv = 1.0 / sqrt(max(d2, 1e-20));
             float ci = dot(n, d) * inv;
-            float cj = -dot(s_n[t].xyz, d) * inv;
-            float r2 = s_p[t].w;
+            float cj = -dot(ln.xyz, d) * inv;
+            float r2 = lp.w;
             float w = r2 * cj / (r2 + d2);
             bool ok = ci > 0.0 && cj > 0.0;
             float wc = ok ? w * ci : 0.0;
             float wd = u_eps + wc;
-            vec3 b = s_b[t].xyz;
+            vec3 b = lb.xyz;
             ed += b * wc;
             wd_sum += wd;
             ld += wd * d;

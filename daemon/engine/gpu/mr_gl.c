@@ -9,7 +9,8 @@
 #include "gpu/egl_context.h"
 #include "gpu/gl_util.h"
 
-#define MR_GL_LOCAL 64 /* the shader's local_size_x */
+#define MR_GL_LOCAL 64         /* the shader's local_size_x */
+#define MR_GL_DEFAULT_SHARED 1 /* see mr_gl.h */
 
 struct lc_mr_gl {
     lc_egl_context *ctx;
@@ -30,7 +31,7 @@ static int mr_gl_fail(char *err, size_t errlen, const char *fmt, ...) {
     return -1;
 }
 
-lc_mr_gl *lc_mr_gl_create(char *err, size_t errlen) {
+lc_mr_gl *lc_mr_gl_create_variant(int shared_tiles, char *err, size_t errlen) {
     lc_mr_gl *g = calloc(1, sizeof *g);
     if (!g) {
         mr_gl_fail(err, errlen, "mr_gl: out of memory");
@@ -44,15 +45,19 @@ lc_mr_gl *lc_mr_gl_create(char *err, size_t errlen) {
         goto err;
     }
     char defs[64];
-    snprintf(defs, sizeof defs, "#define TILE %d\n", LC_MR_TILE);
+    snprintf(defs, sizeof defs, "#define TILE %d\n#define SHARED %d\n", LC_MR_TILE, shared_tiles ? 1 : 0);
     g->prog = lc_gl_compile_program_defs("mr_gather.comp", src, defs, err, errlen);
     if (!g->prog) goto err;
-    snprintf(g->desc, sizeof g->desc, "mr_gather on %s%s", lc_egl_description(g->ctx),
-             lc_egl_is_software(g->ctx) ? " (software)" : "");
+    snprintf(g->desc, sizeof g->desc, "mr_gather (%s) on %s%s", shared_tiles ? "shared-memory tiles" : "direct",
+             lc_egl_description(g->ctx), lc_egl_is_software(g->ctx) ? " (software)" : "");
     return g;
 err:
     lc_mr_gl_release(g);
     return NULL;
+}
+
+lc_mr_gl *lc_mr_gl_create(char *err, size_t errlen) {
+    return lc_mr_gl_create_variant(MR_GL_DEFAULT_SHARED, err, errlen);
 }
 
 void lc_mr_gl_release(lc_mr_gl *g) {

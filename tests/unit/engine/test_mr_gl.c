@@ -169,10 +169,18 @@ int main(void) {
         fprintf(stderr, "SKIP: no EGL context: %s\n", err);
         return CHECK_SKIP_RC;
     }
-    fprintf(stderr, "%s\n", lc_mr_gl_description(g));
-    for (int glossy = 0; glossy < 2; glossy++)
-        for (int occ = 0; occ < 2; occ++) compare(g, glossy, occ);
-    test_wall(g);
+    for (int variant = 0; variant < 2; variant++) {
+        if (variant) {
+            lc_mr_gl_release(g);
+            g = lc_mr_gl_create_variant(0, err, sizeof err);
+            CHECK(g != NULL, "the direct variant: %s", err);
+            if (!g) break;
+        }
+        fprintf(stderr, "%s\n", lc_mr_gl_description(g));
+        for (int glossy = 0; glossy < 2; glossy++)
+            for (int occ = 0; occ < 2; occ++) compare(g, glossy, occ);
+        test_wall(g);
+    }
     lc_mr_gl_release(g);
     CHECK_DONE();
 }
