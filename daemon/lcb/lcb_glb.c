@@ -31,6 +31,7 @@
 #define GLB_TRIANGLE_BYTES 12
 /* With LightSkin sparse points: _LUCENT_SP_INDEX0/1 (VEC4 u16) + _LUCENT_SP_WEIGHT0/1 (VEC4 f32). */
 #define GLB_ASSET_SPARSE_BYTES (8 + 8 + 16 + 16)
+#define GLB_SPARSE_POINT_BYTES (12 + 12 + 4) /* per sparse point: position, normal, radius */
 
 typedef struct glb_doc {
     cJSON *root, *views, *accessors, *materials;
@@ -550,12 +551,22 @@ err:
     return NULL;
 }
 
-/* mesh 0's extras.lucent.sparse_points = n (PROTOCOL §8.7: the points its tables refer to). */
-static int glb_mesh_sparse_extras(glb_doc *d, uint32_t n) {
+/* mesh 0's extras.lucent (PROTOCOL §8.7): "sparse_points" = n, the points its tables refer to,
+ * and "sparse_point_accessors" {"position", "normal", "radius"}: accessors (VEC3, VEC3, SCALAR
+ * float, asset-local) of the points themselves, which no primitive uses (a viewer draws them). */
+static int glb_mesh_sparse_extras(glb_doc *d, const lc_lcb_sparse_point *sp, uint32_t n) {
     cJSON *mesh = cJSON_GetArrayItem(cJSON_GetObjectItem(d->root, "meshes"), 0);
     cJSON *extras = mesh ? cJSON_AddObjectToObject(mesh, "extras") : NULL;
     cJSON *lucent = extras ? cJSON_AddObjectToObject(extras, "lucent") : NULL;
-    return lucent && cJSON_AddNumberToObject(lucent, "sparse_points", n) ? 0 : -1;
+    cJSON *accs = lucent ? cJSON_AddObjectToObject(lucent, "sparse_point_accessors") : NULL;
+    if (!accs || !cJSON_AddNumberToObject(lucent, "sparse_points", n)) return -1;
+    int pos = glb_attr(d, sp[0].position, sizeof *sp, NULL, n, 3, 1, 0);
+    int nrm = glb_attr(d, sp[0].normal, sizeof *sp, NULL, n, 3, 0, 0);
+    int rad = glb_attr(d, &sp[0].radius, sizeof *sp, NULL, n, 1, 0, 0);
+    return pos >= 0 && nrm >= 0 && rad >= 0 && cJSON_AddNumberToObject(accs, "position", pos) &&
+            cJSON_AddNumberToObject(accs, "normal", nrm) && cJSON_AddNumberToObject(accs, "radius", rad)
+        ? 0
+        : -1;
 }
 
 int lc_lcb_asset_glb(const lc_lcb *f, uint32_t asset, unsigned char **out, size_t *len, char *err, size_t errlen) {
@@ -581,8 +592,9 @@ int lc_lcb_asset_glb(const lc_lcb *f, uint32_t asset, unsigned char **out, size_
     uint32_t sp_first, sp_count;
     lc_lcb_asset_sparse(v, asset, &sp_first, &sp_count);
     uint64_t vertex_bytes = GLB_ASSET_VERTEX_BYTES + (sp_count ? GLB_ASSET_SPARSE_BYTES : 0);
-    uint64_t bin_bytes =
-        has_mesh ? (uint64_t)a->vertex_count * vertex_bytes + (uint64_t)a->triangle_count * GLB_TRIANGLE_BYTES : 0;
+    uint64_t bin_bytes = has_mesh ? (uint64_t)a->vertex_count * vertex_bytes +
+            (uint64_t)a->triangle_count * GLB_TRIANGLE_BYTES + (uint64_t)sp_count * GLB_SPARSE_POINT_BYTES
+                                  : 0;
     if (glb_doc_open(&d, f, bin_bytes, a->name, err, errlen) != 0) return -1;
     vtri = malloc((a->vertex_count ? a->vertex_count : 1) * sizeof *vtri);
     normals = malloc((a->vertex_count ? a->vertex_count : 1) * 3 * sizeof *normals);
@@ -595,7 +607,8 @@ int lc_lcb_asset_glb(const lc_lcb *f, uint32_t asset, unsigned char **out, size_
     }
     rc = glb_node(&d, a->name, prims);
     prims = NULL;
-    if (rc != 0 || (has_mesh && sp_count && glb_mesh_sparse_extras(&d, sp_count) != 0)) goto oom;
+    if (rc != 0 || (has_mesh && sp_count && glb_mesh_sparse_extras(&d, v->sparse_points + sp_first, sp_count) != 0))
+        goto oom;
     rc = glb_finish(&d, uses_strength, out, len, err, errlen);
     goto out;
 oom:

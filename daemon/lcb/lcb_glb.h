@@ -21,7 +21,8 @@
  * each vertex also carries its 8 nearest points and eq. 12 weights (PROTOCOL.md §8.7):
  * _LUCENT_SP_INDEX0/1 (VEC4 UNSIGNED_SHORT, indices among the asset's points) and
  * _LUCENT_SP_WEIGHT0/1 (VEC4 FLOAT, summing to 1), and the mesh's extras.lucent holds
- * {"sparse_points": N}.
+ * {"sparse_points": N, "sparse_point_accessors": {"position", "normal", "radius"}}: accessors
+ * of the points themselves (asset-local VEC3, VEC3, SCALAR float), used by no primitive.
  *
  * Outputs over the GLB format's 4 GiB limit are refused. */
 #ifndef LC_LCB_GLB_H

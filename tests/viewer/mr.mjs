@@ -127,6 +127,10 @@ await run('viewer.mr', async ({ d, browser }) => {
   check(m.acks >= 1, `an mr.ack arrived (${m.acks}; ${m.processed} processed, lights ${m.lights}, ${m.ms} ms)`);
   check(m.vplFrames >= 1 && m.vplObjects.some((o) => o.id === 'mrcube' && o.count > 0), `mr.vpl delivered records for mrcube (${JSON.stringify(m.vplObjects)})`);
   check(m.lights > 0, `the server made area lights from the wall (${m.lights})`);
+  // every VPL's line starts at its sparse point, from the asset glTF's sparse_point_accessors
+  await page.waitForFunction(() => window.lucentViewer.mr().vplLines === 256, null, { timeout: 10000, polling: 50 }).catch(() => {});
+  const lines = await page.evaluate(() => window.lucentViewer.mr().vplLines);
+  check(lines === 256, `a line from each of the cube's 256 sparse points to its l_d (${lines})`);
 
   // The cloud of frame 1 or 3 has W*H points; frame 2 one fewer (its pixel (0, 0) has no
   // depth, so its first point is pixel (1, 0)). Positions per §8.4. One evaluate: the shown

@@ -370,14 +370,22 @@ export class MrPanel {
     return new Float32Array(out.flatMap((v) => [v.x, v.y, v.z]));
   }
 
-  // Sparse point positions are not on the wire: each is estimated as the mean of the object's
-  // vertices whose nearest sparse point (_LUCENT_SP_INDEX0.x) it is, in world space.
+  // The sparse points in world space: the asset glTF's sparse_point_accessors (PROTOCOL §8.7)
+  // placed with the object; for an asset glTF without them, each is estimated as the mean of
+  // the vertices whose nearest sparse point (_LUCENT_SP_INDEX0.x) it is.
   sparsePoints(id, count) {
     const it = this.objects.get(id);
     if (!it) return null;
     const sum = new Float64Array(3 * count), num = new Uint32Array(count), v = new THREE.Vector3();
-    let any = false;
+    let any = false, exact = null;
     it.root.updateMatrixWorld(true);
+    it.root.traverse((o) => {
+      const sp = o.isMesh && o.geometry.userData.sparsePoints;
+      if (!sp || sp.length !== 3 * count || exact) return;
+      exact = new Float32Array(3 * count);
+      for (let j = 0; j < count; j++) v.fromArray(sp, 3 * j).applyMatrix4(o.matrixWorld).toArray(exact, 3 * j);
+    });
+    if (exact) return exact;
     it.root.traverse((o) => {
       const g = o.isMesh && o.geometry, idx = g && (g.attributes._lucent_sp_index0 || g.attributes._LUCENT_SP_INDEX0);
       if (!idx) return;

@@ -25,11 +25,21 @@ export class ObjectSet {
   geometry(name) {
     if (!this.assets.has(name)) {
       const url = this.paths[name] || `/assets/${encodeURIComponent(name)}.glb`;
-      this.assets.set(name, loadGlb(url).then((gltf) => {
+      this.assets.set(name, loadGlb(url).then(async (gltf) => {
         const out = [];
         gltf.scene.updateMatrixWorld(true);
-        gltf.scene.traverse((o) => { if (o.isMesh) out.push(o.geometry.clone().applyMatrix4(o.matrixWorld)); });
-        return out;
+        gltf.scene.traverse((o) => { if (o.isMesh) out.push([o, o.geometry.clone().applyMatrix4(o.matrixWorld)]); });
+        // LightSkin sparse points (PROTOCOL §8.7: accessors named in the mesh's extras.lucent),
+        // asset-local like the geometry: geometry.userData.sparsePoints, 3 floats per point
+        for (const [o, g] of out) {
+          const acc = o.userData.lucent && o.userData.lucent.sparse_point_accessors;
+          if (!acc || !Number.isInteger(acc.position)) continue;
+          const a = await gltf.parser.getDependency('accessor', acc.position);
+          const p = new Float32Array(3 * a.count), v = new THREE.Vector3();
+          for (let i = 0; i < a.count; i++) v.fromBufferAttribute(a, i).applyMatrix4(o.matrixWorld).toArray(p, 3 * i);
+          g.userData.sparsePoints = p;
+        }
+        return out.map(([, g]) => g);
       }));
     }
     return this.assets.get(name);

@@ -294,6 +294,23 @@ static void check_asset_sparse(const glb *g, const cJSON *prim, const lc_lcb_vie
     const cJSON *lucent = cJSON_GetObjectItem(cJSON_GetObjectItem(mesh, "extras"), "lucent");
     CHECK(num(lucent, "sparse_points") == points, "mesh extras.lucent.sparse_points %g, bake %u",
           num(lucent, "sparse_points"), points);
+    /* the points themselves (asset-local), bit for bit ASPT's */
+    const cJSON *spa = cJSON_GetObjectItem(lucent, "sparse_point_accessors");
+    static const char *const pkeys[3] = {"position", "normal", "radius"};
+    for (int k = 0; k < 3; k++) {
+        int acc = (int)num(spa, pkeys[k]);
+        uint32_t n = 0;
+        int comps = 0;
+        const float *pd = acc >= 0 ? acc_data(g, acc, &n, &comps) : NULL;
+        CHECK(pd && n == points && comps == (k < 2 ? 3 : 1), "sparse_point_accessors.%s: %u x %d, bake %u points",
+              pkeys[k], n, comps, points);
+        for (uint32_t i = 0; pd && n == points && i < points; i++) {
+            const lc_lcb_sparse_point *sp = &v->sparse_points[first + i];
+            const float *want = k == 0 ? sp->position : k == 1 ? sp->normal : &sp->radius;
+            CHECK(!memcmp(pd + (size_t)comps * i, want, (size_t)comps * sizeof(float)), "sparse point %u %s = ASPT", i,
+                  pkeys[k]);
+        }
+    }
     static const char *const names[4] = {"_LUCENT_SP_INDEX0", "_LUCENT_SP_INDEX1", "_LUCENT_SP_WEIGHT0",
                                          "_LUCENT_SP_WEIGHT1"};
     const void *data[4] = {NULL, NULL, NULL, NULL};
