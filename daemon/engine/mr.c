@@ -647,6 +647,17 @@ static void mr_reduce(const float acc[MR_ACC][MR_LANES], int base, const float x
     mr_reduce_sums(s, x, scale, e, l, radius);
 }
 
+/* gl_buf for n points (LC_MR_GL_POINT + LC_MR_GL_SUMS floats each, which also holds the
+ * occlusion's 2 LC_MR_GL_OCC_POINT + 2). */
+static int mr_gl_scratch(lc_mr *m, uint32_t n) {
+    if (n <= m->gl_cap) return 0;
+    float *b = malloc((size_t)n * (LC_MR_GL_POINT + LC_MR_GL_SUMS) * sizeof(float));
+    if (!b) return -1;
+    free(m->gl_buf);
+    m->gl_buf = b, m->gl_cap = n;
+    return 0;
+}
+
 /* Step 3 on the GL backend: the lights uploaded when they changed, the points packed, the raw
  * sums reduced as mr_reduce does. -1 with err on a GL failure. */
 static int mr_gather_gl(lc_mr *m, uint32_t n, char *err, size_t errlen) {
@@ -655,12 +666,7 @@ static int mr_gather_gl(lc_mr *m, uint32_t n, char *err, size_t errlen) {
         if (lc_mr_gl_set_lights(m->gl, &v, err, errlen)) return -1;
         m->gl_dirty = 0;
     }
-    if (n > m->gl_cap) {
-        float *b = malloc((size_t)n * (LC_MR_GL_POINT + LC_MR_GL_SUMS) * sizeof(float));
-        if (!b) return mr_fail(err, errlen, "points: out of memory for %u (GL gather)", n);
-        free(m->gl_buf);
-        m->gl_buf = b, m->gl_cap = n;
-    }
+    if (mr_gl_scratch(m, n)) return mr_fail(err, errlen, "points: out of memory for %u (GL gather)", n);
     float *pk = m->gl_buf, *sums = m->gl_buf + (size_t)n * LC_MR_GL_POINT;
     for (uint32_t i = 0; i < n; i++) {
         const mr_pt *p = &m->pts[i];
@@ -773,6 +779,33 @@ static float mr_occlusion(const lc_mr *m, uint32_t n, uint32_t i, const float l[
     }
     double o = sum / area_s;
     return (float)(o < 1.0 ? o : 1.0);
+}
+
+/* Step 4 on the GL backend (mr_occlusion_range's result). -1 with err on a GL failure. */
+static int mr_occlusion_gl(lc_mr *m, uint32_t n, char *err, size_t errlen) {
+    if (mr_gl_scratch(m, n)) return mr_fail(err, errlen, "points: out of memory for %u (GL occlusion)", n);
+    float *pk = m->gl_buf, *tg = pk + (size_t)n * LC_MR_GL_OCC_POINT, *occ = tg + (size_t)n * LC_MR_GL_OCC_POINT;
+    for (uint32_t i = 0; i < n; i++) {
+        const mr_pt *p = &m->pts[i];
+        const mr_gathered *g = &m->g[i];
+        float *o = pk + (size_t)i * LC_MR_GL_OCC_POINT, *t = tg + (size_t)i * LC_MR_GL_OCC_POINT;
+        union {
+            uint32_t u;
+            float f;
+        } obj = {p->object};
+        o[0] = p->x[0], o[1] = p->x[1], o[2] = p->x[2], o[3] = p->radius;
+        o[4] = p->n[0], o[5] = p->n[1], o[6] = p->n[2], o[7] = obj.f;
+        t[0] = g->l_d[0], t[1] = g->l_d[1], t[2] = g->l_d[2], t[3] = g->rad_d;
+        t[4] = g->l_s[0], t[5] = g->l_s[1], t[6] = g->l_s[2], t[7] = g->rad_s;
+    }
+    if (lc_mr_gl_occlusion(m->gl, pk, tg, n, m->p.self_occlusion, m->p.glossy, occ, err, errlen)) return -1;
+    for (uint32_t i = 0; i < n; i++) {
+        mr_gathered *g = &m->g[i];
+        float od = occ[2 * i], os = occ[2 * i + 1];
+        for (int k = 0; k < 3; k++) g->e_d[k] *= 1.0f - od, g->e_s[k] *= 1.0f - os;
+        m->occ[2 * i] = od, m->occ[2 * i + 1] = os;
+    }
+    return 0;
 }
 
 static void mr_occlusion_range(void *ctx, size_t begin, size_t end, int thread) {
@@ -987,7 +1020,9 @@ int lc_mr_compute(lc_mr *m, const lc_mr_point *pts, uint32_t n, const uint32_t *
         }
     double t1 = lc_clock_ms();
     memset(m->occ, 0, (size_t)n * 2 * sizeof(float));
-    if (m->p.occlusion && n > 1) {
+    if (m->p.occlusion && n > 1 && m->gl) {
+        if (mr_occlusion_gl(m, n, err, errlen)) return -1;
+    } else if (m->p.occlusion && n > 1) {
         mr_gather_job oj = {m, n};
         lc_parallel_for(m->threads, n, 16, mr_occlusion_range, &oj);
     }

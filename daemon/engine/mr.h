@@ -157,9 +157,9 @@ lc_mr_lights_view lc_mr_lights(const lc_mr *m);
 int lc_mr_compute(lc_mr *m, const lc_mr_point *pts, uint32_t n, const uint32_t *object_of_point, uint32_t n_objects,
                   const float (*centres)[3], lc_mr_vpl *vpl_out, lc_mr_point_out *point_out, float (*sh_out)[27],
                   char *err, size_t errlen);
-/* The GL backend for step 3 (gpu/mr_gl.h; NULL = the CPU, the default; not owned, and it must
- * outlive its use here): lc_mr_compute then runs the gather on it (uploading the lights once
- * after each set_frame / set_lights) and everything else on the CPU as before. Called on the
+/* The GL backend for steps 3 and 4 (gpu/mr_gl.h; NULL = the CPU, the default; not owned, and it
+ * must outlive its use here): lc_mr_compute then runs the gather (uploading the lights once after
+ * each set_frame / set_lights) and the occlusion on it, and everything else on the CPU as before. Called on the
  * thread that computes. A GL failure makes lc_mr_compute return -1 with err ("mr_gl/...");
  * the caller may set NULL and compute again on the CPU. */
 typedef struct lc_mr_gl lc_mr_gl;

@@ -14,8 +14,8 @@
 
 struct lc_mr_gl {
     lc_egl_context *ctx;
-    GLuint prog, lights_buf, points_buf, sums_buf;
-    size_t lights_cap, points_cap, sums_cap; /* bytes */
+    GLuint prog, occ_prog, lights_buf, points_buf, sums_buf, opts_buf, targets_buf, occ_buf;
+    size_t lights_cap, points_cap, sums_cap, opts_cap, targets_cap, occ_cap; /* bytes */
     uint32_t n_lights;
     int fail_next;
     char desc[512];
@@ -48,6 +48,13 @@ lc_mr_gl *lc_mr_gl_create_variant(int shared_tiles, char *err, size_t errlen) {
     snprintf(defs, sizeof defs, "#define TILE %d\n#define SHARED %d\n", LC_MR_TILE, shared_tiles ? 1 : 0);
     g->prog = lc_gl_compile_program_defs("mr_gather.comp", src, defs, err, errlen);
     if (!g->prog) goto err;
+    const char *osrc = lc_gl_shader_source("mr_occlusion");
+    if (!osrc) {
+        mr_gl_fail(err, errlen, "mr_occlusion: shader not embedded");
+        goto err;
+    }
+    g->occ_prog = lc_gl_compile_program("mr_occlusion.comp", osrc, err, errlen);
+    if (!g->occ_prog) goto err;
     snprintf(g->desc, sizeof g->desc, "mr_gather (%s) on %s%s", shared_tiles ? "shared-memory tiles" : "direct",
              lc_egl_description(g->ctx), lc_egl_is_software(g->ctx) ? " (software)" : "");
     return g;
@@ -64,8 +71,9 @@ void lc_mr_gl_release(lc_mr_gl *g) {
     if (!g) return;
     if (g->ctx && lc_egl_make_current(g->ctx, NULL, 0) == 0) {
         if (g->prog) glDeleteProgram(g->prog);
-        GLuint bufs[3] = {g->lights_buf, g->points_buf, g->sums_buf};
-        for (int i = 0; i < 3; i++)
+        if (g->occ_prog) glDeleteProgram(g->occ_prog);
+        GLuint bufs[6] = {g->lights_buf, g->points_buf, g->sums_buf, g->opts_buf, g->targets_buf, g->occ_buf};
+        for (int i = 0; i < 6; i++)
             if (bufs[i]) glDeleteBuffers(1, &bufs[i]);
     }
     if (g->ctx) lc_egl_release(g->ctx);
@@ -150,3 +158,33 @@ int lc_mr_gl_gather(lc_mr_gl *g, const float *points, uint32_t n, float k, int g
 }
 
 int lc_mr_gl_is_software(const lc_mr_gl *g) { return g && g->ctx && lc_egl_is_software(g->ctx); }
+
+int lc_mr_gl_occlusion(lc_mr_gl *g, const float *points, const float *targets, uint32_t n, int self_occlusion,
+                       int glossy, float *occ, char *err, size_t errlen) {
+    if (n > LC_MR_MAX_POINTS) return mr_gl_fail(err, errlen, "mr_gl/points: %u over %u", n, LC_MR_MAX_POINTS);
+    if (g->fail_next) {
+        g->fail_next = 0;
+        return mr_gl_fail(err, errlen, "mr_gl/occlusion: injected GL failure");
+    }
+    if (n == 0) return 0;
+    if (lc_egl_make_current(g->ctx, err, errlen)) return -1;
+    size_t pbytes = (size_t)n * LC_MR_GL_OCC_POINT * sizeof(float), obytes = (size_t)n * 2 * sizeof(float);
+    if (mr_gl_reserve(&g->opts_buf, &g->opts_cap, pbytes, "mr_gl/occluders", err, errlen) ||
+        mr_gl_reserve(&g->targets_buf, &g->targets_cap, pbytes, "mr_gl/targets", err, errlen) ||
+        mr_gl_reserve(&g->occ_buf, &g->occ_cap, obytes, "mr_gl/occ", err, errlen))
+        return -1;
+    glNamedBufferSubData(g->opts_buf, 0, (GLsizeiptr)pbytes, points);
+    glNamedBufferSubData(g->targets_buf, 0, (GLsizeiptr)pbytes, targets);
+    glUseProgram(g->occ_prog);
+    lc_gl_bind(0, g->opts_buf, 0, pbytes);
+    lc_gl_bind(1, g->targets_buf, 0, pbytes);
+    lc_gl_bind(2, g->occ_buf, 0, obytes);
+    glUniform1ui(0, n);
+    glUniform1i(1, self_occlusion ? 1 : 0);
+    glUniform1i(2, glossy ? 1 : 0);
+    lc_gl_dispatch_1d(n, MR_GL_LOCAL);
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    glGetNamedBufferSubData(g->occ_buf, 0, (GLsizeiptr)obytes, occ);
+    glUseProgram(0);
+    return lc_gl_check("mr_gl/occlusion", err, errlen);
+}

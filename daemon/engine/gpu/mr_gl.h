@@ -1,7 +1,9 @@
-/* mr_gl: LightSkin's gather (engine/mr.h step 3) on GL 4.3 compute (EGL), shaders/mr_gather.comp.
+/* mr_gl: LightSkin's gather and occlusion (engine/mr.h steps 3, 4) on GL 4.3 compute (EGL),
+ * shaders/mr_gather.comp and mr_occlusion.comp.
  * lc_mr_set_gl (mr.h) hands one to an lc_mr; lc_mr_compute then uploads the frame's lights once
  * (lc_mr_gl_set_lights), runs lc_mr_gl_gather for the points and reduces the raw sums on the CPU
- * exactly as its own gather's (double), so everything after the gather is the CPU's code.
+ * exactly as its own gather's (double), then lc_mr_gl_occlusion; smoothing, renormalisation and
+ * the SH stay the CPU's code.
  *
  * Threads: lc_mr_gl_create makes its own EGL context current on the calling thread (in lucentd
  * the MR worker); every call below re-makes it current on the calling thread, one at a time.
@@ -13,8 +15,9 @@
 
 #include "engine/mr.h"
 
-#define LC_MR_GL_SUMS 20  /* raw sums per point: E_d rgb, W_d, sum W d (3), sum W d^2 (3), then the glossy 10 */
-#define LC_MR_GL_POINT 12 /* floats per point: x, n.v, n, 0, v, 0 (the shader's Point) */
+#define LC_MR_GL_SUMS 20     /* raw sums per point: E_d rgb, W_d, sum W d (3), sum W d^2 (3), then the glossy 10 */
+#define LC_MR_GL_OCC_POINT 8 /* floats per point and per target for the occlusion */
+#define LC_MR_GL_POINT 12    /* floats per point: x, n.v, n, 0, v, 0 (the shader's Point) */
 
 typedef struct lc_mr_gl lc_mr_gl;
 
@@ -37,7 +40,12 @@ int lc_mr_gl_set_lights(lc_mr_gl *g, const lc_mr_lights_view *v, char *err, size
  * 0, or -1 with err. */
 int lc_mr_gl_gather(lc_mr_gl *g, const float *points, uint32_t n, float k, int glossy, float eps, float *sums,
                     char *err, size_t errlen);
-/* Test hook: the next gather fails as a GL error would (once). */
+/* Step 4 at n points: points[n][LC_MR_GL_OCC_POINT] = x, disc radius, n, object (its uint32 bits);
+ * targets[n][LC_MR_GL_OCC_POINT] = l_d, S_o radius for l_d, l_s, radius for l_s; occ[n][2] = o_d,
+ * o_s (o_s = 0 without glossy). 0, or -1 with err. */
+int lc_mr_gl_occlusion(lc_mr_gl *g, const float *points, const float *targets, uint32_t n, int self_occlusion,
+                       int glossy, float *occ, char *err, size_t errlen);
+/* Test hook: the next gather or occlusion fails as a GL error would (once). */
 void lc_mr_gl_inject_failure(lc_mr_gl *g);
 
 #endif

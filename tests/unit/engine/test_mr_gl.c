@@ -1,4 +1,4 @@
-/* mr_gl: LightSkin's gather on GL compute (gpu/mr_gl.h, the lc_mr_set_gl hook of engine/mr.h)
+/* mr_gl: LightSkin's gather and occlusion on GL compute (gpu/mr_gl.h, the lc_mr_set_gl hook of engine/mr.h)
  * against the CPU: every output of lc_mr_compute (vpl, point_out, sh) on random lights and points
  * with glossy and occlusion on and off; the radiant wall of test_mr.c on the GPU path; a GL
  * failure returns -1 with a message. Skips (77) when no EGL context can be had. */
@@ -91,11 +91,16 @@ static void compare(lc_mr_gl *g, int glossy, int occlusion) {
                        sizeof v[0][0] / (sizeof(float)), 1e-2, &f_v);
     double w_sh = worst(&sh[0][0][0], &sh[1][0][0], sizeof sh[0] / (sizeof(float)), 27, 1e-2, &f_sh);
     int lit = 0;
-    for (int i = 0; i < NP; i++) lit += po[0][i].e_d[0] > 0 && (!glossy || po[0][i].e_s[0] > 0);
+    int shaded = 0;
+    for (int i = 0; i < NP; i++) {
+        lit += po[0][i].e_d[0] > 0 && (!glossy || po[0][i].e_s[0] > 0);
+        shaded += po[0][i].occ_d > 0.01f;
+    }
+    CHECK(!occlusion || shaded > NP / 10, "too few occluded points (%d) to test the occlusion", shaded);
     fprintf(stderr,
             "glossy %d occlusion %d: worst relative difference point_out %.2e (float %d) vpl %.2e (float %d) "
-            "sh %.2e (%d lit)\n",
-            glossy, occlusion, w_e, f_e, w_v, f_v, w_sh, lit);
+            "sh %.2e (%d lit, %d occluded)\n",
+            glossy, occlusion, w_e, f_e, w_v, f_v, w_sh, lit, shaded);
     CHECK(lit > NP / 4, "too few lit points (%d) for the comparison to mean anything", lit);
     /* Diffuse: 1e-4. Glossy: 1e-3: cos^k g (k = 16) multiplies cos g's float rounding by k and a
      * few lights near the mirror direction carry l_s, so the float sums keep ~1e-4..5e-4 there. */
@@ -153,6 +158,16 @@ static void test_wall(lc_mr_gl *g) {
     lc_mr_set_gl(m, NULL);
     rc = lc_mr_compute(m, &pt, 1, &obj, 1, (const float(*)[3])centre, &v, &po, NULL, err, sizeof err);
     CHECK(rc == 0 && po.e_d[1] > 0, "the CPU after a GL failure: %s", err);
+    /* Without lights the occlusion is the first GL stage: its failure is reported the same way. */
+    lc_mr_set_gl(m, g);
+    lc_mr_point two[2] = {pt, {.position = {0, 0, -1.5f}, .normal = {0, 0, 1}, .radius = 0.01f}};
+    uint32_t objs[2] = {0, 0};
+    lc_mr_vpl v2[2];
+    p.occlusion = 1;
+    rc = lc_mr_set_lights(m, &cam, NULL, 0, &p, err, sizeof err);
+    lc_mr_gl_inject_failure(g);
+    if (rc == 0) rc = lc_mr_compute(m, two, 2, objs, 1, (const float(*)[3])centre, v2, NULL, NULL, err, sizeof err);
+    CHECK(rc == -1 && strstr(err, "mr_gl/occlusion"), "a GL occlusion failure: rc %d, err '%s'", rc, err);
     lc_mr_release(m);
     free(depth);
     free(rad);
