@@ -8,18 +8,23 @@
 // per point; the lights are read through shared memory in tiles of TILE (K_cache = 128),
 // each invocation of the workgroup loading TILE / 64 of them (SHARED 1), or straight from the
 // SSBO (SHARED 0: the lights stream through the caches). The host prepends TILE and SHARED.
+// The host dispatches the lights in chunks (LC_MR_GL_CHUNK, from u_base), each adding to the
+// sums: llvmpipe stops any loop after 65535 iterations per invocation (Mesa's loop limiter,
+// counted over all iterations of an inner loop), which silently dropped the lights past ~64k.
 layout(local_size_x = 64) in;
 
 struct Light { vec4 p_r2; vec4 n; vec4 b; }; // position, r2 = area / pi; normal; radiosity
 struct Point { vec4 x_nv; vec4 n; vec4 v; }; // position, n.v; unit normal; unit direction to the camera
 layout(std430, binding = 0) readonly buffer Lights { Light lights[]; };
 layout(std430, binding = 1) readonly buffer Points { Point points[]; };
-layout(std430, binding = 2) writeonly buffer Sums { float sums[]; }; // [point][20]
+layout(std430, binding = 2) buffer Sums { float sums[]; }; // [point][20]
 layout(location = 0) uniform uint u_points;
-layout(location = 1) uniform uint u_lights;
+layout(location = 1) uniform uint u_lights; // lights in this chunk, from u_base
 layout(location = 2) uniform float u_k;     // Phong exponent
 layout(location = 3) uniform int u_glossy;
 layout(location = 4) uniform float u_eps;   // LC_MR_EPSILON
+layout(location = 5) uniform uint u_base;   // the chunk's first light
+layout(location = 6) uniform int u_accumulate; // 0: the first chunk writes the sums, 1: later ones add
 
 #if SHARED
 shared vec4 s_p[TILE];
@@ -64,11 +69,11 @@ void main() {
         barrier();
         for (uint t = gl_LocalInvocationID.x; t < uint(TILE); t += 64u) {
             uint j = j0 + t;
-            bool in_range = j < u_lights;
-            Light l = lights[in_range ? j : 0u];
-            s_p[t] = in_range ? l.p_r2 : vec4(0.0);
-            s_n[t] = in_range ? l.n : vec4(0.0);
-            s_b[t] = in_range ? l.b : vec4(0.0);
+            vec4 p = vec4(0.0), nn = vec4(0.0), b = vec4(0.0);
+            if (j < u_lights) p = lights[u_base + j].p_r2, nn = lights[u_base + j].n, b = lights[u_base + j].b;
+            s_p[t] = p;
+            s_n[t] = nn;
+            s_b[t] = b;
         }
         barrier();
         uint nj = min(uint(TILE), u_lights - j0);
@@ -77,7 +82,7 @@ void main() {
 #else
     if (live) {
         for (uint t = 0u; t < u_lights; t++) {
-            vec4 lp = lights[t].p_r2, ln = lights[t].n, lb = lights[t].b;
+            vec4 lp = lights[u_base + t].p_r2, ln = lights[u_base + t].n, lb = lights[u_base + t].b;
 #endif
             vec3 d = lp.xyz - x;
             float d2 = dot(d, d);
@@ -108,10 +113,7 @@ void main() {
     }
     if (!live) return;
     uint o = idx * 20u;
-    sums[o + 0u] = ed.x, sums[o + 1u] = ed.y, sums[o + 2u] = ed.z, sums[o + 3u] = wd_sum;
-    sums[o + 4u] = ld.x, sums[o + 5u] = ld.y, sums[o + 6u] = ld.z;
-    sums[o + 7u] = md.x, sums[o + 8u] = md.y, sums[o + 9u] = md.z;
-    sums[o + 10u] = es.x, sums[o + 11u] = es.y, sums[o + 12u] = es.z, sums[o + 13u] = ws_sum;
-    sums[o + 14u] = ls.x, sums[o + 15u] = ls.y, sums[o + 16u] = ls.z;
-    sums[o + 17u] = ms.x, sums[o + 18u] = ms.y, sums[o + 19u] = ms.z;
+    float r[20] = float[20](ed.x, ed.y, ed.z, wd_sum, ld.x, ld.y, ld.z, md.x, md.y, md.z, es.x, es.y, es.z, ws_sum, ls.x,
+                            ls.y, ls.z, ms.x, ms.y, ms.z);
+    for (uint k = 0u; k < 20u; k++) sums[o + k] = u_accumulate != 0 ? sums[o + k] + r[k] : r[k];
 }

@@ -3,17 +3,22 @@
 // point, in float, the formulas of mr.c's mr_occlusion: the other points as two-sided discs in
 // front of x's tangent plane and nearer than S_o's centre, projected (Nusselt) to squares in the
 // (t, b) frame of n, summed over their overlap with S_o's square, ramped to 0 inside S_o.
-// One invocation per point (o_d, then o_s when glossy); the occluders stream from the SSBO.
+// One invocation per point (o_d, then o_s when glossy); the occluders stream from the SSBO in
+// chunks the host dispatches one by one (u_kbase, u_kcount: llvmpipe ends any loop after 65535
+// iterations), each adding its sum / area_S; the host clamps the total to [0, 1].
 layout(local_size_x = 64) in;
 
 struct OPoint { vec4 x_r; vec4 n_obj; }; // position, disc radius; unit normal, object (uint bits)
 struct Target { vec4 ld_r; vec4 ls_r; }; // l_d, S_o radius for l_d; l_s, radius for l_s
 layout(std430, binding = 0) readonly buffer Points { OPoint pts[]; };
 layout(std430, binding = 1) readonly buffer Targets { Target targets[]; };
-layout(std430, binding = 2) writeonly buffer Occ { float occ[]; }; // [point][2]
+layout(std430, binding = 2) buffer Occ { float occ[]; }; // [point][2], unclamped
 layout(location = 0) uniform uint u_points;
 layout(location = 1) uniform int u_self;   // self_occlusion
 layout(location = 2) uniform int u_glossy;
+layout(location = 3) uniform uint u_kbase;  // the chunk's first occluder
+layout(location = 4) uniform uint u_kcount; // occluders in the chunk
+layout(location = 5) uniform int u_accumulate; // 0: the first chunk writes, 1: later ones add
 
 const float PI = 3.14159265358979;
 
@@ -39,7 +44,7 @@ float occlusion(uint i, vec3 x, vec3 n, uint obj, vec3 l, float rad) {
     float hs = 0.5 * sqrt(area_s);
     float near = dd - R > 0.0 ? dd - R : 0.0, ramp = dd - near;
     float sum = 0.0;
-    for (uint k = 0u; k < u_points; k++) {
+    for (uint k = u_kbase; k < u_kbase + u_kcount; k++) {
         OPoint o = pts[k];
         if (k == i || (u_self == 0 && floatBitsToUint(o.n_obj.w) == obj)) continue;
         vec3 u = o.x_r.xyz - x;
@@ -57,8 +62,7 @@ float occlusion(uint i, vec3 x, vec3 n, uint obj, vec3 l, float rad) {
         float s = dk <= near ? 1.0 : (dd - dk) / ramp;
         sum += s * ox * oy;
     }
-    float r = sum / area_s;
-    return r < 1.0 ? r : 1.0;
+    return sum / area_s;
 }
 
 void main() {
@@ -69,6 +73,6 @@ void main() {
     uint obj = floatBitsToUint(p.n_obj.w);
     float od = occlusion(i, p.x_r.xyz, p.n_obj.xyz, obj, g.ld_r.xyz, g.ld_r.w);
     float os = u_glossy != 0 ? occlusion(i, p.x_r.xyz, p.n_obj.xyz, obj, g.ls_r.xyz, g.ls_r.w) : 0.0;
-    occ[2u * i] = od;
-    occ[2u * i + 1u] = os;
+    occ[2u * i] = u_accumulate != 0 ? occ[2u * i] + od : od;
+    occ[2u * i + 1u] = u_accumulate != 0 ? occ[2u * i + 1u] + os : os;
 }

@@ -144,11 +144,19 @@ int lc_mr_gl_gather(lc_mr_gl *g, const float *points, uint32_t n, float k, int g
     lc_gl_bind(1, g->points_buf, 0, pbytes);
     lc_gl_bind(2, g->sums_buf, 0, sbytes);
     glUniform1ui(0, n);
-    glUniform1ui(1, g->n_lights);
     glUniform1f(2, k);
     glUniform1i(3, glossy ? 1 : 0);
     glUniform1f(4, eps);
-    lc_gl_dispatch_1d(n, MR_GL_LOCAL);
+    uint32_t base = 0;
+    do { /* chunks of lights (see mr_gather.comp); with no lights one dispatch writes zeros */
+        uint32_t count = g->n_lights - base < LC_MR_GL_CHUNK ? g->n_lights - base : LC_MR_GL_CHUNK;
+        glUniform1ui(1, count);
+        glUniform1ui(5, base);
+        glUniform1i(6, base > 0);
+        lc_gl_dispatch_1d(n, MR_GL_LOCAL);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+        base += count;
+    } while (base < g->n_lights);
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     glBindBuffer(GL_SHADER_STORAGE_BUFFER, g->sums_buf);
     glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)sbytes, sums);
@@ -182,9 +190,16 @@ int lc_mr_gl_occlusion(lc_mr_gl *g, const float *points, const float *targets, u
     glUniform1ui(0, n);
     glUniform1i(1, self_occlusion ? 1 : 0);
     glUniform1i(2, glossy ? 1 : 0);
-    lc_gl_dispatch_1d(n, MR_GL_LOCAL);
+    for (uint32_t base = 0; base < n; base += LC_MR_GL_CHUNK) { /* occluder chunks (mr_occlusion.comp) */
+        glUniform1ui(3, base);
+        glUniform1ui(4, n - base < LC_MR_GL_CHUNK ? n - base : LC_MR_GL_CHUNK);
+        glUniform1i(5, base > 0);
+        lc_gl_dispatch_1d(n, MR_GL_LOCAL);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    }
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     glGetNamedBufferSubData(g->occ_buf, 0, (GLsizeiptr)obytes, occ);
     glUseProgram(0);
+    for (uint32_t i = 0; i < 2 * n; i++) occ[i] = occ[i] < 1.0f ? occ[i] : 1.0f;
     return lc_gl_check("mr_gl/occlusion", err, errlen);
 }

@@ -16,6 +16,7 @@
 #include "engine/mr.h"
 
 #define LC_MR_GL_SUMS 20     /* raw sums per point: E_d rgb, W_d, sum W d (3), sum W d^2 (3), then the glossy 10 */
+#define LC_MR_GL_CHUNK 16384 /* lights (and occluders) per dispatch: llvmpipe ends loops after 65535 iterations */
 #define LC_MR_GL_OCC_POINT 8 /* floats per point and per target for the occlusion */
 #define LC_MR_GL_POINT 12    /* floats per point: x, n.v, n, 0, v, 0 (the shader's Point) */
 
@@ -42,7 +43,7 @@ int lc_mr_gl_gather(lc_mr_gl *g, const float *points, uint32_t n, float k, int g
                     char *err, size_t errlen);
 /* Step 4 at n points: points[n][LC_MR_GL_OCC_POINT] = x, disc radius, n, object (its uint32 bits);
  * targets[n][LC_MR_GL_OCC_POINT] = l_d, S_o radius for l_d, l_s, radius for l_s; occ[n][2] = o_d,
- * o_s (o_s = 0 without glossy). 0, or -1 with err. */
+ * o_s (o_s = 0 without glossy), clamped to [0, 1]. 0, or -1 with err. */
 int lc_mr_gl_occlusion(lc_mr_gl *g, const float *points, const float *targets, uint32_t n, int self_occlusion,
                        int glossy, float *occ, char *err, size_t errlen);
 /* Test hook: the next gather or occlusion fails as a GL error would (once). */

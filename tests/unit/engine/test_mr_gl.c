@@ -110,6 +110,64 @@ static void compare(lc_mr_gl *g, int glossy, int occlusion) {
     CHECK(w_sh == 0, "sh (CPU in both): %.3e", w_sh);
 }
 
+/* Past llvmpipe's 65535-iteration loop limit and the dispatch chunks (LC_MR_GL_CHUNK): 70 000
+ * lights at 64 points, then 17 000 points (occluders in two chunks); each against the CPU. Before
+ * the chunks, the lights past ~64k were silently dropped (E 3-50 % low). */
+static void test_chunks(lc_mr_gl *g) {
+    const uint32_t cases[2][2] = {{70000, 64}, {256, LC_MR_GL_CHUNK + 616}};
+    for (int c = 0; c < 2; c++) {
+        uint32_t nl = cases[c][0], np = cases[c][1];
+        unsigned seed = 3;
+        lc_mr_light *l = calloc(nl, sizeof *l);
+        lc_mr_point *p = calloc(np, sizeof *p);
+        uint32_t *obj = calloc(np, sizeof *obj);
+        lc_mr_point_out *po[2] = {calloc(np, sizeof *po[0]), calloc(np, sizeof *po[1])};
+        lc_mr_vpl *v = calloc(np, sizeof *v);
+        float centre[1][3] = {{0, 0, 0}};
+        CHECK(l && p && obj && po[0] && po[1] && v, "out of memory");
+        if (!l || !p || !obj || !po[0] || !po[1] || !v) goto next;
+        for (uint32_t j = 0; j < nl; j++) {
+            l[j].position[0] = (float)(4 * rnd(&seed) - 2), l[j].position[1] = (float)(4 * rnd(&seed) - 2);
+            l[j].position[2] = 2.0f, l[j].normal[2] = -1.0f, l[j].area = 16.0f / (float)nl;
+            l[j].radiosity[0] = l[j].radiosity[1] = l[j].radiosity[2] = (float)(1 + rnd(&seed));
+        }
+        for (uint32_t i = 0; i < np; i++) { /* a 1 m slab of points facing the lights */
+            p[i].position[0] = (float)(rnd(&seed) - 0.5), p[i].position[1] = (float)(rnd(&seed) - 0.5);
+            p[i].position[2] = (float)(rnd(&seed) - 0.5), p[i].normal[2] = 1.0f, p[i].radius = 0.01f;
+        }
+        lc_mr_camera cam = {.translation = {0, 0, 3}, .rotation = {0, 0, 0, 1}};
+        lc_mr_params prm = lc_mr_params_default();
+        char err[512] = "";
+        for (int b = 0; b < 2; b++) {
+            lc_mr *m = lc_mr_create(0);
+            lc_mr_set_gl(m, b ? g : NULL);
+            int rc = lc_mr_set_lights(m, &cam, l, nl, &prm, err, sizeof err);
+            if (rc == 0)
+                rc = lc_mr_compute(m, p, np, obj, 1, (const float(*)[3])centre, v, po[b], NULL, err, sizeof err);
+            CHECK(rc == 0, "%u lights x %u points on %s: %s", nl, np, b ? "GL" : "CPU", err);
+            lc_mr_release(m);
+        }
+        /* E_d's floor: 10 % of the largest (most points are nearly fully occluded, where E (1 - o)
+         * turns o's 1e-6 into a large relative difference of a small E) */
+        double we = 0, wo = 0, emax = 0;
+        int shaded = 0;
+        for (uint32_t i = 0; i < np; i++) emax = fmax(emax, po[0][i].e_d[0]);
+        for (uint32_t i = 0; i < np; i++) {
+            for (int k = 0; k < 3; k++)
+                we = fmax(we, fabs(po[1][i].e_d[k] - po[0][i].e_d[k]) / fmax(fabs(po[0][i].e_d[k]), 0.1 * emax));
+            wo = fmax(wo, fabs(po[1][i].occ_d - po[0][i].occ_d));
+            shaded += po[0][i].occ_d > 0.01f;
+        }
+        fprintf(stderr, "%u lights x %u points: E_d worst relative difference %.2e, occ_d worst %.2e (%d occluded)\n",
+                nl, np, we, wo, shaded);
+        CHECK(we <= 1e-4, "%u lights x %u points: E_d %.3e", nl, np, we);
+        CHECK(wo <= 1e-4, "%u lights x %u points: occ_d %.3e", nl, np, wo);
+        CHECK(c == 0 || shaded > (int)np / 10, "too few occluded points (%d)", shaded);
+    next:
+        free(l), free(p), free(obj), free(po[0]), free(po[1]), free(v);
+    }
+}
+
 static double rect_form_factor(double hx, double hy, double d) {
     double x = hx / d, y = hy / d;
     double c = (x / sqrt(1 + x * x) * atan(y / sqrt(1 + x * x)) + y / sqrt(1 + y * y) * atan(x / sqrt(1 + y * y))) /
@@ -195,6 +253,7 @@ int main(void) {
         for (int glossy = 0; glossy < 2; glossy++)
             for (int occ = 0; occ < 2; occ++) compare(g, glossy, occ);
         test_wall(g);
+        if (variant == 0) test_chunks(g); /* the default variant (seconds on llvmpipe) */
     }
     lc_mr_gl_release(g);
     CHECK_DONE();
