@@ -26,7 +26,8 @@ typedef struct lc_mr_gl lc_mr_gl;
 lc_mr_gl *lc_mr_gl_create(char *err, size_t errlen);
 /* The shader variant: shared_tiles 1 = one invocation per point, the workgroup's 64 points sharing
  * tiles of LC_MR_TILE lights in shared memory (the paper's K_cache); 0 = each invocation reads the
- * lights straight from the SSBO. lc_mr_gl_create picks the one measured faster (lucent-mr-bench). */
+ * lights straight from the SSBO. lc_mr_gl_create takes the shared tiles: on llvmpipe the two are
+ * within noise of each other (lucent-mr-bench --variant), and on a real GPU tiles are the paper's. */
 lc_mr_gl *lc_mr_gl_create_variant(int shared_tiles, char *err, size_t errlen);
 void lc_mr_gl_release(lc_mr_gl *g);
 /* "mr_gather on <GL_RENDERER (GL_VERSION) via ...>[ (software)]". */
