@@ -55,6 +55,7 @@ static int dnrt_list_reserve(dnrt_list *l, uint32_t n) {
 
 /* Appends src[first, first + n) to l. */
 static int dnrt_list_append(dnrt_list *l, const dnrt_list *src, uint32_t first, uint32_t n) {
+    if (!n) return 0; /* nothing to copy, and either list may still have no arrays (memcpy's NULL) */
     if (dnrt_list_reserve(l, l->n + n) != 0) return -1;
     memcpy(l->targets + l->n, src->targets + first, (size_t)n * sizeof *l->targets);
     memcpy(l->dirs + 3 * (size_t)l->n, src->dirs + 3 * (size_t)first, (size_t)n * 3 * sizeof *l->dirs);
