@@ -107,6 +107,17 @@ function corpusFrames() {
     if (b.length !== 128 + h.planeBytes[0] + h.planeBytes[1] + h.planeBytes[2]) continue;
     if (dv.getUint32(124, true) !== crc32(b.subarray(128), crc32(b.subarray(0, 124)))) continue;
     if (!h.depthEncoding || !h.colorEncoding || h.width < 8 || h.height < 8) continue;
+    // valid as the C parser defines it: each plane is, or inflates to, exactly its raw size (the
+    // fuzz runs add CRC-valid frames whose zlib streams are broken or the wrong size)
+    const n = h.width * h.height;
+    const raw = [2 * n, h.flags & 1 ? n : 0, (h.colorEncoding === 'rgb8_srgb' ? 3 : 6) * n];
+    let at = 128, planesOk = true;
+    for (let i = 0; i < 3 && planesOk; i++) {
+      const p = b.subarray(at, (at += h.planeBytes[i]));
+      if (h.compression[i] !== 1) planesOk = p.length === raw[i];
+      else try { planesOk = raw[i] > 0 && inflateSync(p).length === raw[i]; } catch { planesOk = false; }
+    }
+    if (!planesOk) continue;
     out.push({ name, b, h });
   }
   return out;
