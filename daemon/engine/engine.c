@@ -12,6 +12,7 @@
 #include <time.h>
 
 #include "engine/dnrt.h"
+#include "engine/drt.h"
 #include "engine/embree_device.h"
 #include "engine/lightmap_filter.h"
 #include "engine/scene_math.h"
@@ -54,9 +55,17 @@ struct lc_engine {
     lc_engine_environment env;
     lc_engine_settings settings;
     int have_state;
-    lc_dnrt *dnrt;         /* placed objects in the indirect light (dnrt.h) */
-    lc_lmfilter *lmfilter; /* same-surface 3x3 smoothing of the lightmap (lightmap_filter.h) */
-    float *lightmap;       /* W*H*3: the filtered lightmap the frame points at */
+    lc_dnrt *dnrt; /* placed objects in the indirect light (dnrt.h) */
+    /* Clutter operators (drt.h), owned; `clutter_active` are those that applied in the last
+     * relight (a prefix-free subset, in attach order), `clutter_dirty` when the set changed. */
+    lc_drt_ops **clutter;
+    uint32_t n_clutter, clutter_cap;
+    lc_drt_ops **clutter_active;
+    uint32_t n_clutter_active;
+    int clutter_dirty;
+    lc_engine_object *dnrt_objects; /* the state's objects with active clutter out of DNRT */
+    lc_lmfilter *lmfilter;          /* same-surface 3x3 smoothing of the lightmap (lightmap_filter.h) */
+    float *lightmap;                /* W*H*3: the filtered lightmap the frame points at */
     lc_engine_frame frame;
 };
 
@@ -139,6 +148,10 @@ void lc_engine_release(lc_engine *e) {
     free(e->emission);
     lc_lmfilter_release(e->lmfilter);
     lc_dnrt_release(e->dnrt);
+    for (uint32_t i = 0; i < e->n_clutter; i++) lc_drt_ops_release(e->clutter[i]);
+    free(e->clutter);
+    free(e->clutter_active);
+    free(e->dnrt_objects);
     free(e->lightmap);
     free(e);
 }
@@ -328,67 +341,85 @@ typedef struct {
     uint32_t n_lights;
 } engine_direct_job;
 
-static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread) {
-    (void)thread;
-    const engine_direct_job *job = ctx;
-    lc_engine *e = job->e;
-    const lc_lcb_view *v = e->v;
-    for (size_t s = begin; s < end; s++) {
-        const lc_lcb_surfel *sf = &v->surfels[s];
-        const float *n = sf->normal;
-        float org[3] = {sf->position[0] + n[0] * e->scene_eps, sf->position[1] + n[1] * e->scene_eps,
-                        sf->position[2] + n[2] * e->scene_eps};
-        float acc[3] = {0, 0, 0};
-        for (uint32_t li = 0; li < job->n_lights; li++) {
-            const lc_engine_light *l = &job->lights[li];
-            float scale = l->intensity;
-            if (l->type == LC_ENGINE_LIGHT_DIRECTIONAL) {
-                float dl = engine_len(l->direction);
-                float w[3] = {-l->direction[0] / dl, -l->direction[1] / dl, -l->direction[2] / dl};
-                float cosn = n[0] * w[0] + n[1] * w[1] + n[2] * w[2];
-                if (cosn <= 0 || lc_embree_occluded(e->top, org, w, INFINITY)) continue;
-                for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn;
-            } else if (l->type == LC_ENGINE_LIGHT_AREA) {
-                /* Stratified samples over the emitter, one shadow ray each. */
-                lc_sm_area_frame fr = lc_sm_area_frame_of(l);
-                const float *ln = fr.n;
-                lc_rng rng = lc_rng_seed(0xA5EA, ((uint64_t)li << 32) | s);
-                float sum = 0;
-                for (int j = 0; j < ENGINE_AREA_SAMPLES; j++) {
-                    float u = ((float)(j % 4) + lc_rng_float(&rng)) * 0.25f;
-                    float w = ((float)(j / 4) + lc_rng_float(&rng)) * 0.25f;
-                    float p[3], d[3];
-                    lc_sm_area_point(l, &fr, u, w, p);
-                    for (int k = 0; k < 3; k++) d[k] = p[k] - org[k];
-                    float d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-                    if (!(d2 > 1e-12f)) continue;
-                    float dist = sqrtf(d2);
-                    for (int k = 0; k < 3; k++) d[k] /= dist;
-                    float cos_s = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
-                    float cos_l = -(ln[0] * d[0] + ln[1] * d[1] + ln[2] * d[2]);
-                    if (cos_s <= 0 || cos_l <= 0) continue;
-                    if (lc_embree_occluded(e->top, org, d, lc_ray_shadow_tfar(dist, e->scene_eps))) continue;
-                    sum += cos_s * cos_l / d2 * lc_sm_range_window(d2, l->range);
-                }
-                float g = scale * sum * fr.area / ENGINE_AREA_SAMPLES;
-                for (int k = 0; k < 3; k++) acc[k] += g * l->color[k];
-            } else { /* point, spot */
-                float d[3] = {l->position[0] - org[0], l->position[1] - org[1], l->position[2] - org[2]};
+/* Irradiance from the lights at a surface point (unit normal n), shadow rays against the
+ * top scene from the point lifted along n; `key` seeds the area lights' samples (a surfel's
+ * index; clutter elements count from 2^31). */
+static void engine_direct_point(const engine_direct_job *job, const float pos[3], const float n[3], uint64_t key,
+                                float acc[3]) {
+    const lc_engine *e = job->e;
+    float org[3] = {pos[0] + n[0] * e->scene_eps, pos[1] + n[1] * e->scene_eps, pos[2] + n[2] * e->scene_eps};
+    acc[0] = acc[1] = acc[2] = 0;
+    for (uint32_t li = 0; li < job->n_lights; li++) {
+        const lc_engine_light *l = &job->lights[li];
+        float scale = l->intensity;
+        if (l->type == LC_ENGINE_LIGHT_DIRECTIONAL) {
+            float dl = engine_len(l->direction);
+            float w[3] = {-l->direction[0] / dl, -l->direction[1] / dl, -l->direction[2] / dl};
+            float cosn = n[0] * w[0] + n[1] * w[1] + n[2] * w[2];
+            if (cosn <= 0 || lc_embree_occluded(e->top, org, w, INFINITY)) continue;
+            for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn;
+        } else if (l->type == LC_ENGINE_LIGHT_AREA) {
+            /* Stratified samples over the emitter, one shadow ray each. */
+            lc_sm_area_frame fr = lc_sm_area_frame_of(l);
+            const float *ln = fr.n;
+            lc_rng rng = lc_rng_seed(0xA5EA, ((uint64_t)li << 32) | key);
+            float sum = 0;
+            for (int j = 0; j < ENGINE_AREA_SAMPLES; j++) {
+                float u = ((float)(j % 4) + lc_rng_float(&rng)) * 0.25f;
+                float w = ((float)(j / 4) + lc_rng_float(&rng)) * 0.25f;
+                float p[3], d[3];
+                lc_sm_area_point(l, &fr, u, w, p);
+                for (int k = 0; k < 3; k++) d[k] = p[k] - org[k];
                 float d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
                 if (!(d2 > 1e-12f)) continue;
                 float dist = sqrtf(d2);
                 for (int k = 0; k < 3; k++) d[k] /= dist;
-                float cosn = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
-                if (cosn <= 0) continue;
-                float att = lc_sm_range_window(d2, l->range) / d2;
-                if (l->type == LC_ENGINE_LIGHT_SPOT) att *= lc_sm_spot_cone(l, d);
-                if (att <= 0) continue;
+                float cos_s = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
+                float cos_l = -(ln[0] * d[0] + ln[1] * d[1] + ln[2] * d[2]);
+                if (cos_s <= 0 || cos_l <= 0) continue;
                 if (lc_embree_occluded(e->top, org, d, lc_ray_shadow_tfar(dist, e->scene_eps))) continue;
-                for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn * att;
+                sum += cos_s * cos_l / d2 * lc_sm_range_window(d2, l->range);
             }
+            float g = scale * sum * fr.area / ENGINE_AREA_SAMPLES;
+            for (int k = 0; k < 3; k++) acc[k] += g * l->color[k];
+        } else { /* point, spot */
+            float d[3] = {l->position[0] - org[0], l->position[1] - org[1], l->position[2] - org[2]};
+            float d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            if (!(d2 > 1e-12f)) continue;
+            float dist = sqrtf(d2);
+            for (int k = 0; k < 3; k++) d[k] /= dist;
+            float cosn = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
+            if (cosn <= 0) continue;
+            float att = lc_sm_range_window(d2, l->range) / d2;
+            if (l->type == LC_ENGINE_LIGHT_SPOT) att *= lc_sm_spot_cone(l, d);
+            if (att <= 0) continue;
+            if (lc_embree_occluded(e->top, org, d, lc_ray_shadow_tfar(dist, e->scene_eps))) continue;
+            for (int k = 0; k < 3; k++) acc[k] += scale * l->color[k] * cosn * att;
         }
-        for (int k = 0; k < 3; k++) e->e_direct[3 * s + k] = acc[k];
     }
+}
+
+static void engine_direct_range(void *ctx, size_t begin, size_t end, int thread) {
+    (void)thread;
+    const engine_direct_job *job = ctx;
+    const lc_lcb_view *v = job->e->v;
+    for (size_t s = begin; s < end; s++)
+        engine_direct_point(job, v->surfels[s].position, v->surfels[s].normal, s, job->e->e_direct + 3 * s);
+}
+
+/* The same direct light at one clutter object's patch elements (drt.h). */
+typedef struct {
+    engine_direct_job job;
+    lc_drt_elements el;
+    uint64_t key0;
+} engine_clutter_job;
+
+static void engine_clutter_direct_range(void *ctx, size_t begin, size_t end, int thread) {
+    (void)thread;
+    const engine_clutter_job *cj = ctx;
+    for (size_t i = begin; i < end; i++)
+        engine_direct_point(&cj->job, cj->el.positions + 3 * i, cj->el.normals + 3 * i, cj->key0 + i,
+                            cj->el.e_direct + 3 * i);
 }
 
 /* Cosine-weighted visibility of the sky projected on L2 SH, per surfel (PRT transfer). */
@@ -470,17 +501,144 @@ static int engine_place_objects(lc_engine *e, const lc_engine_state *st) {
 }
 
 /* Objects in the indirect light (dnrt.h): their receivers when objects (or the switches)
- * change, the direct light on them when the lights change too. */
-static int engine_dnrt_update(lc_engine *e, const lc_engine_state *st, int first, int objects_changed,
-                              int lights_changed, char *err, size_t errlen) {
+ * change, the direct light on them when the lights change too. `objects` are the state's,
+ * with clutter whose operators apply taken out (engine_clutter_reconcile). */
+static int engine_dnrt_update(lc_engine *e, const lc_engine_state *st, const lc_engine_object *objects, int first,
+                              int objects_changed, int lights_changed, char *err, size_t errlen) {
     int switches_changed =
         first || st->settings.dnrt != e->settings.dnrt || st->settings.dnrt_blockers != e->settings.dnrt_blockers;
     if ((objects_changed || switches_changed) &&
-        lc_dnrt_place(e->dnrt, st->objects, st->n_objects, e->object_pos, &st->settings, e->static_scene, e->scene_eps,
-                      err, errlen) != 0)
+        lc_dnrt_place(e->dnrt, objects, st->n_objects, e->object_pos, &st->settings, e->static_scene, e->scene_eps, err,
+                      errlen) != 0)
         return -1;
     if (objects_changed || switches_changed || lights_changed)
-        lc_dnrt_direct(e->dnrt, st->lights, st->n_lights, e->top, e->scene_eps, st->objects);
+        lc_dnrt_direct(e->dnrt, st->lights, st->n_lights, e->top, e->scene_eps, objects);
+    return 0;
+}
+
+/* --- clutter operators (drt.h) ------------------------------------------------------------------ */
+
+int lc_engine_clutter_attach(lc_engine *e, lc_drt_ops *ops, char *err, size_t errlen) {
+    if (e->ops != &lc_transport_cpu) {
+        lc_drt_ops_release(ops);
+        lc_set_err(err, errlen, "clutter operators apply on the cpu backend only (this engine runs %s)", e->ops->name);
+        return -1;
+    }
+    lc_engine_clutter_detach(e, lc_drt_ops_object(ops)->id);
+    if (e->n_clutter == e->clutter_cap) {
+        uint32_t cap = e->clutter_cap ? 2 * e->clutter_cap : 4;
+        lc_drt_ops **a = realloc(e->clutter, cap * sizeof *a),
+                   **b = a ? realloc(e->clutter_active, cap * sizeof *b) : NULL;
+        if (a) e->clutter = a;
+        if (b) e->clutter_active = b;
+        if (!a || !b) {
+            lc_drt_ops_release(ops);
+            lc_set_err(err, errlen, "out of memory attaching clutter operators");
+            return -1;
+        }
+        e->clutter_cap = cap;
+    }
+    e->clutter[e->n_clutter++] = ops;
+    e->clutter_dirty = 1;
+    return 0;
+}
+
+void lc_engine_clutter_detach(lc_engine *e, const char *object_id) {
+    for (uint32_t i = 0; i < e->n_clutter; i++) {
+        if (strcmp(lc_drt_ops_object(e->clutter[i])->id, object_id) != 0) continue;
+        for (uint32_t k = 0; k < e->n_clutter_active; k++)
+            if (e->clutter_active[k] == e->clutter[i]) {
+                memmove(e->clutter_active + k, e->clutter_active + k + 1,
+                        (e->n_clutter_active - k - 1) * sizeof *e->clutter_active);
+                e->n_clutter_active--;
+                break;
+            }
+        lc_drt_ops_release(e->clutter[i]);
+        memmove(e->clutter + i, e->clutter + i + 1, (e->n_clutter - i - 1) * sizeof *e->clutter);
+        e->n_clutter--;
+        e->clutter_dirty = 1;
+        return;
+    }
+}
+
+int lc_engine_clutter_active(const lc_engine *e, const char *object_id) {
+    for (uint32_t k = 0; k < e->n_clutter_active; k++)
+        if (strcmp(lc_drt_ops_object(e->clutter_active[k])->id, object_id) == 0) return 1;
+    return 0;
+}
+
+/* Releases the operators whose object moved, hid or left; the rest apply, and their objects
+ * leave DNRT (*dnrt_objects: the objects DNRT gets). -1 out of memory. */
+static int engine_clutter_reconcile(lc_engine *e, const lc_engine_state *st, const lc_engine_object **dnrt_objects) {
+    *dnrt_objects = st->objects;
+    e->n_clutter_active = 0;
+    for (uint32_t i = 0; i < e->n_clutter;) {
+        const lc_engine_object *want = lc_drt_ops_object(e->clutter[i]), *found = NULL;
+        for (uint32_t k = 0; k < st->n_objects && !found; k++)
+            if (strcmp(st->objects[k].id, want->id) == 0) found = &st->objects[k];
+        if (!found || !found->visible || !lc_drt_ops_match(e->clutter[i], found)) {
+            lc_drt_ops_release(e->clutter[i]);
+            memmove(e->clutter + i, e->clutter + i + 1, (e->n_clutter - i - 1) * sizeof *e->clutter);
+            e->n_clutter--;
+            e->clutter_dirty = 1;
+            continue;
+        }
+        e->clutter_active[e->n_clutter_active++] = e->clutter[i++];
+    }
+    if (!e->n_clutter_active) return 0;
+    lc_engine_object *o = realloc(e->dnrt_objects, (st->n_objects ? st->n_objects : 1) * sizeof *o);
+    if (!o) return -1;
+    e->dnrt_objects = o;
+    memcpy(o, st->objects, st->n_objects * sizeof *o);
+    for (uint32_t k = 0; k < st->n_objects; k++)
+        if (lc_engine_clutter_active(e, o[k].id)) o[k].dnrt_off = 1;
+    *dnrt_objects = o;
+    return 0;
+}
+
+/* The direct light at every active clutter object's patch elements. */
+static void engine_clutter_direct(lc_engine *e, const lc_engine_state *st) {
+    uint64_t key0 = 1ull << 31;
+    for (uint32_t i = 0; i < e->n_clutter_active; i++) {
+        engine_clutter_job cj = {{e, st->lights, st->n_lights}, lc_drt_elements_get(e->clutter_active[i]), key0};
+        lc_parallel_for(e->threads, cj.el.n, 64, engine_clutter_direct_range, &cj);
+        lc_drt_elements_lit(e->clutter_active[i]);
+        key0 += cj.el.n;
+    }
+}
+
+/* B0 = pi * emission + albedo * (direct + sky) per surfel; the sky transfer is computed once. */
+static int engine_compute_b0(lc_engine *e, const lc_engine_state *st, const float *emission, char *err, size_t errlen) {
+    const lc_lcb_view *v = e->v;
+    int sky_on = st->environment.kind != LC_ENV_NONE && st->environment.intensity > 0;
+    if (sky_on && !e->sky_valid) {
+        if (!e->sky_t) e->sky_t = calloc((size_t)v->n_surfels * 9, sizeof(float));
+        if (!e->sky_t) {
+            lc_set_err(err, errlen, "out of memory for the sky transfer");
+            return -1;
+        }
+        lc_parallel_for(e->threads, v->n_surfels, 256, engine_sky_range, e);
+        e->sky_valid = 1;
+    }
+    /* Sky radiance SH (L2). */
+    float sky[9][3] = {{0}};
+    if (sky_on) {
+        if (st->environment.kind == LC_ENV_CONSTANT)
+            for (int k = 0; k < 3; k++) sky[0][k] = st->environment.color[k] * (float)sqrt(4.0 * M_PI);
+        else memcpy(sky, st->environment.sh, sizeof sky);
+        for (int j = 0; j < 9; j++)
+            for (int k = 0; k < 3; k++) sky[j][k] *= st->environment.intensity;
+    }
+    for (uint32_t s = 0; s < v->n_surfels; s++) {
+        const lc_lcb_surfel *sf = &v->surfels[s];
+        for (int k = 0; k < 3; k++) {
+            float es = 0;
+            if (sky_on)
+                for (int j = 0; j < 9; j++) es += sky[j][k] * e->sky_t[9 * (size_t)s + j];
+            float em = st->material_emission ? emission[3 * sf->material + k] : sf->emission[k];
+            e->b0[3 * s + k] = (float)M_PI * em + sf->albedo[k] * (e->e_direct[3 * s + k] + fmaxf(0.0f, es));
+        }
+    }
     return 0;
 }
 
@@ -509,7 +667,15 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     int emission_changed = first || memcmp(emission, e->emission, nm * sizeof(float)) != 0;
     int env_changed = first || memcmp(&st->environment, &e->env, sizeof st->environment) != 0;
     int settings_changed = first || memcmp(&st->settings, &e->settings, sizeof st->settings) != 0;
-    if (!(lights_changed || objects_changed || emission_changed || env_changed || settings_changed) &&
+    const lc_engine_object *dnrt_objects;
+    if (engine_clutter_reconcile(e, st, &dnrt_objects) != 0) {
+        free(emission);
+        lc_set_err(err, errlen, "out of memory");
+        return -1;
+    }
+    int clutter_changed = e->clutter_dirty;
+    if (!(lights_changed || objects_changed || emission_changed || env_changed || settings_changed ||
+          clutter_changed) &&
         !st->settings.progressive) {
         free(emission);
         e->frame.revision = st->revision;
@@ -526,12 +692,16 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     }
 
     double td = lc_clock_ms();
-    if (engine_dnrt_update(e, st, first, objects_changed, lights_changed, err, errlen) != 0) {
+    if (engine_dnrt_update(e, st, dnrt_objects, first, objects_changed || clutter_changed, lights_changed, err,
+                           errlen) != 0) {
         free(emission);
         return -1;
     }
     const lc_dnrt_frame *dnrt = lc_dnrt_frame_get(e->dnrt);
     double dnrt_ms = lc_clock_ms() - td;
+    td = lc_clock_ms();
+    if (lights_changed || objects_changed || clutter_changed) engine_clutter_direct(e, st);
+    double drt_ms = lc_clock_ms() - td;
 
     double t1 = lc_clock_ms();
     uint32_t stages_run = 0;
@@ -540,36 +710,9 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
         lc_parallel_for(e->threads, v->n_surfels, 256, engine_direct_range, &job);
         stages_run |= 1u << LC_STAGE_DIRECT;
     }
-    int sky_on = st->environment.kind != LC_ENV_NONE && st->environment.intensity > 0;
-    if (sky_on && !e->sky_valid) {
-        if (!e->sky_t) e->sky_t = calloc((size_t)v->n_surfels * 9, sizeof(float));
-        if (!e->sky_t) {
-            free(emission);
-            lc_set_err(err, errlen, "out of memory for the sky transfer");
-            return -1;
-        }
-        lc_parallel_for(e->threads, v->n_surfels, 256, engine_sky_range, e);
-        e->sky_valid = 1;
-    }
-    /* Sky radiance SH (L2). */
-    float sky[9][3] = {{0}};
-    if (sky_on) {
-        if (st->environment.kind == LC_ENV_CONSTANT)
-            for (int k = 0; k < 3; k++) sky[0][k] = st->environment.color[k] * (float)sqrt(4.0 * M_PI);
-        else memcpy(sky, st->environment.sh, sizeof sky);
-        for (int j = 0; j < 9; j++)
-            for (int k = 0; k < 3; k++) sky[j][k] *= st->environment.intensity;
-    }
-    /* B0 = pi * emission + albedo * (direct + sky). */
-    for (uint32_t s = 0; s < v->n_surfels; s++) {
-        const lc_lcb_surfel *sf = &v->surfels[s];
-        for (int k = 0; k < 3; k++) {
-            float es = 0;
-            if (sky_on)
-                for (int j = 0; j < 9; j++) es += sky[j][k] * e->sky_t[9 * (size_t)s + j];
-            float em = st->material_emission ? emission[3 * sf->material + k] : sf->emission[k];
-            e->b0[3 * s + k] = (float)M_PI * em + sf->albedo[k] * (e->e_direct[3 * s + k] + fmaxf(0.0f, es));
-        }
+    if (engine_compute_b0(e, st, emission, err, errlen) != 0) {
+        free(emission);
+        return -1;
     }
     double t2 = lc_clock_ms();
 
@@ -578,7 +721,9 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
                              .reset_feedback = !st->settings.progressive || first,
                              .object_pos = e->object_pos,
                              .n_objects = st->n_objects,
-                             .dnrt = dnrt->n_objects ? dnrt : NULL};
+                             .dnrt = dnrt->n_objects ? dnrt : NULL,
+                             .drt = e->clutter_active,
+                             .n_drt = e->n_clutter_active};
     lc_engine_frame fr;
     memset(&fr, 0, sizeof fr);
     if (e->ops->run(e->impl, &in, &fr, err, errlen) != 0) {
@@ -616,6 +761,12 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     fr.dnrt_objects = dnrt->n_objects;
     fr.dnrt_receivers = dnrt->n_receivers;
     if (dnrt->n_objects) stages_run |= 1u << LC_STAGE_DNRT;
+    fr.stage_ms[LC_STAGE_DRT] += drt_ms;
+    fr.drt_objects = e->n_clutter_active;
+    for (uint32_t i = 0; i < e->n_clutter_active; i++)
+        fr.drt_receivers += lc_drt_ops_info(e->clutter_active[i]).receivers;
+    if (e->n_clutter_active) stages_run |= 1u << LC_STAGE_DRT;
+    e->clutter_dirty = 0;
     fr.stages_run = stages_run;
     fr.revision = st->revision;
     fr.total_ms = lc_clock_ms() - t0;

@@ -97,6 +97,7 @@ typedef enum {
     LC_STAGE_OBJECTS,
     LC_STAGE_CHROMA,
     LC_STAGE_DNRT, /* placing objects' receivers, their direct light, and the per-pass sums */
+    LC_STAGE_DRT,  /* clutter operators: their patches' direct light and the per-pass deltas */
     LC_STAGE_COUNT
 } lc_engine_stage;
 
@@ -120,12 +121,15 @@ typedef struct lc_engine_frame {
     const float *node_flux;        /* n_nodes*3: pulled flux (W) of the last pass, for tests/debug */
     uint32_t dnrt_objects;         /* objects with an effect on the indirect light (engine/dnrt.h) */
     uint32_t dnrt_receivers;       /* caches and objects they change */
+    uint32_t drt_objects;          /* clutter objects whose operators applied (engine/drt.h) */
+    uint32_t drt_receivers;        /* caches their operators change */
     double stage_ms[LC_STAGE_COUNT];
     double total_ms;
     uint32_t stages_run; /* bit per lc_engine_stage that ran (skipped stages: inputs unchanged) */
 } lc_engine_frame;
 
 typedef struct lc_engine lc_engine;
+typedef struct lc_drt_ops lc_drt_ops; /* engine/drt.h */
 
 /* Creates an engine over a validated bake. AUTO picks EGL on a hardware GPU and the CPU
  * backend when EGL only offers a software rasterizer, and logs the choice; if EGL creation
@@ -149,6 +153,18 @@ int lc_engine_check_state(const lc_lcb_view *bake, const lc_engine_state *state,
  * with err set (invalid state; the engine keeps its previous state). */
 int lc_engine_relight(lc_engine *e, const lc_engine_state *state, const lc_engine_frame **frame, char *err,
                       size_t errlen);
+
+/* Clutter operators (engine/drt.h) built for one object's placement. The engine takes
+ * ownership of `ops` (on failure too) and replaces any it holds for the same object id.
+ * They apply from the next relight while the state holds that object, visible, with the
+ * placement they were built for (the object is then out of DNRT); a relight that finds it
+ * moved, hidden or gone releases them, so stale operators never apply. -1 with err when the
+ * backend cannot apply them (EGL: not yet). */
+int lc_engine_clutter_attach(lc_engine *e, lc_drt_ops *ops, char *err, size_t errlen);
+/* Releases the operators held for object_id, if any (the next relight runs without them). */
+void lc_engine_clutter_detach(lc_engine *e, const char *object_id);
+/* 1 when operators for object_id applied in the last relight. */
+int lc_engine_clutter_active(const lc_engine *e, const char *object_id);
 
 /* Default settings: bounces 1 (two passes) with progressive on, so further bounces
  * accumulate over successive relights; bands = the bake's; no chroma compression; DNRT on,

@@ -9,7 +9,8 @@
  *     L_c,lm  = sum over the cache's used links of
  *               flux[node] * factor * h_l(cos alpha) * y_lm(dir)   (gather; radiance SH)
  *     E_ind[s]= irradiance at surfel s's cache for the cache normal (feedback)
- *   (after each gather, placed objects change the caches around them: engine/dnrt.h)
+ *   (after each gather, placed objects change the caches around them: engine/dnrt.h, then
+ *    clutter operators add their deltas: engine/drt.h)
  *   lightmap texel = irradiance of its cache; grid = L2 irradiance SH; objects = trilinear grid
  *
  * Irradiance from a cache's radiance SH for normal n:
@@ -22,6 +23,7 @@
 #include <stddef.h>
 
 #include "engine/dnrt.h"
+#include "engine/drt.h"
 #include "engine/engine.h"
 
 typedef struct lc_transport_input {
@@ -31,6 +33,8 @@ typedef struct lc_transport_input {
     const float *object_pos; /* n_objects*3 world positions to sample the grid at */
     uint32_t n_objects;
     const lc_dnrt_frame *dnrt; /* objects in the indirect light, applied after each gather; NULL = none */
+    lc_drt_ops *const *drt;    /* clutter operators (engine/drt.h), applied after DNRT in each pass */
+    uint32_t n_drt;
 } lc_transport_input;
 
 typedef struct lc_transport_ops {

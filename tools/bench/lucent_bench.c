@@ -15,7 +15,7 @@
 #include "util/log.h"
 
 static const char *stage_names[LC_STAGE_COUNT] = {"direct", "bounce",  "pull",   "gather", "lightmap",
-                                                  "grid",   "objects", "chroma", "dnrt"};
+                                                  "grid",   "objects", "chroma", "dnrt",   "drt"};
 
 static int cmp_double(const void *a, const void *b) {
     double x = *(const double *)a, y = *(const double *)b;

@@ -522,6 +522,23 @@ static int tcpu_dnrt_corner_list(tcpu *t, const lc_dnrt_frame *f, char *err, siz
     return 0;
 }
 
+/* Clutter operators after DNRT (engine/drt.h): intermediate passes change only the caches
+ * they gathered, the last pass all. */
+static void tcpu_drt(tcpu *t, const lc_transport_input *in, int last) {
+    const lc_engine_settings *st = &in->settings;
+    int tb = lc_transport_texel_bands(st);
+    lc_drt_target tg = {.node_flux = t->out.flux,
+                        .flux_ycocg = lc_transport_chroma(st),
+                        .cache_sh = t->out.cache_sh,
+                        .stride = t->coeff_cap,
+                        .n_texel_caches = t->v->n_texel_caches,
+                        .texel_lo = lc_transport_texel_band1(st) ? 1 : 0,
+                        .texel_nc = tb * tb,
+                        .grid_nc = (int)(st->bands * st->bands),
+                        .fresh = last ? NULL : t->feedback_cache};
+    lc_drt_apply(in->drt, in->n_drt, &tg);
+}
+
 /* --- run ------------------------------------------------------------------------------------- */
 
 static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr, char *err, size_t errlen) {
@@ -533,7 +550,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     if (lc_transport_check_settings(st, err, errlen) != 0) return -1;
     double t1;
     if (in->reset_feedback) memset(t->e_ind, 0, (size_t)v->n_surfels * 3 * sizeof(float));
-    double ms_pull = 0, ms_gather = 0, ms_bounce = 0, ms_dnrt = 0;
+    double ms_pull = 0, ms_gather = 0, ms_bounce = 0, ms_dnrt = 0, ms_drt = 0;
     if (in->dnrt && tcpu_dnrt_corner_list(t, in->dnrt, err, errlen) != 0) return -1;
 
     for (uint32_t pass = 0; pass <= st->bounces; pass++) {
@@ -573,6 +590,12 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
             ms_dnrt += t5 - t4;
             t4 = t5;
         }
+        if (in->n_drt) {
+            tcpu_drt(t, in, last);
+            double t5 = lc_clock_ms();
+            ms_drt += t5 - t4;
+            t4 = t5;
+        }
         /* Feedback for the next pass (and, progressive, for the next relight). */
         tcpu_feedback_job fj = {t, bands};
         lc_parallel_for(t->threads, v->n_surfels, 1024, tcpu_feedback_range, &fj);
@@ -590,6 +613,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     tcpu_grid(t, bands);
     fr->stage_ms[LC_STAGE_GRID] = lc_clock_ms() - t2;
     fr->stage_ms[LC_STAGE_DNRT] = ms_dnrt;
+    fr->stage_ms[LC_STAGE_DRT] = ms_drt;
     lc_transport_publish(&t->out, st, fr);
     return 0;
 }

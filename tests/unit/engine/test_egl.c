@@ -89,7 +89,7 @@ static double compare_frames(const lc_engine_frame *g, const lc_engine_frame *c,
 
 static void print_stages(const char *label, const lc_engine_frame *fr) {
     static const char *names[LC_STAGE_COUNT] = {"direct", "bounce",  "pull",   "gather", "lightmap",
-                                                "grid",   "objects", "chroma", "dnrt"};
+                                                "grid",   "objects", "chroma", "dnrt",   "drt"};
     fprintf(stderr, "  %-14s", label);
     for (int i = 0; i < LC_STAGE_COUNT; i++) fprintf(stderr, " %s %.2f", names[i], fr->stage_ms[i]);
     fprintf(stderr, " | total %.2f ms\n", fr->total_ms);
