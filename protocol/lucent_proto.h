@@ -96,7 +96,12 @@ typedef struct lc_proto_object {
     float translation[3], rotation[4], scale[3]; /* rotation normalised by the parser */
     int visible;
     int dnrt; /* 1 (default): the object affects the indirect light when its asset has transfer data */
+    int mode; /* LC_OBJECT_MODE_* (§4.5; default dynamic) */
+    /* state replies only (§5.4; never parsed): LC_OBJECT_TRANSPORT_* + 1, 0 = not written */
+    int transport;
 } lc_proto_object;
+enum { LC_OBJECT_MODE_DYNAMIC = 0, LC_OBJECT_MODE_CLUTTER, LC_OBJECT_MODE_AUTO };
+enum { LC_OBJECT_TRANSPORT_DYNAMIC = 0, LC_OBJECT_TRANSPORT_CLUTTER };
 
 typedef struct lc_proto_environment {
     int kind; /* 0 none, 1 constant, 2 sh */
@@ -246,6 +251,8 @@ typedef struct lc_proto_welcome {
     const char *geometry;                  /* path of the scene's glTF, e.g. "/scene.glb"; NULL: not sent */
     const char *const *asset_geometry;     /* per asset its glTF's path; NULL: not sent */
     const lc_proto_asset_info *asset_info; /* per asset (n_assets); NULL: not sent */
+    double clutter_rest;                   /* scene.clutter (§4.5): rest time in s; 0 = not sent */
+    uint32_t clutter_max_objects;
     const char *const *materials;
     uint32_t n_materials;
     lc_proto_limits limits;
@@ -280,6 +287,9 @@ char *lc_proto_build_ok_mr(const lc_proto_id *id, uint64_t revision, uint32_t se
 char *lc_proto_build_mr_ack(uint32_t seq, uint64_t capture_us, int replaced, uint32_t lights, double ms);
 char *lc_proto_build_error(const lc_proto_id *id, const lc_proto_error *e);
 char *lc_proto_build_changed(uint64_t revision, const char *by, const lc_proto_op *ops, uint32_t n_ops);
+/* object.transport (§5.5): transport LC_OBJECT_TRANSPORT_*; build_ms and bytes only with clutter. */
+char *lc_proto_build_object_transport(const char *object_id, int transport, uint64_t revision, double build_ms,
+                                      uint64_t bytes);
 char *lc_proto_build_state(const lc_proto_id *id, const lc_proto_state *st);
 char *lc_proto_build_pong(const lc_proto_id *id, double t, uint64_t server_time_us);
 /* One op as the JSON request that would make it (journal records). */

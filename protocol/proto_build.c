@@ -186,6 +186,10 @@ static cJSON *proto_object_json(proto_b *b, const lc_proto_object *O) {
     proto_add_floats(b, o, "scale", O->scale, 3);
     proto_add_bool(b, o, "visible", O->visible);
     proto_add_bool(b, o, "dnrt", O->dnrt);
+    static const char *const modes[] = {"dynamic", "clutter", "auto"};
+    proto_add_str(b, o, "mode", modes[O->mode >= 0 && O->mode <= 2 ? O->mode : 0]);
+    if (O->transport)
+        proto_add_str(b, o, "transport", O->transport == LC_OBJECT_TRANSPORT_CLUTTER + 1 ? "clutter" : "dynamic");
     return o;
 }
 
@@ -318,6 +322,12 @@ char *lc_proto_build_welcome(const lc_proto_id *id, const lc_proto_welcome *w) {
         proto_add(&b, scene, "asset_geometry", ag);
     }
     if (w->asset_info) proto_add(&b, scene, "asset_info", proto_asset_info_json(&b, w));
+    if (w->clutter_rest > 0) {
+        cJSON *cl = proto_chk(&b, cJSON_CreateObject());
+        proto_add_float(&b, cl, "rest", (float)w->clutter_rest);
+        proto_add_u64(&b, cl, "max_objects", w->clutter_max_objects);
+        proto_add(&b, scene, "clutter", cl);
+    }
     proto_add_strs(&b, scene, "materials", w->materials, w->n_materials);
     proto_add(&b, m, "scene", scene);
     cJSON *lim = proto_chk(&b, cJSON_CreateObject());
@@ -400,6 +410,23 @@ char *lc_proto_build_changed(uint64_t revision, const char *by, const lc_proto_o
     }
     proto_add(&b, m, "ops", types);
     proto_add(&b, m, "ids", ids);
+    return proto_finish(&b, m);
+}
+
+char *lc_proto_build_object_transport(const char *object_id, int transport, uint64_t revision, double build_ms,
+                                      uint64_t bytes) {
+    proto_b b = {0};
+    cJSON *m = proto_msg(&b, "object.transport", NULL);
+    char key[LC_PROTO_ID_MAX + 1];
+    proto_idcpy(key, object_id);
+    proto_add(&b, m, "object_id", proto_chk(&b, proto_string(key)));
+    int clutter = transport == LC_OBJECT_TRANSPORT_CLUTTER;
+    proto_add_str(&b, m, "transport", clutter ? "clutter" : "dynamic");
+    proto_add_u64(&b, m, "revision", revision);
+    if (clutter) {
+        proto_add_float(&b, m, "build_ms", (float)(build_ms > 0 ? build_ms : 0));
+        proto_add_u64(&b, m, "bytes", bytes);
+    }
     return proto_finish(&b, m);
 }
 

@@ -39,6 +39,7 @@ static const char *const proto_encoding_names[] = {"rgb9e5", "rgba16f", "f32"};
 static const char *const proto_delta_names[] = {"tiles", "residual"};
 static const char *const proto_light_type_names[] = {"point", "spot", "directional", "area"};
 static const char *const proto_shape_names[] = {"quad", "disc"};
+static const char *const proto_mode_names[] = {"dynamic", "clutter", "auto"}; /* LC_OBJECT_MODE_* */
 static const char *const proto_env_names[] = {"none", "constant", "sh"};
 
 const char *lc_proto_type_name(lc_req_type t) { return (unsigned)t < LC_REQ_COUNT ? proto_type_names[t] : "unknown"; }
@@ -615,6 +616,8 @@ static int proto_parse_object(const cJSON *o, const char *p, lc_proto_object *O,
     if (proto_bool(o, "visible", p, 0, &O->visible, err) < 0) return -1;
     O->dnrt = 1;
     if (proto_bool(o, "dnrt", p, 0, &O->dnrt, err) < 0) return -1;
+    O->mode = LC_OBJECT_MODE_DYNAMIC;
+    if (proto_enum(o, "mode", p, 0, proto_mode_names, 3, &O->mode, err) < 0) return -1;
     return 0;
 }
 

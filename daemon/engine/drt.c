@@ -138,7 +138,10 @@ lc_drt_info lc_drt_ops_info(const lc_drt_ops *o) { return o->info; }
 const lc_engine_object *lc_drt_ops_object(const lc_drt_ops *o) { return &o->object; }
 
 int lc_drt_ops_match(const lc_drt_ops *o, const lc_engine_object *obj) {
-    const lc_engine_object *a = &o->object;
+    return lc_drt_same_placement(&o->object, obj);
+}
+
+int lc_drt_same_placement(const lc_engine_object *a, const lc_engine_object *obj) {
     return strcmp(a->id, obj->id) == 0 && a->asset == obj->asset &&
         memcmp(a->translation, obj->translation, sizeof a->translation) == 0 &&
         memcmp(a->rotation, obj->rotation, sizeof a->rotation) == 0 &&
@@ -282,7 +285,7 @@ typedef struct {
     const lc_drt_builder *b;
     const lc_drt_settings *s;
     lc_drt_ops *o;
-    const volatile int *cancel;
+    const atomic_int *cancel;
     RTCScene clutter; /* the object's triangles in world space */
     float *wv;        /* its world vertices, 3 floats each (+1 padding for Embree) */
     const uint32_t *idx;
@@ -624,7 +627,7 @@ static void drt_patch_range(void *ctx, size_t begin, size_t end, int thread) {
         return;
     }
     for (size_t p = begin; p < end; p++) {
-        if (j->cancel && *j->cancel) break;
+        if (j->cancel && atomic_load_explicit(j->cancel, memory_order_relaxed)) break;
         /* its elements: a scan (patches are few, elements a few per patch) */
         uint32_t m = 0;
         lc_rng rng = lc_rng_seed(0xD27C, p);
@@ -785,7 +788,7 @@ static void drt_receiver_range(void *ctx, size_t begin, size_t end, int thread) 
         return;
     }
     for (size_t b = begin; b < end; b++) {
-        if (j->cancel && *j->cancel) break;
+        if (j->cancel && atomic_load_explicit(j->cancel, memory_order_relaxed)) break;
         size_t hi = (b + 1) * DRT_BATCH < j->n_cand ? (b + 1) * DRT_BATCH : j->n_cand;
         for (size_t ci = b * DRT_BATCH; ci < hi; ci++) drt_receiver_one(j, (uint32_t)ci, rec, thread);
     }
@@ -934,8 +937,8 @@ static size_t drt_ops_bytes(const lc_drt_ops *o) {
         (size_t)o->n_inpaint * sizeof(drt_inpaint) + (size_t)o->n_inpaint_from * sizeof(uint32_t);
 }
 
-int lc_drt_build(lc_drt_builder *b, const lc_engine_object *object, const lc_drt_settings *s,
-                 const volatile int *cancel, lc_drt_ops **out, char *err, size_t errlen) {
+int lc_drt_build(lc_drt_builder *b, const lc_engine_object *object, const lc_drt_settings *s, const atomic_int *cancel,
+                 lc_drt_ops **out, char *err, size_t errlen) {
     *out = NULL;
     double t0 = lc_clock_ms();
     if (lc_drt_check_settings(s, err, errlen) != 0) return -1;
@@ -956,7 +959,7 @@ int lc_drt_build(lc_drt_builder *b, const lc_engine_object *object, const lc_drt
     if (!j.patch_entries || !j.patch_count || drt_candidates(&j) != 0) goto oom;
     lc_parallel_for(b->threads, j.o->n_patches, 4, drt_patch_range, &j);
     lc_parallel_for(b->threads, (j.n_cand + DRT_BATCH - 1) / DRT_BATCH, 1, drt_receiver_range, &j);
-    if (cancel && *cancel) {
+    if (cancel && atomic_load(cancel)) {
         rc = 1;
         goto done;
     }

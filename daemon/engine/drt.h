@@ -44,6 +44,7 @@
  * (lc_engine_clutter_attach), which then owns them and uses them on its own thread only. */
 #ifndef LC_DRT_H
 #define LC_DRT_H
+#include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -77,8 +78,8 @@ void lc_drt_builder_release(lc_drt_builder *b);
  * validated the state). `cancel`, when not NULL, is polled between batches of receivers:
  * non-zero abandons the build (returns 1, *out NULL), so a newer placement never waits for
  * an outdated one. 0 and *out (owned by the caller) or -1 with err (out of memory). */
-int lc_drt_build(lc_drt_builder *b, const lc_engine_object *object, const lc_drt_settings *s,
-                 const volatile int *cancel, lc_drt_ops **out, char *err, size_t errlen);
+int lc_drt_build(lc_drt_builder *b, const lc_engine_object *object, const lc_drt_settings *s, const atomic_int *cancel,
+                 lc_drt_ops **out, char *err, size_t errlen);
 void lc_drt_ops_release(lc_drt_ops *ops);
 
 /* What a build made, for logs, lucent-bench and the protocol's event. */
@@ -97,6 +98,8 @@ const lc_engine_object *lc_drt_ops_object(const lc_drt_ops *ops);
 /* 1 when the operators were built for exactly this object's id, asset and placement (the
  * transform compared bit for bit: any move makes them stale). */
 int lc_drt_ops_match(const lc_drt_ops *ops, const lc_engine_object *object);
+/* 1 when a and b are the same object in the same placement (id, asset, transform). */
+int lc_drt_same_placement(const lc_engine_object *a, const lc_engine_object *b);
 
 /* --- runtime (the engine's thread) ---------------------------------------------------------- */
 

@@ -561,10 +561,17 @@ void lc_engine_clutter_detach(lc_engine *e, const char *object_id) {
     }
 }
 
-int lc_engine_clutter_active(const lc_engine *e, const char *object_id) {
+int lc_engine_clutter_info(const lc_engine *e, const char *object_id, lc_drt_info *info) {
     for (uint32_t k = 0; k < e->n_clutter_active; k++)
-        if (strcmp(lc_drt_ops_object(e->clutter_active[k])->id, object_id) == 0) return 1;
+        if (strcmp(lc_drt_ops_object(e->clutter_active[k])->id, object_id) == 0) {
+            if (info) *info = lc_drt_ops_info(e->clutter_active[k]);
+            return 1;
+        }
     return 0;
+}
+
+int lc_engine_clutter_active(const lc_engine *e, const char *object_id) {
+    return lc_engine_clutter_info(e, object_id, NULL);
 }
 
 /* Releases the operators whose object moved, hid or left; the rest apply, and their objects
@@ -576,7 +583,7 @@ static int engine_clutter_reconcile(lc_engine *e, const lc_engine_state *st, con
         const lc_engine_object *want = lc_drt_ops_object(e->clutter[i]), *found = NULL;
         for (uint32_t k = 0; k < st->n_objects && !found; k++)
             if (strcmp(st->objects[k].id, want->id) == 0) found = &st->objects[k];
-        if (!found || !found->visible || !lc_drt_ops_match(e->clutter[i], found)) {
+        if (!found || !found->visible || found->clutter_off || !lc_drt_ops_match(e->clutter[i], found)) {
             lc_drt_ops_release(e->clutter[i]);
             memmove(e->clutter + i, e->clutter + i + 1, (e->n_clutter - i - 1) * sizeof *e->clutter);
             e->n_clutter--;

@@ -52,7 +52,8 @@ typedef struct lc_engine_object {
     float rotation[4]; /* unit quaternion x, y, z, w */
     float scale[3];
     int visible;
-    int dnrt_off; /* 1: no effect on the indirect light even if the asset has transfer data (engine/dnrt.h) */
+    int dnrt_off;    /* 1: no effect on the indirect light even if the asset has transfer data (engine/dnrt.h) */
+    int clutter_off; /* 1: clutter operators attached for it are dropped (lc_engine_clutter_attach) */
 } lc_engine_object;
 
 typedef enum { LC_ENV_NONE = 0, LC_ENV_CONSTANT, LC_ENV_SH } lc_engine_env_kind;
@@ -129,7 +130,8 @@ typedef struct lc_engine_frame {
 } lc_engine_frame;
 
 typedef struct lc_engine lc_engine;
-typedef struct lc_drt_ops lc_drt_ops; /* engine/drt.h */
+typedef struct lc_drt_ops lc_drt_ops;   /* engine/drt.h */
+typedef struct lc_drt_info lc_drt_info; /* engine/drt.h */
 
 /* Creates an engine over a validated bake. AUTO picks EGL on a hardware GPU and the CPU
  * backend when EGL only offers a software rasterizer, and logs the choice; if EGL creation
@@ -158,13 +160,15 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *state, const lc_engin
  * ownership of `ops` (on failure too) and replaces any it holds for the same object id.
  * They apply from the next relight while the state holds that object, visible, with the
  * placement they were built for (the object is then out of DNRT); a relight that finds it
- * moved, hidden or gone releases them, so stale operators never apply. -1 with err when the
+ * moved, hidden, gone or clutter_off releases them, so stale operators never apply. -1 with err when the
  * backend cannot apply them (EGL: not yet). */
 int lc_engine_clutter_attach(lc_engine *e, lc_drt_ops *ops, char *err, size_t errlen);
 /* Releases the operators held for object_id, if any (the next relight runs without them). */
 void lc_engine_clutter_detach(lc_engine *e, const char *object_id);
 /* 1 when operators for object_id applied in the last relight. */
 int lc_engine_clutter_active(const lc_engine *e, const char *object_id);
+/* The same, and then *info (may be NULL) describes those operators. */
+int lc_engine_clutter_info(const lc_engine *e, const char *object_id, lc_drt_info *info);
 
 /* Default settings: bounces 1 (two passes) with progressive on, so further bounces
  * accumulate over successive relights; bands = the bake's; no chroma compression; DNRT on,

@@ -1,5 +1,5 @@
 /* compute: the relight thread (see compute.h). Locks: `lock` guards pending, latest,
- * sequence, stop, count and every lc_published refcount. */
+ * sequence, stop, count, the clutter operators handed over and every lc_published refcount. */
 #include "compute.h"
 
 #include <math.h>
@@ -47,6 +47,8 @@ struct lc_compute {
     uint64_t failures;        /* guarded by lock: relights that failed */
     uint64_t failed_revision; /* guarded by lock: revision of the last failed relight (0 = the last one succeeded) */
     char failure[256];        /* guarded by lock: why it failed */
+    lc_drt_ops **clutter_in;  /* guarded by lock: operators handed over, not yet attached */
+    uint32_t n_clutter_in, clutter_in_cap; /* guarded by lock */
 };
 
 static void compute_job_free(compute_job *j) {
@@ -64,6 +66,7 @@ static void published_free(lc_published *p) {
     free(p->grid_sh);
     free(p->object_ids);
     free(p->object_sh);
+    free(p->object_clutter);
     free(p);
 }
 
@@ -75,7 +78,7 @@ static int compute_is_discarded(const lc_compute *c, uint64_t job) {
 }
 
 /* Compute thread. */
-static lc_published *compute_publish(const lc_engine_frame *fr, compute_job *job) {
+static lc_published *compute_publish(lc_engine *e, const lc_engine_frame *fr, compute_job *job) {
     lc_published *p = calloc(1, sizeof *p);
     if (!p) return NULL;
     size_t texels = (size_t)fr->lightmap_width * fr->lightmap_height;
@@ -84,7 +87,8 @@ static lc_published *compute_publish(const lc_engine_frame *fr, compute_job *job
     p->grid_sh = malloc(cells * 27 * sizeof(float));
     p->object_sh = malloc(((size_t)fr->n_objects + 1) * 27 * sizeof(float));
     p->object_ids = malloc(((size_t)fr->n_objects + 1) * sizeof *p->object_ids);
-    if (!p->lightmap || !p->grid_sh || !p->object_sh || !p->object_ids) {
+    p->object_clutter = calloc((size_t)fr->n_objects + 1, sizeof *p->object_clutter);
+    if (!p->lightmap || !p->grid_sh || !p->object_sh || !p->object_ids || !p->object_clutter) {
         published_free(p);
         return NULL;
     }
@@ -93,6 +97,11 @@ static lc_published *compute_publish(const lc_engine_frame *fr, compute_job *job
     if (fr->n_objects) {
         memcpy(p->object_sh, fr->object_sh, (size_t)fr->n_objects * 27 * sizeof(float));
         memcpy(p->object_ids, job->object_ids, (size_t)fr->n_objects * sizeof *p->object_ids);
+    }
+    for (uint32_t i = 0; i < fr->n_objects; i++) {
+        lc_drt_info in;
+        if (!lc_engine_clutter_info(e, job->st.objects[i].id, &in)) continue;
+        p->object_clutter[i] = (lc_published_clutter){1, in.build_ms, in.bytes};
     }
     p->refs = 1;
     p->job = job->id;
@@ -175,7 +184,7 @@ static void *compute_main(void *arg) {
     for (;;) {
         pthread_mutex_lock(&c->lock);
         for (;;) {
-            if (c->pending || c->stop) break;
+            if (c->pending || c->stop || c->n_clutter_in) break;
             if (last && refine_left > 0) {
                 /* The first refinement pass waits a moment after an update's frame, so
                  * that frame reaches the clients before the passes take the cores. */
@@ -195,11 +204,23 @@ static void *compute_main(void *arg) {
         }
         compute_job *job = c->pending;
         c->pending = NULL;
+        lc_drt_ops **clutter = c->clutter_in;
+        uint32_t n_clutter = c->n_clutter_in;
+        c->clutter_in = NULL;
+        c->n_clutter_in = c->clutter_in_cap = 0;
         pthread_mutex_unlock(&c->lock);
-        if (job) {
-            compute_job_free(last);
-            last = job;
-            refine_left = job->st.settings.progressive ? c->refine_passes : 0;
+        for (uint32_t i = 0; i < n_clutter; i++)
+            if (lc_engine_clutter_attach(e, clutter[i], err, sizeof err) != 0)
+                lc_warn("compute", "clutter operators not applied: %s", err);
+        free(clutter);
+        if (!job && !last) continue;  /* operators before any state: the first relight applies them */
+        int fresh = job || n_clutter; /* a new solution: its own series of refinement passes */
+        if (fresh) {
+            if (job) {
+                compute_job_free(last);
+                last = job;
+            }
+            refine_left = last->st.settings.progressive ? c->refine_passes : 0;
             pass = 0;
         } else {
             refine_left--;
@@ -213,9 +234,9 @@ static void *compute_main(void *arg) {
             refine_left = 0;
         } else {
             double change = compute_frame_change(&refine, fr);
-            if (job) refine.last_change = -1; /* a new revision: its passes start a new series */
+            if (fresh) refine.last_change = -1; /* a new solution: its passes start a new series */
             else if (compute_refine_done(&refine, change, c->refine_tolerance)) refine_left = 0;
-            p = compute_publish(fr, last);
+            p = compute_publish(e, fr, last);
             if (!p) {
                 snprintf(err, sizeof err, "out of memory publishing the frame");
             } else {
@@ -254,7 +275,7 @@ static void *compute_main(void *arg) {
         pthread_mutex_unlock(&c->lock);
         c->wake(c->wake_arg); /* lucentd: lws_cancel_service(), the only lws call made off the service thread */
         clock_gettime(CLOCK_MONOTONIC, &refine_due);
-        if (job) refine_due.tv_nsec += (long)c->refine_delay_ms * 1000000L; /* later passes: back to back */
+        if (fresh) refine_due.tv_nsec += (long)c->refine_delay_ms * 1000000L; /* later passes: back to back */
         refine_due.tv_sec += refine_due.tv_nsec / 1000000000L;
         refine_due.tv_nsec %= 1000000000L;
     }
@@ -395,6 +416,26 @@ uint64_t lc_compute_count(lc_compute *c) {
 
 const char *lc_compute_backend(lc_compute *c) { return c->backend_name; }
 
+void lc_compute_clutter_give(lc_compute *c, lc_drt_ops *ops) {
+    if (!ops) return;
+    pthread_mutex_lock(&c->lock);
+    if (!c->stop && c->n_clutter_in == c->clutter_in_cap) {
+        uint32_t cap = c->clutter_in_cap ? 2 * c->clutter_in_cap : 4;
+        lc_drt_ops **grown = realloc(c->clutter_in, cap * sizeof *grown);
+        if (grown) c->clutter_in = grown, c->clutter_in_cap = cap;
+    }
+    int stopping = c->stop;
+    if (stopping || c->n_clutter_in == c->clutter_in_cap) {
+        pthread_mutex_unlock(&c->lock);
+        if (!stopping) lc_warn("compute", "out of memory handing over clutter operators; the object stays dynamic");
+        lc_drt_ops_release(ops);
+        return;
+    }
+    c->clutter_in[c->n_clutter_in++] = ops;
+    pthread_cond_broadcast(&c->cond);
+    pthread_mutex_unlock(&c->lock);
+}
+
 void lc_compute_stop(lc_compute *c) {
     if (!c) return;
     pthread_mutex_lock(&c->lock);
@@ -412,6 +453,8 @@ void lc_compute_release(lc_compute *c) {
     if (!c) return;
     if (!c->joined) lc_compute_stop(c);
     lc_published_release(c, c->latest); /* sessions released theirs before (lc_compute_stop's contract) */
+    for (uint32_t i = 0; i < c->n_clutter_in; i++) lc_drt_ops_release(c->clutter_in[i]); /* given while stopping */
+    free(c->clutter_in);
     pthread_mutex_destroy(&c->lock);
     pthread_cond_destroy(&c->cond);
     free(c);

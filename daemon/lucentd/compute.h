@@ -7,12 +7,20 @@
 #define LC_COMPUTE_H
 #include <stdint.h>
 
+#include "engine/drt.h"
 #include "lcb/lcb.h"
 #include "state.h"
 
 /* Called on the compute thread after each publication or failed relight; it must be safe
  * to call from another thread (lws_cancel_service is). */
 typedef void (*lc_compute_wake_fn)(void *arg);
+
+/* Per object of a result: whether its clutter operators applied (PROTOCOL.md §5.5). */
+typedef struct lc_published_clutter {
+    int on;
+    double build_ms;
+    uint64_t bytes;
+} lc_published_clutter;
 
 /* One relight's outputs. Immutable once published; free with lc_published_release. */
 typedef struct lc_published {
@@ -29,7 +37,8 @@ typedef struct lc_published {
     float *grid_sh; /* cells*27 */
     uint32_t n_objects;
     char (*object_ids)[LC_PROTO_ID_MAX + 1];
-    float *object_sh; /* n_objects*27 */
+    float *object_sh;                     /* n_objects*27 */
+    lc_published_clutter *object_clutter; /* n_objects: the clutter operators that applied */
 } lc_published;
 
 typedef struct lc_compute lc_compute;
@@ -66,6 +75,11 @@ lc_published *lc_compute_take_newer(lc_compute *c, uint64_t *seen);
 void lc_published_release(lc_compute *c, lc_published *p);
 /* Service thread: another reference to p (which the caller holds). */
 lc_published *lc_published_ref(lc_compute *c, lc_published *p);
+/* Any thread: hands clutter operators (engine/drt.h; ownership moves, also when stopping) to
+ * the compute thread, which attaches them to the engine and relights the last state, so the
+ * next publication applies them if the object is still where they were built for. A CPU
+ * backend only: with another, they are released and logged. */
+void lc_compute_clutter_give(lc_compute *c, lc_drt_ops *ops);
 /* Relights finished so far (for /metrics). */
 uint64_t lc_compute_count(lc_compute *c);
 

@@ -128,6 +128,13 @@ static const lc_opt config_options[] = {
     {"mr-max-sessions", LC_OPT_INT, OFF(mr_max_sessions), 1, 16, "4", NULL, "concurrent MR sessions", NULL, NULL},
     {"mr-max-rate", LC_OPT_FLOAT, OFF(mr_max_rate), 0.1, 60, "30", NULL,
      "MR upload frames per second a session may send (a session asks for at most this)", NULL, NULL},
+    {"clutter", LC_OPT_BOOL, OFF(clutter), 0, 1, "true", NULL,
+     "build DRT operators for objects in mode clutter or auto (PROTOCOL.md §4.5; CPU backend), in the background", NULL,
+     NULL},
+    {"clutter-rest", LC_OPT_FLOAT, OFF(clutter_rest), 0.1, 3600, "2", NULL,
+     "seconds an object in mode auto must rest before its operators are built", "S", NULL},
+    {"clutter-max-objects", LC_OPT_INT, OFF(clutter_max_objects), 1, 4096, "64", NULL,
+     "objects that may hold clutter operators at once (a few MiB each); further ones stay dynamic", NULL, NULL},
     {"log-level", LC_OPT_ENUM, OFF(log_level), 0, 0, "info", "debug|info|warn|error", "log level", NULL, NULL},
     {"check-config", LC_OPT_BOOL, OFF(check_config), 0, 1, "false", NULL,
      "validate the configuration and the bake file, then exit (0 valid, 2 invalid)", NULL, NULL},
@@ -256,6 +263,8 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
     RESTART_IF(max_objects, "max-objects")
     RESTART_IF(tile, "tile")
     RESTART_IF(recover, "recover")
+    RESTART_IF(clutter, "clutter")
+    RESTART_IF(clutter_max_objects, "clutter-max-objects")
 #undef RESTART_IF
     memcpy(dst->controller_tokens, src->controller_tokens, sizeof dst->controller_tokens);
     memcpy(dst->viewer_tokens, src->viewer_tokens, sizeof dst->viewer_tokens);
@@ -271,6 +280,7 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
     dst->delta_threshold = src->delta_threshold;
     dst->compact_bytes = src->compact_bytes;
     dst->log_level = src->log_level;
+    dst->clutter_rest = src->clutter_rest;
 }
 
 /* 1 when a token is a placeholder left from an example config ("CHANGE-ME", "<token>", ...). */

@@ -41,13 +41,16 @@ typedef struct lc_config {
     int bounces;             /* initial feedback bounces per relight (a snapshot's settings win) */
     int tile;                /* lightmap tile size for delta frames */
     int keyframe_interval;
-    double delta_threshold; /* relative change that marks a tile dirty */
-    int compact_bytes;      /* journal size that triggers a snapshot */
-    int mr;                 /* MR sessions accepted (PROTOCOL.md §8) */
-    int mr_max_frame;       /* bytes per upload frame */
-    int mr_max_lights;      /* area lights per MR frame */
-    int mr_max_sessions;    /* concurrent MR sessions */
-    double mr_max_rate;     /* upload frames per second per session */
+    double delta_threshold;  /* relative change that marks a tile dirty */
+    int compact_bytes;       /* journal size that triggers a snapshot */
+    int mr;                  /* MR sessions accepted (PROTOCOL.md §8) */
+    int mr_max_frame;        /* bytes per upload frame */
+    int mr_max_lights;       /* area lights per MR frame */
+    int mr_max_sessions;     /* concurrent MR sessions */
+    double mr_max_rate;      /* upload frames per second per session */
+    int clutter;             /* clutter operators built for objects in mode clutter / auto (PROTOCOL.md §4.5) */
+    double clutter_rest;     /* seconds an auto object rests before its operators are built */
+    int clutter_max_objects; /* objects that may hold operators at once */
     int log_level;
     int check_config;
     int recover; /* start from the snapshot + the journal's valid prefix, setting the rest aside */

@@ -371,6 +371,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         server_report_relight_failure(s);
         lc_published *p = lc_compute_take_newer(s->compute, &s->pub_seq);
         if (!p) return 0;
+        server_clutter_published(s, p); /* object.transport events go out before the frames */
         for (lc_session *o = s->sessions; o; o = o->next) {
             lc_published_release(s->compute, o->frame); /* a newer frame replaces an unsent one */
             o->frame = lc_published_ref(s->compute, p);
@@ -407,6 +408,7 @@ static void server_tick(lws_sorted_usec_list_t *sul) {
         if (ss->authed && session_frame_due(ss, now)) session_want_write(ss);
     }
     lc_journal_tick(s->journal, &s->state);
+    server_clutter_tick(s);
     lws_sul_schedule(s->ctx, 0, &s->tick, server_tick, 250 * LWS_US_PER_MS);
 }
 
@@ -636,7 +638,8 @@ static void server_release(lc_server *s, int clean) {
      * which must not touch a destroyed context. Sessions then release their frames as the
      * context closes them, and only then is the compute object freed. */
     lc_compute_stop(s->compute);
-    server_mr_stop(s); /* the MR worker's wake too */
+    server_clutter_stop(s); /* its deliveries go to the compute object */
+    server_mr_stop(s);      /* the MR worker's wake too */
     if (s->ctx) {
         lws_sul_cancel(&s->tick);
         lws_context_destroy(s->ctx);
@@ -696,7 +699,7 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
         lc_error("server", "%s", err);
         goto done;
     }
-    if (server_mr_start(s, err, sizeof err) != 0) {
+    if (server_mr_start(s, err, sizeof err) != 0 || server_clutter_start(s, err, sizeof err) != 0) {
         lc_error("server", "%s", err);
         goto done;
     }

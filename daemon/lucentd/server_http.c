@@ -166,6 +166,16 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
                mr_processed);
     metric_u64(body, cap, &n, "lucent_mr_frames_replaced_total", "counter",
                "MR frames dropped unprocessed because a newer one arrived (latest wins).", mr_replaced);
+    lc_clw_counts cc = lc_clw_counts_get(s->clw);
+    metric_u64(body, cap, &n, "lucent_clutter_objects", "gauge",
+               "Objects whose clutter operators apply (PROTOCOL.md §5.5).", s->n_announced);
+    metric_u64(body, cap, &n, "lucent_clutter_builds_total", "counter", "Clutter operator builds finished.", cc.built);
+    metric_u64(body, cap, &n, "lucent_clutter_builds_cancelled_total", "counter",
+               "Clutter operator builds abandoned because the object moved, left or changed mode.", cc.cancelled);
+    metric_u64(body, cap, &n, "lucent_clutter_builds_failed_total", "counter", "Clutter operator builds that failed.",
+               cc.failed);
+    metric_u64(body, cap, &n, "lucent_clutter_builds_queued", "gauge", "Clutter operator builds waiting or running.",
+               (uint64_t)cc.queued + (uint64_t)cc.building);
     metric_head(body, cap, &n, "lucent_errors_total", "counter", "Error replies sent, by code.");
     for (int i = 0; i < LC_ERR_COUNT; i++)
         http_append(body, cap, &n, "lucent_errors_total{code=\"%s\"} %llu\n",

@@ -6,6 +6,7 @@
 #define LC_SERVER_INTERNAL_H
 #include <libwebsockets.h>
 
+#include "clutter_worker.h"
 #include "compute.h"
 #include "config.h"
 #include "journal.h"
@@ -71,6 +72,15 @@ typedef struct lc_session {
     uint8_t *tx;
     size_t tx_cap;
 } lc_session;
+
+/* An object in mode clutter or auto (server_clutter.c). */
+typedef struct server_clutter_entry {
+    char id[LC_PROTO_ID_MAX + 1];
+    lc_engine_object placed; /* its placement when last seen */
+    double rested_since_ms;  /* when it got there (auto objects rest from then) */
+    int requested;           /* operators for `placed` were asked of the worker */
+    int over_limit;          /* --clutter-max-objects kept it dynamic (logged once) */
+} server_clutter_entry;
 
 /* Failed hellos per peer address (see server_auth_peer_for). */
 #define SERVER_AUTH_PEERS 256
@@ -142,6 +152,14 @@ struct lc_server {
     uint64_t mr_frames_in, mr_bytes_in;
     double mr_last_ms;
     lc_mr_timings mr_last_timings;
+    /* clutter objects (server_clutter.c) */
+    lc_clw *clw; /* NULL: no operators are built (--clutter false, or not the CPU backend) */
+    server_clutter_entry *clutter;
+    uint32_t n_clutter, cap_clutter;
+    uint32_t clutter_waiting;                       /* auto objects resting towards promotion */
+    char (*clutter_announced)[LC_PROTO_ID_MAX + 1]; /* objects clients were told are clutter (§5.5) */
+    uint32_t n_announced, cap_announced;
+    uint64_t clutter_events; /* object.transport broadcasts */
 };
 
 /* server.c */
@@ -175,6 +193,21 @@ void server_mr_frame(lc_server *s, lc_session *ss, const uint8_t *data, size_t l
 void server_mr_collect(lc_server *s);
 /* The stream's frame from the MR light (mr.vpl) into cp; its length, 0 when out of memory. */
 size_t server_mr_encode_vpl(lc_server *s, lc_session *ss, lc_encoding enc, uint64_t sequence);
+
+/* server_clutter.c */
+/* Main thread, after the compute thread started: the clutter worker (when --clutter and the CPU
+ * backend), then builds for the restored state's clutter objects. 0 or -1 with err. */
+int server_clutter_start(lc_server *s, char *err, size_t errlen);
+/* After lc_compute_stop, before lc_compute_release (the worker delivers to it). */
+void server_clutter_stop(lc_server *s);
+/* After every change of s->state: asks for, or cancels, operator builds. */
+void server_clutter_sync(lc_server *s);
+/* Every tick: auto objects that have rested long enough. */
+void server_clutter_tick(lc_server *s);
+/* On each new publication: object.transport events for what changed. */
+void server_clutter_published(lc_server *s, const lc_published *p);
+/* 1 when clients were told object_id is clutter (state replies, §5.4). */
+int server_clutter_announced(const lc_server *s, const char *object_id);
 
 /* server_geometry.c */
 /* Main thread, before the loop: builds the scene's and the assets' glTF. 0 or -1 (logged). */

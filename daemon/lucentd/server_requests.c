@@ -82,6 +82,10 @@ static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) 
     w.geometry = s->n_glbs ? s->glbs[0].path : NULL;
     w.asset_geometry = s->n_glbs ? s->asset_paths : NULL;
     w.asset_info = info;
+    if (s->clw) {
+        w.clutter_rest = s->cfg->clutter_rest;
+        w.clutter_max_objects = (uint32_t)s->cfg->clutter_max_objects;
+    }
     w.materials = s->material_names;
     w.n_materials = s->v->n_materials;
     w.limits = s->limits;
@@ -125,6 +129,7 @@ static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *
         lc_state_release(&s->state);
         s->state = before;
         lc_compute_submit(s->compute, &s->state, NULL);
+        server_clutter_sync(s);
         session_error(s, ss, &req->id, LC_ERR_INTERNAL, "",
                       lc_journal_broken(s->journal)
                           ? "the change could not be stored, and the journal refuses changes until it recovers "
@@ -133,6 +138,7 @@ static void server_change(lc_server *s, lc_session *ss, const lc_proto_request *
         return;
     }
     lc_state_release(&before);
+    server_clutter_sync(s);
     session_send(ss, lc_proto_build_ok(&req->id, s->state.revision));
     for (lc_session *o = s->sessions; o; o = o->next)
         if (o != ss && o->authed)
@@ -228,7 +234,21 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
     case LC_REQ_STATE_GET: {
         lc_proto_state ps;
         lc_proto_material_state *mats = NULL;
-        if (lc_state_to_proto(&s->state, &ps, &mats) == 0) session_send(ss, lc_proto_build_state(&req.id, &ps));
+        lc_proto_object *objs = NULL;
+        if (lc_state_to_proto(&s->state, &ps, &mats) == 0 &&
+            (objs = malloc((ps.n_objects ? ps.n_objects : 1) * sizeof *objs))) {
+            /* §5.4: each object with its transport, as the clients were told (§5.5) */
+            memcpy(objs, ps.objects, ps.n_objects * sizeof *objs);
+            for (uint32_t i = 0; i < ps.n_objects; i++)
+                objs[i].transport = 1 +
+                    (server_clutter_announced(s, objs[i].id) ? LC_OBJECT_TRANSPORT_CLUTTER
+                                                             : LC_OBJECT_TRANSPORT_DYNAMIC);
+            ps.objects = objs;
+            session_send(ss, lc_proto_build_state(&req.id, &ps));
+        } else {
+            session_error(s, ss, &req.id, LC_ERR_INTERNAL, "", "out of memory");
+        }
+        free(objs);
         free(mats);
         break;
     }

@@ -391,6 +391,18 @@ int lc_state_to_proto(const lc_state *s, lc_proto_state *out, lc_proto_material_
     return 0;
 }
 
+void lc_state_object_to_engine(const lc_state *s, const lc_proto_object *p, lc_engine_object *o) {
+    memset(o, 0, sizeof *o);
+    snprintf(o->id, sizeof o->id, "%s", p->id);
+    o->asset = (uint32_t)state_asset(s->scene, p->asset);
+    memcpy(o->translation, p->translation, sizeof o->translation);
+    memcpy(o->rotation, p->rotation, sizeof o->rotation);
+    memcpy(o->scale, p->scale, sizeof o->scale);
+    o->visible = p->visible;
+    o->dnrt_off = !p->dnrt;
+    o->clutter_off = p->mode == LC_OBJECT_MODE_DYNAMIC;
+}
+
 int lc_state_to_engine(const lc_state *s, lc_engine_state *out, lc_engine_light **lights, lc_engine_object **objects,
                        float **emission) {
     const lc_lcb_view *v = s->scene;
@@ -427,17 +439,7 @@ int lc_state_to_engine(const lc_state *s, lc_engine_state *out, lc_engine_light 
             l->tangent[1] = fabsf(l->direction[0]) < 0.9f ? 0.0f : 1.0f;
         }
     }
-    for (uint32_t i = 0; i < s->n_objects; i++) {
-        const lc_proto_object *p = &s->objects[i];
-        lc_engine_object *o = &(*objects)[i];
-        snprintf(o->id, sizeof o->id, "%s", p->id);
-        o->asset = (uint32_t)state_asset(v, p->asset);
-        memcpy(o->translation, p->translation, sizeof o->translation);
-        memcpy(o->rotation, p->rotation, sizeof o->rotation);
-        memcpy(o->scale, p->scale, sizeof o->scale);
-        o->visible = p->visible;
-        o->dnrt_off = !p->dnrt;
-    }
+    for (uint32_t i = 0; i < s->n_objects; i++) lc_state_object_to_engine(s, &s->objects[i], &(*objects)[i]);
     memcpy(*emission, s->emission, (size_t)v->n_materials * 3 * sizeof **emission);
     memset(out, 0, sizeof *out);
     out->lights = *lights;

@@ -56,5 +56,7 @@ int lc_state_to_proto(const lc_state *s, lc_proto_state *out, lc_proto_material_
  * (caller frees). */
 int lc_state_to_engine(const lc_state *s, lc_engine_state *out, lc_engine_light **lights, lc_engine_object **objects,
                        float **emission);
+/* One object of s (its asset validated) in the engine's form. */
+void lc_state_object_to_engine(const lc_state *s, const lc_proto_object *p, lc_engine_object *o);
 
 #endif

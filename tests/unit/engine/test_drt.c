@@ -312,7 +312,7 @@ static void test_cube_on_floor(void) {
     CHECK(fr->drt_objects == 0 && same_lightmap(fr, dnrt), "R5: detaching gives the DNRT lightmap");
 
     /* A cancelled build returns nothing. */
-    volatile int cancel = 1;
+    atomic_int cancel = 1;
     lc_drt_settings ds = lc_drt_default_settings();
     lc_drt_ops *none = (lc_drt_ops *)1;
     CHECK(lc_drt_build(b, &cube, &ds, &cancel, &none, err, sizeof err) == 1 && none == NULL,

@@ -1510,6 +1510,111 @@ static void test_nul_escape(void) {
     CHECK(lc_proto_parse_state(st, strlen(st), &ps, &e) == -1 && !strcmp(e.code, "invalid"), "state with NUL");
 }
 
+/* Issue 19: object.set "mode" (§4.5), state objects' "transport" (§5.4), object.transport (§5.5),
+ * welcome.scene.clutter. */
+static void test_clutter_fields(void) {
+    lc_proto_request r;
+    PARSE_OK("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\"}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].object.mode == LC_OBJECT_MODE_DYNAMIC && r.ops[0].object.transport == 0,
+          "mode defaults to dynamic");
+    lc_proto_request_release(&r);
+    const char *modes[] = {"dynamic", "clutter", "auto"};
+    for (int m = 0; m < 3; m++) {
+        char msg[160];
+        snprintf(msg, sizeof msg, "{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"c\",\"mode\":\"%s\"}}",
+                 modes[m]);
+        PARSE_OK(msg, &r);
+        CHECK(r.n_ops == 1 && r.ops[0].object.mode == m, "mode %s", modes[m]);
+        char *s = r.n_ops == 1 ? lc_proto_build_op(&r.ops[0]) : NULL;
+        char want[32];
+        snprintf(want, sizeof want, "\"mode\":\"%s\"", modes[m]);
+        CHECK(s && strstr(s, want) && !strstr(s, "transport"), "journal op keeps the mode, no transport: %s",
+              s ? s : "NULL");
+        lc_proto_request b;
+        if (s) {
+            PARSE_OK(s, &b);
+            CHECK(b.n_ops == 1 && !memcmp(&r.ops[0], &b.ops[0], sizeof b.ops[0]), "mode op round trip: %s", s);
+            lc_proto_request_release(&b);
+        }
+        free(s);
+        lc_proto_request_release(&r);
+    }
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"c\",\"mode\":\"static\"}}", "invalid",
+            "/object/mode");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"c\",\"mode\":3}}", "invalid",
+            "/object/mode");
+    INVALID("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"c\",\"mode\":\"\"}}", "invalid",
+            "/object/mode");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"c\",\"mode\":"
+            "null}}]}",
+            "invalid", "/ops/0/object/mode");
+    /* transport is the server's: a client's is ignored */
+    PARSE_OK("{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"c\",\"transport\":\"clutter\"}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].object.transport == 0, "transport in object.set is ignored");
+    lc_proto_request_release(&r);
+
+    /* state: transport written only when set; an older snapshot (no mode) reads as dynamic */
+    lc_proto_object objs[2] = {{.id = "a",
+                                .asset = "c",
+                                .rotation = {0, 0, 0, 1},
+                                .scale = {1, 1, 1},
+                                .visible = 1,
+                                .dnrt = 1,
+                                .mode = LC_OBJECT_MODE_AUTO,
+                                .transport = 1 + LC_OBJECT_TRANSPORT_CLUTTER},
+                               {.id = "b",
+                                .asset = "c",
+                                .rotation = {0, 0, 0, 1},
+                                .scale = {1, 1, 1},
+                                .visible = 1,
+                                .dnrt = 1,
+                                .mode = LC_OBJECT_MODE_CLUTTER}};
+    lc_proto_state st = {0};
+    st.objects = objs;
+    st.n_objects = 2;
+    st.settings.present = LC_SET_ALL;
+    st.settings.bounces = 1;
+    st.settings.bands = st.settings.chroma_bands = 3;
+    char *text = lc_proto_build_state(NULL, &st);
+    cJSON *j = text ? cJSON_Parse(text) : NULL;
+    const cJSON *ja = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "objects"), 0),
+                *jb = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "objects"), 1);
+    CHECK(cJSON_IsString(cJSON_GetObjectItem(ja, "mode")) &&
+              !strcmp(cJSON_GetObjectItem(ja, "mode")->valuestring, "auto") &&
+              cJSON_IsString(cJSON_GetObjectItem(ja, "transport")) &&
+              !strcmp(cJSON_GetObjectItem(ja, "transport")->valuestring, "clutter") &&
+              !cJSON_GetObjectItem(jb, "transport"),
+          "state objects: mode, and transport only when the server set it: %s", text ? text : "NULL");
+    cJSON_Delete(j);
+    lc_proto_parsed_state p;
+    lc_proto_error e;
+    int rc = text ? lc_proto_parse_state(text, strlen(text), &p, &e) : -1;
+    CHECK(rc == 0 && p.n_objects == 2 && p.objects[0].mode == LC_OBJECT_MODE_AUTO &&
+              p.objects[1].mode == LC_OBJECT_MODE_CLUTTER && p.objects[0].transport == 0,
+          "state mode round trip (transport not read back)");
+    if (rc == 0) lc_proto_parsed_state_free(&p);
+    free(text);
+
+    /* object.transport */
+    char *ev = lc_proto_build_object_transport("box", LC_OBJECT_TRANSPORT_CLUTTER, 12, 812.5, 6332416);
+    CHECK(ev &&
+              !strcmp(ev,
+                      "{\"type\":\"object.transport\",\"object_id\":\"box\",\"transport\":\"clutter\",\"revision\":"
+                      "12,\"build_ms\":812.5,\"bytes\":6332416}"),
+          "object.transport clutter: %s", ev ? ev : "NULL");
+    free(ev);
+    ev = lc_proto_build_object_transport("box", LC_OBJECT_TRANSPORT_DYNAMIC, 13, 812.5, 6332416);
+    CHECK(ev &&
+              !strcmp(ev,
+                      "{\"type\":\"object.transport\",\"object_id\":\"box\",\"transport\":\"dynamic\",\"revision\":"
+                      "13}"),
+          "object.transport dynamic: no build fields: %s", ev ? ev : "NULL");
+    free(ev);
+    ev = lc_proto_build_object_transport("bad\xff", LC_OBJECT_TRANSPORT_DYNAMIC, 1, 0, 0);
+    CHECK(ev && lc_proto_utf8_valid(ev, strlen(ev)), "object.transport is valid UTF-8 for any id");
+    free(ev);
+}
+
 /* Issue 17: object.set "dnrt", settings.set "dnrt" / "dnrt_blockers" (defaults, type errors
  * naming the field, journal and snapshot round trips, older snapshots without them) and
  * welcome.scene.asset_info. */
@@ -2011,6 +2116,7 @@ int main(void) {
     test_utf8_builders();
     test_nul_escape();
     test_dnrt_fields();
+    test_clutter_fields();
     test_mr_hello();
     test_mr_begin();
     test_mr_builders();
