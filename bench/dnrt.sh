@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# DNRT against the path tracer: the change dE = E(with object) - E(without) an object makes
-# to the lightmap, per texel, engine against lucent-ref (`lucent-ref delta`), for the engine
-# with DNRT (the default bake) and without it (the same bake with --no-transfer: placed
-# objects only shadow the direct light). Cases on the embedded Cornell box: a white cube on
+# DNRT and DRT against the path tracer: the change dE = E(with object) - E(without) an object
+# makes to the lightmap, per texel, engine against lucent-ref (`lucent-ref delta`), for the
+# engine with DNRT (the default bake), with DRT (the same bake, the objects in mode clutter:
+# their operators built as lucentd builds them once they rest) and without either (the bake
+# with --no-transfer: placed objects only shadow the direct light). Cases on the embedded Cornell box: a white cube on
 # the floor, a red cube by the wall, both side by side; with --sponza, a 2 m white cube in
 # sunlit Sponza (../shared/scenes).
 #
@@ -73,14 +74,19 @@ run_scene() { # name source scale-flags lights-json spp case=objects...
             step "$name: reference '$c' ($sspp spp)"
             "$ref" render "$dir/dnrt.lcb" --state "$dir/$c.json" --out "$dir/ref-$c" --spp "$sspp" --quiet
         fi
-        for b in dnrt plain; do
+        # the same state with every object in mode clutter (DRT operators, PROTOCOL.md §4.5)
+        sed 's/"visible":true}/"visible":true,"mode":"clutter"}/g' "$dir/$c.json" >"$dir/$c-clutter.json"
+        for b in dnrt drt plain; do
             step "$name: engine '$c' ($b)"
-            "$ref" fidelity "$dir/$b.lcb" --state "$dir/$c.json" --reference "$dir/ref-$c" --out "$dir/fid-$b-$c" \
-                --bound-rays 0 --quiet >/dev/null
+            local lcb="$dir/$b.lcb" st="$dir/$c.json"
+            [ "$b" = drt ] && lcb="$dir/dnrt.lcb" st="$dir/$c-clutter.json"
+            "$ref" fidelity "$lcb" --state "$st" --reference "$dir/ref-$c" --out "$dir/fid-$b-$c" \
+                --bound-rays 0 --backend cpu --quiet >"$dir/fid-$b-$c.txt"
+            grep '^clutter:' "$dir/fid-$b-$c.txt" >&2 || true
         done
     done
     for c in "${cases[@]:1}"; do
-        for b in dnrt plain; do
+        for b in dnrt drt plain; do
             "$ref" delta --reference "$dir/ref-none" --reference-with "$dir/ref-$c" \
                 --lightmap "$dir/fid-$b-none/engine_lightmap.exr" --lightmap-with "$dir/fid-$b-$c/engine_lightmap.exr" \
                 --out "$dir/delta-$b-$c" >"$dir/delta-$b-$c.txt"

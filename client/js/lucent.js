@@ -623,7 +623,8 @@ export class LucentClient {
   /**
    * Adds an event listener. Events: 'open' (socket open, hello sent), 'welcome' (welcome msg;
    * also after each reconnect), 'close' ({code, reason, reconnecting}), 'reconnecting'
-   * ({attempt, delayMs, reason}), 'changed' (msg), 'state' (msg), 'error' (LucentError: bad
+   * ({attempt, delayMs, reason}), 'changed' (msg), 'object.transport' (msg: an object's clutter
+   * operators started or stopped applying, PROTOCOL.md §5.5), 'state' (msg), 'error' (LucentError: bad
    * or inapplicable frames, unsolicited server errors, a failed resubscription), 'lightmap' /
    * 'shgrid' / 'objects' ((copy, header) after a frame was applied), 'frame' ((header,
    * bytes) for every frame whose header parsed, after it was handled: header.applied says
@@ -885,6 +886,7 @@ export class LucentClient {
     if ((type === 'ok' || type === 'changed' || type === 'state') && Number.isSafeInteger(msg.revision))
       this.revision = Math.max(this.revision, msg.revision);
     if (type === 'changed') this._emit('changed', msg);
+    if (type === 'object.transport') this._emit('object.transport', msg);
     if (type === 'mr.ack') {
       this._onAck(msg);
       return;

@@ -10,6 +10,7 @@
 #include <sys/resource.h>
 #include <time.h>
 
+#include "engine/drt.h"
 #include "engine/engine.h"
 #include "lcb/lcb.h"
 #include "util/log.h"
@@ -282,6 +283,104 @@ static void bench_dnrt_print(const bench_dnrt_row *rows, int n) {
            "targets here (CPU backend): <= 0.2 ms per object per relight, 10 objects <= 2 ms\n");
 }
 
+/* --- DRT: what clutter objects cost (engine/drt.h) ------------------------------------------ */
+
+typedef struct {
+    char file[512];
+    int objects;
+    double size_m;
+    double build_ms, build_max_ms; /* per object: mean and the slowest */
+    double mib;                    /* operators' memory per object */
+    double receivers;              /* per object */
+    double light_ms;               /* DRT stage of a relight after a light change (median) */
+    double relight_ms;             /* whole relight after a light change with the clutter */
+} bench_drt_row;
+
+/* n clutter objects (placed like the DNRT rows), their operators built one by one, then the
+ * relight after a light change timed with them applied. CPU backend (the GL transport does
+ * not apply operators yet). */
+static int bench_drt(const char *path, int runs, int n_objects, double size_m, bench_drt_row *row) {
+    char err[512];
+    lc_lcb *bake = NULL;
+    lc_engine *e = NULL;
+    lc_drt_builder *b = NULL;
+    lc_engine_object objs[64];
+    double *ms = calloc((size_t)runs * 2, sizeof *ms);
+    int rc = 1;
+    if (!ms || lc_lcb_open(path, &bake, err, sizeof err) != 0 ||
+        !(e = lc_engine_create(bake, LC_BACKEND_CPU, 0, err, sizeof err)))
+        goto done;
+    const lc_lcb_view *v = lc_lcb_get(bake);
+    if (!(size_m > 0)) {
+        float ex = v->grid_cell * (float)(v->grid_dims[0] - 1), ez = v->grid_cell * (float)(v->grid_dims[2] - 1);
+        size_m = fmin(1.0, 0.27 * fmin(ex, ez));
+    }
+    if (bench_place_objects(v, n_objects, size_m, objs) != 0) {
+        rc = 4;
+        goto done;
+    }
+    if (!(b = lc_drt_builder_create(v, 0, err, sizeof err))) goto done;
+    memset(row, 0, sizeof *row);
+    lc_drt_settings ds = lc_drt_default_settings();
+    for (int i = 0; i < n_objects; i++) {
+        lc_drt_ops *ops = NULL;
+        if (lc_drt_build(b, &objs[i], &ds, NULL, &ops, err, sizeof err) != 0) goto done;
+        lc_drt_info in = lc_drt_ops_info(ops);
+        row->build_ms += in.build_ms / n_objects;
+        row->build_max_ms = fmax(row->build_max_ms, in.build_ms);
+        row->mib += in.bytes / 1048576.0 / n_objects;
+        row->receivers += (double)in.receivers / n_objects;
+        if (lc_engine_clutter_attach(e, ops, err, sizeof err) != 0) goto done;
+        fprintf(stderr, "\r%s: clutter %d/%d built", path, i + 1, n_objects);
+    }
+    lc_engine_settings settings = lc_engine_default_settings(bake);
+    lc_engine_light light;
+    lc_engine_state st;
+    const lc_engine_frame *fr;
+    for (int r = 0; r <= runs; r++) { /* run 0 warms up */
+        bench_state(v, r, &light, &st, &settings);
+        st.objects = objs;
+        st.n_objects = (uint32_t)n_objects;
+        if (lc_engine_relight(e, &st, &fr, err, sizeof err) != 0) goto done;
+        if (fr->drt_objects != (uint32_t)n_objects) {
+            snprintf(err, sizeof err, "%u of %d clutter objects applied", fr->drt_objects, n_objects);
+            goto done;
+        }
+        if (r) ms[r - 1] = fr->stage_ms[LC_STAGE_DRT], ms[runs + r - 1] = fr->total_ms;
+        fprintf(stderr, "\r%s cpu: %d clutter objects, run %d/%d", path, n_objects, r, runs);
+    }
+    fprintf(stderr, "\n");
+    for (int k = 0; k < 2; k++) qsort(ms + (size_t)k * runs, (size_t)runs, sizeof *ms, cmp_double);
+    snprintf(row->file, sizeof row->file, "%s", path);
+    row->objects = n_objects;
+    row->size_m = size_m;
+    row->light_ms = ms[runs / 2];
+    row->relight_ms = ms[runs + runs / 2];
+    rc = 0;
+done:
+    if (rc == 1) fprintf(stderr, "\nlucent-bench: %s: %s\n", path, err);
+    lc_drt_builder_release(b);
+    lc_engine_release(e);
+    lc_lcb_close(bake);
+    free(ms);
+    return rc;
+}
+
+static void bench_drt_print(const bench_drt_row *rows, int n) {
+    if (!n) return;
+    printf("\nDRT: clutter objects (operators built once per placement, applied at every relight), cpu\n");
+    printf("%-28s %7s %6s %9s %9s %8s %9s %10s %10s %10s\n", "bake", "objects", "size", "build ms", "max ms", "MiB/obj",
+           "recv/obj", "light", "per obj", "relight");
+    for (int i = 0; i < n; i++) {
+        const char *base = strrchr(rows[i].file, '/');
+        printf("%-28.28s %7d %5.2fm %9.0f %9.0f %8.1f %9.0f %10.3f %10.4f %10.2f\n", base ? base + 1 : rows[i].file,
+               rows[i].objects, rows[i].size_m, rows[i].build_ms, rows[i].build_max_ms, rows[i].mib, rows[i].receivers,
+               rows[i].light_ms, rows[i].light_ms / rows[i].objects, rows[i].relight_ms);
+    }
+    printf("paper (DRT, 12 cores, GTX 580): about 5 s to build per object, a few ms per update; "
+           "target here: <= 5 s per 1 m object on 2 cores\n");
+}
+
 int main(int argc, char **argv) {
     int runs = 15, bounces = 1, dnrt = 1;
     double object_size = 0; /* auto */
@@ -300,7 +399,8 @@ int main(int argc, char **argv) {
                    "                    [--object-size METRES] [--no-dnrt] BAKE.lcb...\n"
                    "  bakes with an asset transfer grid also get the DNRT rows: 1 and 10 objects of --object-size\n"
                    "  (default: 1 m, or 0.27 x the room's smaller horizontal extent when that is less) on the\n"
-                   "  floor, with and without blocker rays\n");
+                   "  floor, with and without blocker rays; and the DRT rows (cpu): the same objects as clutter,\n"
+                   "  their operators' build time and memory and their cost per relight (--no-dnrt: neither)\n");
             return 0;
         } else if (argv[i][0] == '-') {
             fprintf(stderr, "lucent-bench: unknown option %s (see --help)\n", argv[i]);
@@ -341,6 +441,16 @@ int main(int argc, char **argv) {
                 }
         }
     }
+    bench_drt_row crows[16];
+    int ncrows = 0;
+    for (int f = 0; f < nfiles && dnrt && strcmp(backend, "egl"); f++) {
+        static const int counts[2] = {1, 10};
+        for (int c = 0; c < 2 && ncrows < 16; c++) {
+            int rc = bench_drt(files[f], runs, counts[c], object_size, &crows[ncrows]);
+            if (rc == 0) ncrows++;
+            else if (rc == 1) failed = 1;
+        }
+    }
     printf("\nrelight after one light change, median of %d runs, %d feedback bounce(s), ms\n", runs, bounces);
     printf("%-28s %-4s %7s %7s %5s", "bake", "bk", "surfels", "caches", "links");
     for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8s", stage_names[s]);
@@ -353,6 +463,7 @@ int main(int argc, char **argv) {
         printf(" %8.2f %8.0f\n", rows[i].total_ms, rows[i].peak_mib);
     }
     bench_dnrt_print(drows, ndrows);
+    bench_drt_print(crows, ncrows);
     double bw = bench_copy_bandwidth();
     printf("\nwhere the time goes (this machine: memcpy %.1f GB/s read+write):\n", bw);
     printf("%-28s %-4s %12s %10s %10s %10s %10s\n", "bake", "bk", "links/relight", "gather MB", "GB/s", "GFLOP/s",
@@ -398,6 +509,16 @@ int main(int argc, char **argv) {
                     i ? "," : "", drows[i].file, drows[i].backend, drows[i].objects, drows[i].size_m,
                     drows[i].blockers ? "true" : "false", drows[i].receivers, drows[i].light_ms,
                     drows[i].light_ms / drows[i].objects, drows[i].move_ms, drows[i].relight_ms, drows[i].grid_kib);
+        fprintf(out, "\n], \"drt\": [");
+        for (int i = 0; i < ncrows; i++)
+            fprintf(out,
+                    "%s\n  {\"bake\": \"%s\", \"backend\": \"cpu\", \"objects\": %d, \"object_size_m\": %.3f, "
+                    "\"build_ms\": %.1f, \"build_max_ms\": %.1f, \"mib_per_object\": %.2f, "
+                    "\"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, \"per_object_ms\": %.5f, "
+                    "\"relight_ms\": %.4f}",
+                    i ? "," : "", crows[i].file, crows[i].objects, crows[i].size_m, crows[i].build_ms,
+                    crows[i].build_max_ms, crows[i].mib, crows[i].receivers, crows[i].light_ms,
+                    crows[i].light_ms / crows[i].objects, crows[i].relight_ms);
         fprintf(out, "\n]}\n");
         fclose(out);
     }

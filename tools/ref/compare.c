@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "bake/image.h"
+#include "engine/drt.h"
 #include "ref/ref.h"
 #include "util/log.h"
 #include "util/sh.h"
@@ -374,6 +375,30 @@ void lc_ref_engine_run_free(lc_ref_engine_run *run) {
     memset(run, 0, sizeof *run);
 }
 
+/* DRT operators for the state's clutter objects, attached to e (see lc_ref_engine_converge). */
+static int engine_attach_clutter(lc_engine *e, const lc_lcb_view *v, const lc_engine_state *st, int threads,
+                                 lc_ref_engine_run *out, char *err, size_t errlen) {
+    lc_drt_builder *b = NULL;
+    lc_drt_settings ds = lc_drt_default_settings();
+    for (uint32_t i = 0; i < st->n_objects; i++) {
+        const lc_engine_object *o = &st->objects[i];
+        if (o->clutter_off || !o->visible) continue;
+        if (!b && !(b = lc_drt_builder_create(v, threads, err, errlen))) return -1;
+        lc_drt_ops *ops = NULL;
+        if (lc_drt_build(b, o, &ds, NULL, &ops, err, errlen) != 0) goto err;
+        lc_drt_info in = lc_drt_ops_info(ops);
+        if (lc_engine_clutter_attach(e, ops, err, errlen) != 0) goto err;
+        out->clutter_objects++;
+        out->clutter_build_ms += in.build_ms;
+        out->clutter_bytes += in.bytes;
+    }
+    lc_drt_builder_release(b);
+    return 0;
+err:
+    lc_drt_builder_release(b);
+    return -1;
+}
+
 int lc_ref_engine_converge(const lc_lcb *bake, const lc_engine_state *state, lc_backend_kind backend, int threads,
                            double tol, uint32_t max_relights, int bounce_limit, lc_ref_engine_run *out, char *err,
                            size_t errlen) {
@@ -391,6 +416,7 @@ int lc_ref_engine_converge(const lc_lcb *bake, const lc_engine_state *state, lc_
         goto err;
     }
     snprintf(out->backend, sizeof out->backend, "%s", lc_engine_backend_name(e));
+    if (engine_attach_clutter(e, v, state, threads, out, err, errlen) != 0) goto err;
     lc_engine_state st = *state;
     st.settings.progressive = 1;
     if (bounce_limit >= 0) {

@@ -624,13 +624,18 @@ typedef struct lc_ref_engine_run {
     double b0_power[3];      /* sum of B0 x area over the surfels (one extra relight, bounces 0) */
     float *surfel_radiosity; /* n_surfels*3: the converged B, for the gather bound */
     char backend[16];
+    uint32_t clutter_objects; /* objects in mode clutter / auto whose DRT operators were built and applied */
+    double clutter_build_ms;  /* their build time, summed */
+    size_t clutter_bytes;     /* their memory, summed */
 } lc_ref_engine_run;
 
 /* Relights `state` with the engine (progressive on, the state's bounces per relight) until the
  * largest relative change of a bright texel's luminance between two relights is below tol
  * (or max_relights). bounce_limit >= 0 instead runs ONE relight with progressive off and
  * settings.bounces = bounce_limit: exactly that many reflections, for comparing with a
- * reference rendered with max_bounces = bounce_limit. Returns 0 or -1 with err set. */
+ * reference rendered with max_bounces = bounce_limit. Objects in mode clutter or auto
+ * (!clutter_off) get their DRT operators (engine/drt.h, default settings) built and attached
+ * first, as lucentd does once they rest (CPU backend only). Returns 0 or -1 with err set. */
 int lc_ref_engine_converge(const lc_lcb *bake, const lc_engine_state *state, lc_backend_kind backend, int threads,
                            double tol, uint32_t max_relights, int bounce_limit, lc_ref_engine_run *out, char *err,
                            size_t errlen);

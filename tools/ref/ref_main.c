@@ -814,6 +814,9 @@ static int cmd_fidelity(int argc, char **argv) {
         goto done;
     printf("engine (%s): %u relights to converge (last change %.2e), first relight %.1f ms\n", run.backend,
            run.relights, run.last_change, run.ms_first);
+    if (run.clutter_objects)
+        printf("clutter: DRT operators for %u object(s) built in %.0f ms, %.1f MiB\n", run.clutter_objects,
+               run.clutter_build_ms, run.clutter_bytes / 1048576.0);
     /* Where the light starts: the surfels' B0 against the exact surface integral. */
     double pw[3], pw_se[3];
     {
