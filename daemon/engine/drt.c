@@ -64,30 +64,11 @@ int lc_drt_check_settings(const lc_drt_settings *s, char *err, size_t errlen) {
 
 /* --- the operators ---------------------------------------------------------------------------- */
 
-typedef struct {
-    uint32_t source; /* node, or LC_DRT_PATCH | patch */
-    float w[4];      /* bands 0-1 */
-} drt_entry4;
-
-typedef struct {
-    uint32_t source;
-    float w[9]; /* bands 0-2 */
-} drt_entry9;
-
-typedef struct {
-    uint32_t cache;
-    uint32_t first, count; /* entries: entry4 for texel caches, entry9 for grid caches */
-} drt_receiver;
-
-typedef struct {
-    uint32_t source;
-    float w; /* E_p += w * flux[source] */
-} drt_gather;
-
-typedef struct {
-    uint32_t cache;
-    uint32_t first, count; /* into inpaint_from */
-} drt_inpaint;
+typedef lc_drt_entry4 drt_entry4;
+typedef lc_drt_entry9 drt_entry9;
+typedef lc_drt_receiver drt_receiver;
+typedef lc_drt_gather drt_gather;
+typedef lc_drt_inpaint drt_inpaint;
 
 struct lc_drt_ops {
     lc_engine_object object; /* the placement it was built for */
@@ -109,6 +90,7 @@ struct lc_drt_ops {
     uint32_t *inpaint_from;
     uint32_t n_inpaint_from;
     lc_drt_info info;
+    uint64_t serial; /* unique per build in this process (a backend's upload key) */
 };
 
 void lc_drt_ops_release(lc_drt_ops *o) {
@@ -160,6 +142,27 @@ void lc_drt_elements_lit(lc_drt_ops *o) {
             o->patch_e_direct[3 * o->el_patch[i] + k] += o->el_e_direct[3 * i + k] * o->el_area[i];
     for (uint32_t p = 0; p < o->n_patches; p++)
         for (int k = 0; k < 3; k++) o->patch_e_direct[3 * p + k] /= o->patch_area[p];
+}
+
+lc_drt_arrays lc_drt_arrays_get(lc_drt_ops *o) {
+    lc_drt_arrays a = {o->serial,
+                       o->n_patches,
+                       o->patch_albedo,
+                       o->patch_area,
+                       o->patch_e_direct,
+                       o->patch_b,
+                       o->patch_flux,
+                       o->patch_gather_first,
+                       o->gather,
+                       o->receivers,
+                       o->n_receivers,
+                       o->e4,
+                       o->e9,
+                       o->inpaint,
+                       o->n_inpaint,
+                       o->inpaint_from,
+                       o->n_inpaint_from};
+    return a;
 }
 
 const float *lc_drt_patch_radiosity(const lc_drt_ops *o, uint32_t *n_patches) {
@@ -951,6 +954,8 @@ int lc_drt_build(lc_drt_builder *b, const lc_engine_object *object, const lc_drt
     j.o = calloc(1, sizeof *j.o);
     if (!j.o) goto oom;
     j.o->object = *object;
+    static atomic_uint_fast64_t drt_serials; /* builders may run on several threads */
+    j.o->serial = atomic_fetch_add(&drt_serials, 1) + 1;
     j.thread_rays = calloc((size_t)nthreads, sizeof *j.thread_rays);
     if (!j.thread_rays || drt_place(&j, object) != 0 || drt_patches(&j) != 0) goto oom;
     j.patch_entries = calloc((size_t)j.o->n_patches + 1, sizeof *j.patch_entries);

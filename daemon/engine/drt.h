@@ -127,6 +127,50 @@ typedef struct lc_drt_target {
     const uint8_t *fresh;   /* caches holding this pass's gather (fresh[c] != 0); NULL = all */
 } lc_drt_target;
 
+/* The operators' arrays, for a backend that applies them itself (transport_gl). A receiver's
+ * entries are e4[first, first+count) for a texel cache (cache < n_texel_caches), else e9; a
+ * patch p gathers gather[gather_first[p], gather_first[p+1]); a covered cache takes the mean
+ * of inpaint_from[first, first+count). The backend writes patch_b / patch_flux back after a
+ * run, so lc_drt_patch_radiosity and a later CPU run see them. */
+typedef struct {
+    uint32_t source; /* node, or LC_DRT_PATCH | patch */
+    float w[4];      /* bands 0-1 */
+} lc_drt_entry4;
+typedef struct {
+    uint32_t source;
+    float w[9]; /* bands 0-2 */
+} lc_drt_entry9;
+typedef struct {
+    uint32_t cache;
+    uint32_t first, count;
+} lc_drt_receiver;
+typedef struct {
+    uint32_t source;
+    float w; /* E_p += w * flux[source] */
+} lc_drt_gather;
+typedef struct {
+    uint32_t cache;
+    uint32_t first, count; /* into inpaint_from */
+} lc_drt_inpaint;
+typedef struct lc_drt_arrays {
+    uint64_t serial; /* unique per build in this process */
+    uint32_t n_patches;
+    const float *patch_albedo, *patch_area; /* 3 floats / 1 per patch */
+    const float *patch_e_direct;            /* this relight's (lc_drt_elements_lit) */
+    float *patch_b, *patch_flux;            /* the state between passes and relights */
+    const uint32_t *patch_gather_first;     /* n_patches + 1 */
+    const lc_drt_gather *gather;
+    const lc_drt_receiver *receivers;
+    uint32_t n_receivers;
+    const lc_drt_entry4 *e4;
+    const lc_drt_entry9 *e9;
+    const lc_drt_inpaint *inpaint;
+    uint32_t n_inpaint;
+    const uint32_t *inpaint_from;
+    uint32_t n_inpaint_from;
+} lc_drt_arrays;
+lc_drt_arrays lc_drt_arrays_get(lc_drt_ops *ops);
+
 /* One pass of every attached operator set, in order (see the top). */
 void lc_drt_apply(lc_drt_ops *const *ops, uint32_t n, const lc_drt_target *tg);
 

@@ -519,11 +519,6 @@ static int engine_dnrt_update(lc_engine *e, const lc_engine_state *st, const lc_
 /* --- clutter operators (drt.h) ------------------------------------------------------------------ */
 
 int lc_engine_clutter_attach(lc_engine *e, lc_drt_ops *ops, char *err, size_t errlen) {
-    if (e->ops != &lc_transport_cpu) {
-        lc_drt_ops_release(ops);
-        lc_set_err(err, errlen, "clutter operators apply on the cpu backend only (this engine runs %s)", e->ops->name);
-        return -1;
-    }
     lc_engine_clutter_detach(e, lc_drt_ops_object(ops)->id);
     if (e->n_clutter == e->clutter_cap) {
         uint32_t cap = e->clutter_cap ? 2 * e->clutter_cap : 4;

@@ -160,8 +160,8 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *state, const lc_engin
  * ownership of `ops` (on failure too) and replaces any it holds for the same object id.
  * They apply from the next relight while the state holds that object, visible, with the
  * placement they were built for (the object is then out of DNRT); a relight that finds it
- * moved, hidden, gone or clutter_off releases them, so stale operators never apply. -1 with err when the
- * backend cannot apply them (EGL: not yet). */
+ * moved, hidden, gone or clutter_off releases them, so stale operators never apply. Both
+ * backends apply them. -1 with err out of memory. */
 int lc_engine_clutter_attach(lc_engine *e, lc_drt_ops *ops, char *err, size_t errlen);
 /* Releases the operators held for object_id, if any (the next relight runs without them). */
 void lc_engine_clutter_detach(lc_engine *e, const char *object_id);

@@ -16,13 +16,6 @@ static void server_clutter_deliver(void *arg, lc_drt_ops *ops) { lc_compute_clut
 
 int server_clutter_start(lc_server *s, char *err, size_t errlen) {
     if (!s->cfg->clutter) return 0;
-    if (strcmp(lc_compute_backend(s->compute), "cpu") != 0) {
-        lc_warn("clutter",
-                "clutter operators apply on the CPU backend only (this one is %s): objects in mode "
-                "clutter or auto stay dynamic; run with --backend cpu for them",
-                lc_compute_backend(s->compute));
-        return 0;
-    }
     lc_drt_settings ds = lc_drt_default_settings();
     s->clw = lc_clw_start(s->v, s->cfg->threads, &ds, server_clutter_deliver, s->compute, err, errlen);
     if (!s->clw) return -1;

@@ -36,6 +36,7 @@
 #include <time.h>
 
 #include "engine/transport.h"
+#include "gpu/drt_gl.h"
 #include "gpu/egl_context.h"
 #include "gpu/gl_util.h"
 #include "util/clock.h"
@@ -87,6 +88,7 @@ typedef struct tgl {
     size_t ssbo_align; /* binding offset alignment */
     GLuint prog[TGL_N_PROGS];
     GLuint dnrt_prep, dnrt_apply;                            /* dnrt.comp, both stages */
+    lc_drt_gl *drt;                                          /* drt.comp: clutter operators (owned) */
     GLuint gather[LC_SH_MAX_BANDS + 1][LC_SH_MAX_BANDS + 1]; /* [bands][Co/Cg bands], compiled on first use */
     /* Static (create): */
     GLuint b_surfels, b_nodes, b_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
@@ -122,6 +124,7 @@ static void tgl_release(void *impl) {
                 if (t->gather[b][c]) glDeleteProgram(t->gather[b][c]);
         if (t->dnrt_prep) glDeleteProgram(t->dnrt_prep);
         if (t->dnrt_apply) glDeleteProgram(t->dnrt_apply);
+        lc_drt_gl_release(t->drt);
         GLuint bufs[] = {t->b_surfels, t->b_nodes,    t->b_links,  t->b_caches,   t->b_lm_index,  t->b_grid_index,
                          t->b_cone,    t->b_shk,      t->b_list,   t->b_b0,       t->b_radiosity, t->b_e_ind,
                          t->b_flux,    t->b_cache_sh, t->b_sh9,    t->b_lightmap, t->b_grid_sh,   t->b_obj_pos,
@@ -221,6 +224,7 @@ static int tgl_compile(tgl *t, int def_bands, char *err, size_t errlen) {
         return -1;
     if (!(t->dnrt_apply = lc_gl_compile_program_defs("dnrt.comp (apply)", dnrt, "#define DNRT_PREP 0\n", err, errlen)))
         return -1;
+    if (!(t->drt = lc_drt_gl_create(err, errlen))) return -1;
     return tgl_gather_program(t, def_bands, def_bands, err, errlen) ? 0 : -1;
 }
 
@@ -813,7 +817,7 @@ static void tgl_stage_times(tgl *t, const tgl_stamps *ts, const double rb[LC_STA
         if (i > 0 && now >= prev) ms[ts->stage[i]] += (double)(now - prev) * 1e-6;
         prev = now;
     }
-    for (int s = LC_STAGE_BOUNCE; s <= LC_STAGE_DNRT; s++) fr->stage_ms[s] = ms[s] + rb[s];
+    for (int s = LC_STAGE_BOUNCE; s <= LC_STAGE_DRT; s++) fr->stage_ms[s] = ms[s] + rb[s];
 }
 
 /* One transport pass (tcpu_run's loop body): with DNRT the last one samples the objects' SH
@@ -829,16 +833,35 @@ static int tgl_pass(tgl *t, GLuint gather, const lc_transport_input *in, int las
     tgl_stamp(t, ts, LC_STAGE_CHROMA);
     tgl_gather(t, gather, st, last);
     tgl_stamp(t, ts, LC_STAGE_GATHER);
+    if (last && (in->dnrt || in->n_drt)) { /* the objects' SH before any object changes the caches */
+        tgl_grid(t, (int)st->bands);
+        tgl_stamp(t, ts, LC_STAGE_GRID);
+        if (tgl_objects(t, in, err, errlen) != 0) return -1;
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+        tgl_stamp(t, ts, LC_STAGE_OBJECTS);
+    }
     if (in->dnrt) {
-        if (last) { /* the objects' SH before any object changes the caches */
-            tgl_grid(t, (int)st->bands);
-            tgl_stamp(t, ts, LC_STAGE_GRID);
-            if (tgl_objects(t, in, err, errlen) != 0) return -1;
-            glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
-            tgl_stamp(t, ts, LC_STAGE_OBJECTS);
-        }
         tgl_dnrt(t, gather, in, last);
         tgl_stamp(t, ts, LC_STAGE_DNRT);
+    }
+    if (in->n_drt) { /* clutter operators after DNRT, as tcpu_drt */
+        int tb = lc_transport_texel_bands(st);
+        lc_drt_gl_pass dp = {.node_flux = t->b_flux,
+                             .caches = t->b_caches,
+                             .cache_sh = t->b_cache_sh,
+                             .sh9 = t->b_sh9,
+                             .n_nodes = t->v->n_nodes,
+                             .n_caches = t->v->n_caches,
+                             .n_texel_caches = t->v->n_texel_caches,
+                             .chunk = t->chunk,
+                             .nc = st->bands * st->bands,
+                             .ycocg = lc_transport_chroma(st),
+                             .texel_lo = lc_transport_texel_band1(st) ? 1 : 0,
+                             .texel_nc = tb * tb,
+                             .grid_nc = (int)(st->bands * st->bands),
+                             .last = last};
+        lc_drt_gl_apply(t->drt, &dp);
+        tgl_stamp(t, ts, LC_STAGE_DRT);
     }
     tgl_feedback(t, (int)st->bands);
     tgl_stamp(t, ts, LC_STAGE_BOUNCE);
@@ -861,6 +884,11 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
         if (tgl_dnrt_upload(t, in->dnrt, err, errlen) != 0) return -1;
         rb[LC_STAGE_DNRT] += lc_clock_ms() - t0;
     }
+    if (in->n_drt) {
+        double t0 = lc_clock_ms();
+        if (lc_drt_gl_upload(t->drt, in->drt, in->n_drt, v->n_texel_caches, t->bind_limit, err, errlen) != 0) return -1;
+        rb[LC_STAGE_DRT] += lc_clock_ms() - t0;
+    }
     tgl_stamp(t, &ts, 0);
 
     glNamedBufferSubData(t->b_b0, 0, (GLsizeiptr)((size_t)v->n_surfels * 12), in->b0);
@@ -873,7 +901,7 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
     tgl_stamp(t, &ts, LC_STAGE_LIGHTMAP);
     tgl_grid(t, (int)st->bands);
     tgl_stamp(t, &ts, LC_STAGE_GRID);
-    if (!in->dnrt) { /* else sampled in the last pass */
+    if (!in->dnrt && !in->n_drt) { /* else sampled in the last pass */
         if (tgl_objects(t, in, err, errlen) != 0) return -1;
         tgl_stamp(t, &ts, LC_STAGE_OBJECTS);
     }
@@ -881,6 +909,9 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
     if ((rc = lc_gl_check("egl transport: outputs", err, errlen)) != 0) goto gl_err;
 
     if (tgl_read_back(t, in, rb, err, errlen) != 0) return -1;
+    double t0 = lc_clock_ms();
+    lc_drt_gl_read_back(t->drt, in->drt, in->n_drt);
+    rb[LC_STAGE_DRT] += lc_clock_ms() - t0;
     if ((rc = lc_gl_check("egl transport: read-back", err, errlen)) != 0) goto gl_err;
     tgl_stage_times(t, &ts, rb, fr);
     lc_transport_publish(&t->out, st, fr);

@@ -8,6 +8,8 @@
  * some with dnrt_off) and in bands 6..8; on the Cornell box two cubes (one on the floor, one
  * above it) must agree too, and the EGL lightmap under the floor cube must differ from the one
  * with DNRT off by more than the tolerance (so the agreement cannot come from both lacking it).
+ * A clutter cube's DRT operators (engine/drt.h), attached to both, must agree the same way,
+ * their patches' radiosity included, and change the lightmap by the cube.
  *
  * Agreement metric, per output array (b = CPU, a = EGL):
  *   max_i |a_i - b_i| / max(|b_i|, 1e-3 * max_i |b_i|)  <=  1e-3
@@ -18,6 +20,7 @@
 #include <stdint.h>
 
 #include "check.h"
+#include "engine/drt.h"
 #include "engine_fixture.h"
 #include "gpu/egl_context.h"
 #include "gpu/gl_util.h"
@@ -110,6 +113,8 @@ static double relight_both_frame(lc_engine *gpu, lc_engine *cpu, const lc_lcb_vi
     CHECK(fg->dnrt_objects == fc->dnrt_objects && fg->dnrt_receivers == fc->dnrt_receivers,
           "%s: DNRT placements differ (egl %u objects %u receivers, cpu %u/%u)", label, fg->dnrt_objects,
           fg->dnrt_receivers, fc->dnrt_objects, fc->dnrt_receivers);
+    CHECK(fg->drt_objects == fc->drt_objects, "%s: clutter objects differ (egl %u, cpu %u)", label, fg->drt_objects,
+          fc->drt_objects);
     if (gpu_frame) *gpu_frame = fg;
     if (timings) {
         print_stages("cpu", fc);
@@ -237,6 +242,99 @@ done:
     free(idx);
 }
 
+/* A clutter cube (engine/drt.h) on the Cornell floor: operators built once per engine (the
+ * builds are deterministic) and attached to both; bounces 2, then progressive, then chroma on.
+ * EGL must match CPU within TOL on every output and on the patches' radiosity read back, both
+ * must apply the operators (and drop DNRT for the cube), and the EGL lightmap under the cube
+ * must differ from EGL without the operators by more than TOL. */
+static void test_cornell_drt(lc_engine *gpu, const fixture *f, const char *quality) {
+    const lc_lcb_view *v = f->v;
+    lc_engine_object cube = {.id = "clutter",
+                             .translation = {0.12f, 0, 0.45f},
+                             .rotation = {0, 0.2588190f, 0, 0.9659258f},
+                             .scale = {1.5f, 1.5f, 1.5f},
+                             .visible = 1};
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f->bake);
+    st.settings.bounces = 2;
+    st.settings.bands = 3;
+    st.settings.progressive = 0;
+    st.objects = &cube;
+    st.n_objects = 1;
+    char label[96], err[512];
+    size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
+    float *dnrt = malloc(texels * 3 * sizeof *dnrt), *a = NULL;
+    size_t *idx = malloc(texels * sizeof *idx);
+    lc_drt_builder *b = lc_drt_builder_create(v, 0, err, sizeof err);
+    CHECK(dnrt && idx && b, "drt setup: %s", b ? "out of memory" : err);
+    if (!dnrt || !idx || !b) goto done;
+    const lc_engine_frame *fr;
+    int rc = lc_engine_relight(gpu, &st, &fr, err, sizeof err);
+    CHECK(rc == 0 && fr->dnrt_objects == 1, "cornell %s: egl relight with the cube in DNRT: %s", quality, err);
+    if (rc != 0) goto done;
+    memcpy(dnrt, fr->lightmap, texels * 3 * sizeof *dnrt);
+    lc_drt_settings ds = lc_drt_default_settings();
+    lc_drt_ops *ops[2] = {NULL, NULL};
+    for (int i = 0; i < 2; i++) {
+        CHECK(lc_drt_build(b, &cube, &ds, NULL, &ops[i], err, sizeof err) == 0 && ops[i], "drt build: %s", err);
+        if (!ops[i]) {
+            lc_drt_ops_release(ops[0]);
+            goto done;
+        }
+    }
+    CHECK(lc_engine_clutter_attach(gpu, ops[0], err, sizeof err) == 0, "egl attach: %s", err);
+    CHECK(lc_engine_clutter_attach(f->engine, ops[1], err, sizeof err) == 0, "cpu attach: %s", err);
+    snprintf(label, sizeof label, "cornell %s DRT", quality);
+    double m = relight_both_frame(gpu, f->engine, v, &st, label, 1, &fr);
+    if (!fr) goto done;
+    CHECK(fr->drt_objects == 1 && fr->dnrt_objects == 0 && lc_engine_clutter_active(gpu, "clutter") &&
+              lc_engine_clutter_active(f->engine, "clutter"),
+          "cornell %s: both engines apply the operators (egl drt %u dnrt %u)", quality, fr->drt_objects,
+          fr->dnrt_objects);
+    size_t n = floor_texels(v, 0.12f, 0.45f, 0.25f, idx, texels), w;
+    a = calloc((n ? n : 1) * 6, sizeof *a);
+    CHECK(a != NULL, "out of memory");
+    if (!a) goto done;
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) {
+            a[3 * i + k] = fr->lightmap[3 * idx[i] + k];
+            a[3 * (n + i) + k] = dnrt[3 * idx[i] + k];
+        }
+    double effect = compare(a, a + 3 * n, n, 3, 3, &w);
+    fprintf(stderr, "cornell %s DRT: EGL/CPU worst %.3g; %zu floor texels by the cube, EGL DRT against DNRT %.3g\n",
+            quality, m, n, effect);
+    CHECK(n >= 4 && effect > TOL, "cornell %s: DRT changes the EGL lightmap by the cube by %.3g only (%zu texels)",
+          quality, effect, n);
+    /* The patches' radiosity each backend left in its operators. */
+    uint32_t npg = 0, npc = 0;
+    const float *pg = lc_drt_patch_radiosity(ops[0], &npg), *pc = lc_drt_patch_radiosity(ops[1], &npc);
+    CHECK(pg && pc && npg == npc && npg > 0, "patches: egl %u, cpu %u", npg, npc);
+    if (pg && pc && npg == npc && npg > 0) {
+        double pm = compare(pg, pc, npg, 3, 3, &w);
+        CHECK(pm <= TOL, "cornell %s: patch radiosity EGL/CPU %.3g at %zu (%g vs %g)", quality, pm, w, (double)pg[w],
+              (double)pc[w]);
+    }
+    st.settings.progressive = 1;
+    snprintf(label, sizeof label, "cornell %s DRT progressive", quality);
+    relight_both(gpu, f->engine, v, &st, label, 1);
+    relight_both(gpu, f->engine, v, &st, label, 0);
+    st.settings.progressive = 0;
+    st.settings.chroma_compression = 1;
+    st.settings.chroma_bands = 1;
+    snprintf(label, sizeof label, "cornell %s DRT chroma", quality);
+    relight_both(gpu, f->engine, v, &st, label, 0);
+    /* Moved: both drop the operators (DNRT again) and agree. */
+    cube.translation[0] = 0.42f;
+    snprintf(label, sizeof label, "cornell %s DRT moved", quality);
+    relight_both_frame(gpu, f->engine, v, &st, label, 0, &fr);
+    CHECK(fr && fr->drt_objects == 0 && fr->dnrt_objects == 1, "cornell %s: moved clutter is back in DNRT", quality);
+done:
+    lc_drt_builder_release(b);
+    free(a);
+    free(dnrt);
+    free(idx);
+}
+
 /* Bakes scenes/cornell-box with the given quality and compares EGL with CPU (bounces 2,
  * bands 3), printing per-stage times of a few relights. */
 static void test_cornell(const char *quality, int runs) {
@@ -291,6 +389,7 @@ static void test_cornell(const char *quality, int runs) {
         }
         fprintf(stderr, "cornell %s: worst EGL/CPU difference %.3g\n", quality, worst);
         test_cornell_dnrt(gpu, &f, quality);
+        test_cornell_drt(gpu, &f, quality);
         lc_engine_release(gpu);
     }
     fixture_release(&f);
