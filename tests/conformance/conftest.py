@@ -46,7 +46,7 @@ STREAM_NAMES = {v: k for k, v in STREAMS.items()}
 ENCODINGS = {"rgb9e5": 1, "rgba16f": 2, "f32": 3}
 CHANGE_TYPES = ["light.set", "light.remove", "object.set", "object.remove", "material.set",
                 "environment.set", "settings.set"]
-SERVER_TYPES = ["welcome", "ok", "error", "changed", "state", "pong", "mr.ack"]
+SERVER_TYPES = ["welcome", "ok", "error", "changed", "state", "pong", "mr.ack", "object.transport"]
 
 
 # --------------------------------------------------------------------------- configuration
