@@ -238,7 +238,7 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
         if (lc_state_to_proto(&s->state, &ps, &mats) == 0 &&
             (objs = malloc((ps.n_objects ? ps.n_objects : 1) * sizeof *objs))) {
             /* §5.4: each object with its transport, as the clients were told (§5.5) */
-            memcpy(objs, ps.objects, ps.n_objects * sizeof *objs);
+            if (ps.n_objects) memcpy(objs, ps.objects, ps.n_objects * sizeof *objs);
             for (uint32_t i = 0; i < ps.n_objects; i++)
                 objs[i].transport = 1 +
                     (server_clutter_announced(s, objs[i].id) ? LC_OBJECT_TRANSPORT_CLUTTER

@@ -1,7 +1,9 @@
 /* egl_context: headless EGL display + GL 4.3 core context (see egl_context.h). */
 #include "gpu/egl_context.h"
 
+#include <dlfcn.h>
 #include <epoxy/egl.h>
+#include <link.h>
 #include <epoxy/gl.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -168,7 +170,37 @@ err:
     return -1;
 }
 
+static int tgl_count_module(struct dl_phdr_info *info, size_t size, void *arg) {
+    (void)info, (void)size;
+    ++*(size_t *)arg;
+    return 0;
+}
+
+typedef struct {
+    size_t index, first;
+} tgl_pin_walk;
+
+static int tgl_pin_module(struct dl_phdr_info *info, size_t size, void *arg) {
+    (void)size;
+    tgl_pin_walk *w = arg;
+    if (w->index++ < w->first || !info->dlpi_name[0]) return 0;
+    void *h = dlopen(info->dlpi_name, RTLD_LAZY | RTLD_NOLOAD | RTLD_NODELETE);
+    if (h) dlclose(h); /* the NODELETE flag stays */
+    return 0;
+}
+
+/* Keeps the libraries EGL loaded (libEGL, the vendor library, Mesa's driver) mapped until the
+ * process exits: eglTerminate unloads the driver, and Mesa 22.3.6-1+deb12u2 then leaves
+ * allocations only its globals pointed to, which LeakSanitizer reports as leaks of an
+ * unknown module (no symbols to suppress them by). Mapped, they stay reachable. */
+static void tgl_pin_modules_since(size_t first) {
+    tgl_pin_walk w = {0, first};
+    dl_iterate_phdr(tgl_pin_module, &w);
+}
+
 lc_egl_context *lc_egl_create(char *err, size_t errlen) {
+    size_t modules_before = 0;
+    dl_iterate_phdr(tgl_count_module, &modules_before);
     lc_egl_context *c = calloc(1, sizeof *c);
     EGLDeviceEXT *devs = NULL;
     char why[512] = "", one[256];
@@ -214,11 +246,13 @@ lc_egl_context *lc_egl_create(char *err, size_t errlen) {
     goto err;
 done:
     free(devs);
+    tgl_pin_modules_since(modules_before);
     lc_info("egl", "context: %s%s", c->desc, c->software ? " [software rasterizer]" : "");
     return c;
 err:
     free(devs);
     free(c);
+    tgl_pin_modules_since(modules_before);
     return NULL;
 }
 
