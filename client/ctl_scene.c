@@ -229,6 +229,8 @@ static const ctl_flag ctl_object_flags[] = {
     {"--visible", "visible", CTL_FLAG_BOOL, 0, 0, NULL, "true|false", "default true"},
     {"--dnrt", "dnrt", CTL_FLAG_BOOL, 0, 0, NULL, "true|false",
      "shadow and colour the indirect light if its asset has transfer data (default true)"},
+    {"--mode", "mode", CTL_FLAG_CHOICE, 0, 0, "dynamic|clutter|auto", "dynamic|clutter|auto",
+     "clutter: the server builds exact operators for where it stands; auto: once it rests (default dynamic)"},
     {NULL, NULL, 0, 0, 0, NULL, NULL, NULL},
 };
 

@@ -1,6 +1,6 @@
 # lucentctl against a live lucentd: object (the baked `cube` asset), material, env and
 # settings, each with --help, usage errors and a server refusal; the state they leave
-# (object and settings --dnrt / --dnrt-blockers: issue 17).
+# (object and settings --dnrt / --dnrt-blockers: issue 17; object --mode: issue 19).
 . "$(dirname "$0")/lib.sh"
 lucentctl_setup
 T="timeout 20"
@@ -25,6 +25,10 @@ json_check "$TMP/state.json" 'j["objects"][1]["id"] == "box2" and j["objects"][1
 expect_exit 0 "" $T "$CTL" object set box2 --asset cube --scale 1,2,1 --dnrt true
 state
 json_check "$TMP/state.json" 'j["objects"][1]["dnrt"] is True'
+json_check "$TMP/state.json" 'j["objects"][1]["mode"] == "dynamic" and j["objects"][1]["transport"] == "dynamic"'
+expect_exit 0 "" $T "$CTL" object set box2 --asset cube --scale 1,2,1 --mode auto
+state
+json_check "$TMP/state.json" 'j["objects"][1]["mode"] == "auto"'
 expect_exit 1 "unknown_asset at /object/asset: .*scene.assets" $T "$CTL" object set box3 --asset sphere
 expect_exit 1 "out_of_range at /object/rotation" $T "$CTL" object set box3 --asset cube --rotation 0,0,0,0
 expect_exit 0 "" $T "$CTL" object rm box1
@@ -43,8 +47,10 @@ expect_exit 2 "object set: --asset is required" $T "$CTL" object set box3 --posi
 expect_exit 2 "object set: --scale '1,2': expected 1 or 3" $T "$CTL" object set box3 --asset cube --scale 1,2
 expect_exit 2 "object set: --visible 'maybe': expected true or false" $T "$CTL" object set box3 --asset cube --visible maybe
 expect_exit 2 "object set: --dnrt '5': expected true or false" $T "$CTL" object set box3 --asset cube --dnrt 5
+expect_exit 2 "object set: --mode 'static': expected dynamic[|]clutter[|]auto" $T "$CTL" object set box3 --asset cube --mode static
 expect_exit 0 "" $T "$CTL" object set --help
 grep -q -- "--dnrt true|false" "$TMP/out" || fail "object set --help lacks --dnrt"
+grep -q -- "--mode dynamic|clutter|auto" "$TMP/out" || fail "object set --help lacks --mode"
 expect_exit 2 "object set: --rotation '0,0,1': expected 4" $T "$CTL" object set box3 --asset cube --rotation 0,0,1
 expect_exit 2 "object rm: expected exactly one ID" $T "$CTL" object rm a b
 
