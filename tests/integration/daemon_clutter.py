@@ -187,15 +187,18 @@ def case_metrics():
     p, port = lt.start_lucentd(os.path.join(TMP, "metrics"))
     try:
         ws, _ = connect(port)
-        request(ws, {"type": "object.set", "id": 2, "object": dict(CUBE, id="m")}, "ok")
-        # moved at once: the first build is cancelled or its operators dropped, the second applies
-        request(ws, {"type": "object.set", "id": 3, "object": dict(CUBE, id="m", translation=[0.2, 0, 0.3])}, "ok")
-        check(wait_json(ws, transport_event("m", "clutter")) is not None, "metrics: clutter after the move")
+        # A large cube (a slow build): once the idle worker has taken it, a move cancels it.
+        big = dict(CUBE, id="m", scale=[5, 5, 5], translation=[0.28, 0, 0.28])
+        request(ws, {"type": "object.set", "id": 2, "object": big}, "ok")
+        time.sleep(0.3)
+        check(metric(port, "lucent_clutter_builds_queued") == 1, "metrics: the build is queued or running")
+        request(ws, {"type": "object.set", "id": 3, "object": dict(big, translation=[0.3, 0, 0.3])}, "ok")
+        check(wait_json(ws, transport_event("m", "clutter"), 120) is not None, "metrics: clutter after the move")
         check(metric(port, "lucent_clutter_objects") == 1, "metrics: one clutter object")
         built, cancelled = metric(port, "lucent_clutter_builds_total"), metric(port,
                                                                                "lucent_clutter_builds_cancelled_total")
-        check(built is not None and cancelled is not None and built >= 1 and built + cancelled >= 2,
-              "metrics: builds %s, cancelled %s" % (built, cancelled))
+        check(built == 1 and cancelled == 1, "metrics: builds %s (1), cancelled %s (1)" % (built, cancelled))
+        check(metric(port, "lucent_clutter_builds_queued") == 0, "metrics: nothing queued after the build")
         ws.close()
     finally:
         stop(p)
