@@ -15,7 +15,7 @@ cmake --build "$asan" -j"$jobs"
 echo "== ASan+UBSan: unit, fuzz replay, fast integration tests =="
 (cd "$asan" && ctest --output-on-failure -j"$jobs" -LE slow)
 
-# ThreadSanitizer over the daemon's threads (service, compute, engine workers): its unit
+# ThreadSanitizer over the daemon's threads (service, compute, engine workers, clutter worker): its unit
 # tests and the integration tests that drive a live lucentd. daemon_basic runs alone after
 # them: beside another TSan daemon on 2 cores one run in ~11 lost an HTTP GET to a reset
 # connection (no TSan report); alone it passed every run, a CPU hog beside it included.
@@ -25,7 +25,7 @@ cmake --build "$tsan" -j"$jobs" --target lucentd lucentctl lucent-bake cornell_b
   test_compute test_state test_journal test_frames
 echo "== ThreadSanitizer: the daemon's unit and live integration tests =="
 (cd "$tsan" && ctest --output-on-failure -j"$jobs" \
-  -R '^(unit\.daemon\.|integration\.(daemon_hardening|client_live|journal_faults|lucentctl_basic)$)' &&
+  -R '^(unit\.daemon\.|integration\.(daemon_hardening|client_live|journal_faults|lucentctl_basic|daemon_clutter)$)' &&
   ctest --output-on-failure -R '^integration\.daemon_basic$')
 
 build="$root/build-release"
