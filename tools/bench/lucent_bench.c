@@ -287,6 +287,7 @@ static void bench_dnrt_print(const bench_dnrt_row *rows, int n) {
 
 typedef struct {
     char file[512];
+    const char *backend; /* "cpu" or "egl" */
     int objects;
     double size_m;
     double build_ms, build_max_ms; /* per object: mean and the slowest */
@@ -297,9 +298,9 @@ typedef struct {
 } bench_drt_row;
 
 /* n clutter objects (placed like the DNRT rows), their operators built one by one, then the
- * relight after a light change timed with them applied. CPU backend (the GL transport does
- * not apply operators yet). */
-static int bench_drt(const char *path, int runs, int n_objects, double size_m, bench_drt_row *row) {
+ * relight after a light change timed with them applied on `backend`. */
+static int bench_drt(const char *path, lc_backend_kind backend, int runs, int n_objects, double size_m,
+                     bench_drt_row *row) {
     char err[512];
     lc_lcb *bake = NULL;
     lc_engine *e = NULL;
@@ -308,8 +309,9 @@ static int bench_drt(const char *path, int runs, int n_objects, double size_m, b
     double *ms = calloc((size_t)runs * 2, sizeof *ms);
     int rc = 1;
     if (!ms || lc_lcb_open(path, &bake, err, sizeof err) != 0 ||
-        !(e = lc_engine_create(bake, LC_BACKEND_CPU, 0, err, sizeof err)))
+        !(e = lc_engine_create(bake, backend, 0, err, sizeof err)))
         goto done;
+    const char *bk = backend == LC_BACKEND_EGL ? "egl" : "cpu";
     const lc_lcb_view *v = lc_lcb_get(bake);
     if (!(size_m > 0)) {
         float ex = v->grid_cell * (float)(v->grid_dims[0] - 1), ez = v->grid_cell * (float)(v->grid_dims[2] - 1);
@@ -347,11 +349,12 @@ static int bench_drt(const char *path, int runs, int n_objects, double size_m, b
             goto done;
         }
         if (r) ms[r - 1] = fr->stage_ms[LC_STAGE_DRT], ms[runs + r - 1] = fr->total_ms;
-        fprintf(stderr, "\r%s cpu: %d clutter objects, run %d/%d", path, n_objects, r, runs);
+        fprintf(stderr, "\r%s %s: %d clutter objects, run %d/%d", path, bk, n_objects, r, runs);
     }
     fprintf(stderr, "\n");
     for (int k = 0; k < 2; k++) qsort(ms + (size_t)k * runs, (size_t)runs, sizeof *ms, cmp_double);
     snprintf(row->file, sizeof row->file, "%s", path);
+    row->backend = bk;
     row->objects = n_objects;
     row->size_m = size_m;
     row->light_ms = ms[runs / 2];
@@ -368,14 +371,15 @@ done:
 
 static void bench_drt_print(const bench_drt_row *rows, int n) {
     if (!n) return;
-    printf("\nDRT: clutter objects (operators built once per placement, applied at every relight), cpu\n");
-    printf("%-28s %7s %6s %9s %9s %8s %9s %10s %10s %10s\n", "bake", "objects", "size", "build ms", "max ms", "MiB/obj",
-           "recv/obj", "light", "per obj", "relight");
+    printf("\nDRT: clutter objects (operators built once per placement, applied at every relight)\n");
+    printf("%-28s %-4s %7s %6s %9s %9s %8s %9s %10s %10s %10s\n", "bake", "bk", "objects", "size", "build ms", "max ms",
+           "MiB/obj", "recv/obj", "light", "per obj", "relight");
     for (int i = 0; i < n; i++) {
         const char *base = strrchr(rows[i].file, '/');
-        printf("%-28.28s %7d %5.2fm %9.0f %9.0f %8.1f %9.0f %10.3f %10.4f %10.2f\n", base ? base + 1 : rows[i].file,
-               rows[i].objects, rows[i].size_m, rows[i].build_ms, rows[i].build_max_ms, rows[i].mib, rows[i].receivers,
-               rows[i].light_ms, rows[i].light_ms / rows[i].objects, rows[i].relight_ms);
+        printf("%-28.28s %-4s %7d %5.2fm %9.0f %9.0f %8.1f %9.0f %10.3f %10.4f %10.2f\n",
+               base ? base + 1 : rows[i].file, rows[i].backend, rows[i].objects, rows[i].size_m, rows[i].build_ms,
+               rows[i].build_max_ms, rows[i].mib, rows[i].receivers, rows[i].light_ms,
+               rows[i].light_ms / rows[i].objects, rows[i].relight_ms);
     }
     printf("paper (DRT, 12 cores, GTX 580): about 5 s to build per object, a few ms per update; "
            "target here: <= 5 s per 1 m object on 2 cores\n");
@@ -399,7 +403,7 @@ int main(int argc, char **argv) {
                    "                    [--object-size METRES] [--no-dnrt] BAKE.lcb...\n"
                    "  bakes with an asset transfer grid also get the DNRT rows: 1 and 10 objects of --object-size\n"
                    "  (default: 1 m, or 0.27 x the room's smaller horizontal extent when that is less) on the\n"
-                   "  floor, with and without blocker rays; and the DRT rows (cpu): the same objects as clutter,\n"
+                   "  floor, with and without blocker rays; and the DRT rows: the same objects as clutter,\n"
                    "  their operators' build time and memory and their cost per relight (--no-dnrt: neither)\n");
             return 0;
         } else if (argv[i][0] == '-') {
@@ -443,12 +447,16 @@ int main(int argc, char **argv) {
     }
     bench_drt_row crows[16];
     int ncrows = 0;
-    for (int f = 0; f < nfiles && dnrt && strcmp(backend, "egl"); f++) {
+    for (int f = 0; f < nfiles && dnrt; f++) {
         static const int counts[2] = {1, 10};
-        for (int c = 0; c < 2 && ncrows < 16; c++) {
-            int rc = bench_drt(files[f], runs, counts[c], object_size, &crows[ncrows]);
-            if (rc == 0) ncrows++;
-            else if (rc == 1) failed = 1;
+        for (int k = 0; k < 2; k++) {
+            if ((k == 0 && !strcmp(backend, "egl")) || (k == 1 && !strcmp(backend, "cpu"))) continue;
+            for (int c = 0; c < 2 && ncrows < 16; c++) {
+                int rc = bench_drt(files[f], k ? LC_BACKEND_EGL : LC_BACKEND_CPU, runs, counts[c], object_size,
+                                   &crows[ncrows]);
+                if (rc == 0) ncrows++;
+                else if (rc == 1) failed = 1;
+            }
         }
     }
     printf("\nrelight after one light change, median of %d runs, %d feedback bounce(s), ms\n", runs, bounces);
@@ -512,11 +520,11 @@ int main(int argc, char **argv) {
         fprintf(out, "\n], \"drt\": [");
         for (int i = 0; i < ncrows; i++)
             fprintf(out,
-                    "%s\n  {\"bake\": \"%s\", \"backend\": \"cpu\", \"objects\": %d, \"object_size_m\": %.3f, "
+                    "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
                     "\"build_ms\": %.1f, \"build_max_ms\": %.1f, \"mib_per_object\": %.2f, "
                     "\"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, \"per_object_ms\": %.5f, "
                     "\"relight_ms\": %.4f}",
-                    i ? "," : "", crows[i].file, crows[i].objects, crows[i].size_m, crows[i].build_ms,
+                    i ? "," : "", crows[i].file, crows[i].backend, crows[i].objects, crows[i].size_m, crows[i].build_ms,
                     crows[i].build_max_ms, crows[i].mib, crows[i].receivers, crows[i].light_ms,
                     crows[i].light_ms / crows[i].objects, crows[i].relight_ms);
         fprintf(out, "\n]}\n");
