@@ -103,6 +103,13 @@ def aio(fn):
     return wrapper
 
 
+def scene_asset(w):
+    """The first asset of welcome.scene.assets (the case skips when the scene has none)."""
+    if not w["scene"]["assets"]:
+        pytest.skip("the scene has no assets (welcome.scene.assets is empty)")
+    return w["scene"]["assets"][0]
+
+
 # --------------------------------------------------------------------------- schemas
 
 def _load_schemas():

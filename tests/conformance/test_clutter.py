@@ -8,16 +8,10 @@ import asyncio
 
 import pytest
 
-from conftest import RecvTimeout, aio, controller
+from conftest import RecvTimeout, aio, controller, scene_asset
 
 section = pytest.mark.section
 BUILD_TIMEOUT = 90.0
-
-
-def _asset(w):
-    if not w["scene"]["assets"]:
-        pytest.skip("the scene has no assets (welcome.scene.assets is empty)")
-    return w["scene"]["assets"][0]
 
 
 def _clutter(w):
@@ -66,7 +60,7 @@ async def test_mode_field(cfg):
     c = await controller(cfg)
     p = cfg.uid("mode")
     try:
-        asset = _asset(c.welcome)
+        asset = scene_asset(c.welcome)
         await c.expect_ok({"type": "batch", "ops": [
             {"type": "object.set", "object": _obj(p + "-none", asset)},
             {"type": "object.set", "object": _obj(p + "-dyn", asset, mode="dynamic", transport="clutter")},
@@ -107,7 +101,7 @@ async def test_clutter_lifecycle(cfg):
     p = cfg.uid("clu")
     oid = p + "-a"
     try:
-        asset = _asset(c.welcome)
+        asset = scene_asset(c.welcome)
         _clutter(c.welcome)
         ok = await c.expect_ok({"type": "object.set", "object": _obj(oid, asset, mode="clutter")})
         m = await _transport(c, oid)
@@ -159,7 +153,7 @@ async def test_auto_promotion(cfg):
     p = cfg.uid("auto")
     oid = p + "-a"
     try:
-        asset = _asset(c.welcome)
+        asset = scene_asset(c.welcome)
         rest = _clutter(c.welcome)["rest"]
         loop = asyncio.get_running_loop()
         await c.expect_ok({"type": "object.set", "object": _obj(oid, asset, mode="auto")})

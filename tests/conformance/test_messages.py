@@ -10,7 +10,7 @@ import os
 import pytest
 import websockets
 
-from conftest import RawWS, aio, controller, VALIDATORS
+from conftest import RawWS, VALIDATORS, aio, controller, scene_asset
 
 section = pytest.mark.section
 P = "conf-p-"  # light ids used by the valid-form cases (removed again)
@@ -31,12 +31,6 @@ def _first_material(w, st):
     return {"type": "material.set", "material": m["name"], "emission": m["emission"]}
 
 
-def _asset(w):
-    if not w["scene"]["assets"]:
-        pytest.skip("the scene has no assets (welcome.scene.assets is empty)")
-    return w["scene"]["assets"][0]
-
-
 VALID_CHANGES = [
     ("light.set-point", "4.3", lambda w, st: {"type": "light.set", "light": light(
         id=P + "pt", color=[1, 0.9, 0.8], range=0)}),
@@ -52,7 +46,7 @@ VALID_CHANGES = [
                                                                "light": light(id=P + "fut", future2=3)}),
     ("light.remove", "4.4", lambda w, st: {"type": "light.remove", "light_id": P + "pt"}),
     ("object.set", "4.5", lambda w, st: {"type": "object.set", "object": {
-        "id": P + "obj", "asset": _asset(w), "translation": [0.1, 0, 0.1], "rotation": [0, 0, 0, 2],
+        "id": P + "obj", "asset": scene_asset(w), "translation": [0.1, 0, 0.1], "rotation": [0, 0, 0, 2],
         "scale": [1, 1, 1], "visible": True}}),
     ("object.remove", "4.6", lambda w, st: {"type": "object.remove", "object_id": P + "obj"}),
     ("material.set", "4.7", _first_material),
@@ -453,7 +447,7 @@ async def test_object_dnrt(cfg):
     c = await controller(cfg)
     p = cfg.uid("dnrt")
     try:
-        asset = _asset(c.welcome)
+        asset = scene_asset(c.welcome)
         await c.expect_ok({"type": "batch", "ops": [
             {"type": "object.set", "object": {"id": p + "-a", "asset": asset}},
             {"type": "object.set", "object": {"id": p + "-b", "asset": asset, "dnrt": False}}]})

@@ -283,6 +283,9 @@ static void bench_dnrt_print(const bench_dnrt_row *rows, int n) {
            "targets here (CPU backend): <= 0.2 ms per object per relight, 10 objects <= 2 ms\n");
 }
 
+/* --backend cpu|egl|both: whether backend k (0 cpu, 1 egl) is measured. */
+static int bench_backend_wanted(const char *backend, int k) { return strcmp(backend, k ? "cpu" : "egl") != 0; }
+
 /* --- DRT: what clutter objects cost (engine/drt.h) ------------------------------------------ */
 
 typedef struct {
@@ -422,8 +425,7 @@ int main(int argc, char **argv) {
     for (int f = 0; f < nfiles; f++) {
         lc_backend_kind kinds[2] = {LC_BACKEND_CPU, LC_BACKEND_EGL};
         for (int k = 0; k < 2; k++) {
-            if (k == 0 && !strcmp(backend, "egl")) continue;
-            if (k == 1 && !strcmp(backend, "cpu")) continue;
+            if (!bench_backend_wanted(backend, k)) continue;
             int rc = bench_one(files[f], kinds[k], runs, bounces, &rows[nrows]);
             if (rc == 0) nrows++;
             else if (!(rc == 3 && !strcmp(backend, "both"))) failed = 1; /* an absent EGL is not a failure in "both" */
@@ -434,8 +436,7 @@ int main(int argc, char **argv) {
     for (int f = 0; f < nfiles && dnrt; f++) {
         static const int counts[2] = {1, 10};
         for (int k = 0; k < 2; k++) {
-            if (k == 0 && !strcmp(backend, "egl")) continue;
-            if (k == 1 && !strcmp(backend, "cpu")) continue;
+            if (!bench_backend_wanted(backend, k)) continue;
             for (int c = 0; c < 2; c++)
                 for (int b = 1; b >= 0; b--) {
                     int rc = bench_dnrt(files[f], k ? LC_BACKEND_EGL : LC_BACKEND_CPU, runs, counts[c], object_size, b,
@@ -450,7 +451,7 @@ int main(int argc, char **argv) {
     for (int f = 0; f < nfiles && dnrt; f++) {
         static const int counts[2] = {1, 10};
         for (int k = 0; k < 2; k++) {
-            if ((k == 0 && !strcmp(backend, "egl")) || (k == 1 && !strcmp(backend, "cpu"))) continue;
+            if (!bench_backend_wanted(backend, k)) continue;
             for (int c = 0; c < 2 && ncrows < 16; c++) {
                 int rc = bench_drt(files[f], k ? LC_BACKEND_EGL : LC_BACKEND_CPU, runs, counts[c], object_size,
                                    &crows[ncrows]);

@@ -159,6 +159,30 @@ static size_t floor_texels(const lc_lcb_view *v, float x, float z, float radius,
     return n;
 }
 
+/* How much `on` differs from `off` (lightmaps) on the floor texels within radius of (x, z):
+ * the compare metric over them; *n gets their count. */
+static double floor_effect(const lc_lcb_view *v, const float *on, const float *off, float x, float z, float radius,
+                           size_t *n) {
+    size_t texels = (size_t)v->lightmap_width * v->lightmap_height, w;
+    size_t *idx = malloc(texels * sizeof *idx);
+    float *a = idx ? calloc(texels * 6, sizeof *a) : NULL;
+    double effect = 0;
+    *n = 0;
+    CHECK(a != NULL, "out of memory");
+    if (a) {
+        *n = floor_texels(v, x, z, radius, idx, texels);
+        for (size_t i = 0; i < *n; i++)
+            for (int k = 0; k < 3; k++) {
+                a[3 * i + k] = on[3 * idx[i] + k];
+                a[3 * (*n + i) + k] = off[3 * idx[i] + k];
+            }
+        effect = compare(a, a + 3 * *n, *n, 3, 3, &w);
+    }
+    free(a);
+    free(idx);
+    return effect;
+}
+
 /* Two cubes in the Cornell box, DNRT on (bounces 2: intermediate passes too): one on the
  * floor in the free corner by the short block, scaled 1.5, one above it (an object receiver
  * of the first). EGL must match CPU within TOL (lightmap, cache, grid and object SH), and
@@ -194,9 +218,8 @@ static void test_cornell_dnrt(lc_engine *gpu, const fixture *f, const char *qual
     CHECK(rc == 0, "cornell %s: egl relight without DNRT: %s", quality, err);
     size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
     float *off = malloc(texels * 3 * sizeof *off), *on = malloc(texels * 3 * sizeof *on);
-    size_t *idx = malloc(texels * sizeof *idx);
-    CHECK(off && on && idx, "out of memory");
-    if (rc != 0 || !off || !on || !idx) goto done;
+    CHECK(off && on, "out of memory");
+    if (rc != 0 || !off || !on) goto done;
     CHECK(fr->dnrt_objects == 0, "cornell %s: DNRT off, yet %u objects", quality, fr->dnrt_objects);
     memcpy(off, fr->lightmap, texels * 3 * sizeof *off);
     st.settings.dnrt = 1;
@@ -207,25 +230,15 @@ static void test_cornell_dnrt(lc_engine *gpu, const fixture *f, const char *qual
           fr->dnrt_objects, fr->dnrt_receivers);
     memcpy(on, fr->lightmap, texels * 3 * sizeof *on);
     /* Under the floor cube: its footprint and a little around (the outer volume is ~0.26 m). */
-    size_t n = floor_texels(v, 0.12f, 0.45f, 0.15f, idx, texels);
-    float *a = malloc((n ? n : 1) * 6 * sizeof *a);
-    CHECK(a != NULL, "out of memory");
-    if (!a) goto done;
-    for (size_t i = 0; i < n; i++)
-        for (int k = 0; k < 3; k++) {
-            a[3 * i + k] = on[3 * idx[i] + k];
-            a[3 * (n + i) + k] = off[3 * idx[i] + k];
-        }
-    size_t w;
-    double effect = compare(a, a + 3 * n, n, 3, 3, &w);
+    size_t n;
+    double effect = floor_effect(v, on, off, 0.12f, 0.45f, 0.15f, &n);
     fprintf(stderr,
             "cornell %s DNRT: %u receivers, EGL/CPU worst %.3g; %zu floor texels under the cube, EGL with/without "
-            "DNRT %.3g (at %zu: %.6g vs %.6g)\n",
-            quality, fr->dnrt_receivers, m, n, effect, w, (double)a[w], (double)a[3 * n + w]);
+            "DNRT %.3g\n",
+            quality, fr->dnrt_receivers, m, n, effect);
     CHECK(n >= 4, "cornell %s: %zu floor texels under the cube", quality, n);
     CHECK(effect > TOL, "cornell %s: DNRT changes the EGL lightmap under the cube by %.3g only (tol %g)", quality,
           effect, TOL);
-    free(a);
     /* Again, progressive (nothing re-placed: the dnrt stage is the transport's own). */
     st.settings.progressive = 1;
     snprintf(label, sizeof label, "cornell %s DNRT progressive", quality);
@@ -239,7 +252,6 @@ static void test_cornell_dnrt(lc_engine *gpu, const fixture *f, const char *qual
 done:
     free(off);
     free(on);
-    free(idx);
 }
 
 /* A clutter cube (engine/drt.h) on the Cornell floor: operators built once per engine (the
@@ -263,11 +275,10 @@ static void test_cornell_drt(lc_engine *gpu, const fixture *f, const char *quali
     st.n_objects = 1;
     char label[96], err[512];
     size_t texels = (size_t)v->lightmap_width * v->lightmap_height;
-    float *dnrt = malloc(texels * 3 * sizeof *dnrt), *a = NULL;
-    size_t *idx = malloc(texels * sizeof *idx);
+    float *dnrt = malloc(texels * 3 * sizeof *dnrt);
     lc_drt_builder *b = lc_drt_builder_create(v, 0, err, sizeof err);
-    CHECK(dnrt && idx && b, "drt setup: %s", b ? "out of memory" : err);
-    if (!dnrt || !idx || !b) goto done;
+    CHECK(dnrt && b, "drt setup: %s", b ? "out of memory" : err);
+    if (!dnrt || !b) goto done;
     const lc_engine_frame *fr;
     int rc = lc_engine_relight(gpu, &st, &fr, err, sizeof err);
     CHECK(rc == 0 && fr->dnrt_objects == 1, "cornell %s: egl relight with the cube in DNRT: %s", quality, err);
@@ -291,16 +302,8 @@ static void test_cornell_drt(lc_engine *gpu, const fixture *f, const char *quali
               lc_engine_clutter_active(f->engine, "clutter"),
           "cornell %s: both engines apply the operators (egl drt %u dnrt %u)", quality, fr->drt_objects,
           fr->dnrt_objects);
-    size_t n = floor_texels(v, 0.12f, 0.45f, 0.25f, idx, texels), w;
-    a = calloc((n ? n : 1) * 6, sizeof *a);
-    CHECK(a != NULL, "out of memory");
-    if (!a) goto done;
-    for (size_t i = 0; i < n; i++)
-        for (int k = 0; k < 3; k++) {
-            a[3 * i + k] = fr->lightmap[3 * idx[i] + k];
-            a[3 * (n + i) + k] = dnrt[3 * idx[i] + k];
-        }
-    double effect = compare(a, a + 3 * n, n, 3, 3, &w);
+    size_t n, w;
+    double effect = floor_effect(v, fr->lightmap, dnrt, 0.12f, 0.45f, 0.25f, &n);
     fprintf(stderr, "cornell %s DRT: EGL/CPU worst %.3g; %zu floor texels by the cube, EGL DRT against DNRT %.3g\n",
             quality, m, n, effect);
     CHECK(n >= 4 && effect > TOL, "cornell %s: DRT changes the EGL lightmap by the cube by %.3g only (%zu texels)",
@@ -330,9 +333,7 @@ static void test_cornell_drt(lc_engine *gpu, const fixture *f, const char *quali
     CHECK(fr && fr->drt_objects == 0 && fr->dnrt_objects == 1, "cornell %s: moved clutter is back in DNRT", quality);
 done:
     lc_drt_builder_release(b);
-    free(a);
     free(dnrt);
-    free(idx);
 }
 
 /* Bakes scenes/cornell-box with the given quality and compares EGL with CPU (bounces 2,
