@@ -4,20 +4,21 @@
 # engine with DNRT (the default bake), with DRT (the same bake, the objects in mode clutter:
 # their operators built as lucentd builds them once they rest) and without either (the bake
 # with --no-transfer: placed objects only shadow the direct light). Cases on the embedded Cornell box: a white cube on
-# the floor, a red cube by the wall, both side by side; with --sponza, a 2 m white cube in
-# sunlit Sponza (../shared/scenes).
+# the floor, a red cube by the wall, both side by side; with --sponza, a 1 m white cube in
+# sunlit Sponza (../shared/scenes); --no-cornell skips the Cornell cases.
 #
-# Usage: bench/dnrt.sh [--build DIR] [--out DIR] [--spp N] [--sponza]
+# Usage: bench/dnrt.sh [--build DIR] [--out DIR] [--spp N] [--sponza] [--no-cornell]
 # Prints one table row per case and engine; writes OUT/dnrt.json.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
-build="$root/build" out="$root/bench/out/dnrt" spp=8192 sponza=0
+build="$root/build" out="$root/bench/out/dnrt" spp=8192 sponza=0 do_cornell=1
 while [ $# -gt 0 ]; do
     case "$1" in
     --build) build="$2"; shift 2 ;;
     --out) out="$2"; shift 2 ;;
     --spp) spp="$2"; shift 2 ;;
     --sponza) sponza=1; shift ;;
+    --no-cornell) do_cornell=0; shift ;;
     -h | --help) sed -n '2,11p' "$0"; exit 0 ;;
     *) echo "bench/dnrt.sh: unknown argument $1 (see --help)" >&2; exit 2 ;;
     esac
@@ -96,15 +97,17 @@ run_scene() { # name source scale-flags lights-json spp case=objects...
 }
 
 cornell="$root/scenes/cornell-box/cornell-box.obj"
-run_scene cornell "$cornell" "" "" "$spp" \
-    "white=$(object w white 0.42 0 0.1 1.5)" \
-    "red-wall=$(object r red 0.48 0 0.1 1.2)" \
-    "two=$(object r red 0.40 0 0.22 1.2);$(object w white 0.40 0 0.08 1.2)"
+if [ "$do_cornell" = 1 ]; then
+    run_scene cornell "$cornell" "" "" "$spp" \
+        "white=$(object w white 0.42 0 0.1 1.5)" \
+        "red-wall=$(object r red 0.48 0 0.1 1.2)" \
+        "two=$(object r red 0.40 0 0.22 1.2);$(object w white 0.40 0 0.08 1.2)"
+fi
 if [ "$sponza" = 1 ]; then
     sp="$root/../shared/scenes/sponza-dabrovic/sponza.obj"
     if [ -f "$sp" ]; then
         sun='{"id":"sun","type":"directional","color":[1,0.95,0.9],"intensity":100000,"direction":[0.3,-1,0.2]}'
-        run_scene sponza "$sp" "" "$sun" 4096 "cube=$(object c white 2 0 0 20)"
+        run_scene sponza "$sp" "" "$sun" 4096 "cube=$(object c white 2 0 0 10)"
     else
         echo "bench/dnrt.sh: $sp absent: Sponza skipped" >&2
     fi
