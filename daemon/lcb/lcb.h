@@ -32,6 +32,16 @@
  *   ATRD  int8_t               the transfer grids' quantised values (ATRN says where each starts)
  *   ASPT  lc_lcb_sparse_point  optional: LightSkin sparse points, asset-local, sorted by asset
  *   AVNN  lc_lcb_sparse_vertex per AVRT vertex, its 8 nearest sparse points (iff ASPT)
+ *   PRBH  lc_lcb_probe_header  optional (the probes solver, --solver probes|both): 1 record
+ *   PRBP  lc_lcb_probe         radiance probes in free space
+ *   PRBR  uint32_t             per probe and relight ray (probe-major): the surfel hit, LC_NONE
+ *   PRCL  lc_lcb_probe_cluster receiver clusters with their truncated SVD
+ *   PRCP  uint32_t             each cluster's probes (the column order of its basis)
+ *   PRCB  float                each cluster's basis S V^T: rank x (probes x coefficients)
+ *   PRRW  lc_lcb_probe_row     receiver rows, cluster by cluster
+ *   PRRU  float                each cluster's U: rows x rank, row-major
+ * PIC (links) and probes are two solvers of the same quantities; a bake may carry both
+ * (LINK is then present but may hold zero links per cache for --solver probes).
  * Optional sections were added without a version change (the minor stays 0): a reader that
  * does not know one skips it, and a bake without one stays valid.
  */
@@ -207,6 +217,61 @@ typedef struct lc_lcb_sparse_vertex {
     float weight[8];
 } lc_lcb_sparse_vertex;
 
+/* The probes solver (Silvennoinen & Lehtinen 2017; tools/bake/probes.h bakes it,
+ * daemon/engine/probes.h runs it). A pass, from the surfels' radiosity B:
+ *   probe SH   lambda[p][j] = (4 pi / n_rays) sum_k B[hit(p,k)] / pi * y_j(dir_k)
+ *              (dir_k = lc_probe_ray_dir(k, n_rays), the same for every probe; a miss adds 0)
+ *   basis      b[c][r] = sum_col PRCB[c][r][col] lambda[PRCP[c][col / coeffs]][col % coeffs]
+ *   receivers  value[row] = sum_r PRRU[c][row][r] b[c][r]
+ * A row of a texel cache (coeff 0) is the irradiance E for the cache normal; a grid cache has
+ * 9 rows, coeff j the cosine-convolved L2 irradiance SH coefficient E_j = A_l L_j. RGB
+ * throughout (the matrices are shared by the channels). */
+typedef struct lc_lcb_probe_header {
+    uint32_t n_probes;       /* PRBP records, >= 1 */
+    uint32_t n_rays;         /* relight rays per probe, 1..65536 */
+    uint32_t sh_bands;       /* the probes' SH bands, 1..LC_LCB_PROBE_MAX_BANDS; coeffs = bands^2 */
+    uint32_t n_clusters;     /* PRCL records */
+    uint32_t n_rows;         /* PRRW records */
+    uint32_t max_rank;       /* the largest cluster rank, 1..LC_LCB_PROBE_MAX_RANK */
+    uint32_t overlaps;       /* the most probes one receiver uses (information) */
+    uint32_t receiver_rays;  /* rays per receiver the bake traced (information) */
+    float support_radius;    /* metres (information) */
+    float svd_error;         /* the truncation error each cluster met, relative Frobenius (information) */
+    uint32_t reserved[6];
+} lc_lcb_probe_header;
+
+#define LC_LCB_PROBE_MAX_BANDS 8
+#define LC_LCB_PROBE_MAX_RANK 256
+
+typedef struct lc_lcb_probe {
+    float position[3];
+    uint32_t reserved;
+} lc_lcb_probe;
+
+typedef struct lc_lcb_probe_cluster {
+    uint32_t first_row, n_rows;     /* its rows in PRRW, >= 1 */
+    uint32_t first_probe, n_probes; /* its probes in PRCP, >= 1 */
+    uint32_t rank;                  /* 1..max_rank */
+    uint32_t reserved;
+    uint64_t basis_offset; /* floats into PRCB: rank x (n_probes x coeffs) */
+    uint64_t u_offset;     /* floats into PRRU: n_rows x rank */
+} lc_lcb_probe_cluster;
+
+typedef struct lc_lcb_probe_row {
+    uint32_t cache; /* CACH index */
+    uint32_t coeff; /* texel cache: 0; grid cache: 0..8 */
+} lc_lcb_probe_row;
+
+/* Relight ray k of n (the same set for every probe): a spherical Fibonacci point, so the
+ * directions cover the sphere evenly and need not be stored. */
+static inline void lc_probe_ray_dir(uint32_t k, uint32_t n, float d[3]) {
+    const double golden = 2.399963229728653; /* pi (3 - sqrt 5) */
+    double z = 1.0 - (2.0 * k + 1.0) / (double)n, r = sqrt(fmax(0.0, 1.0 - z * z)), phi = golden * (double)k;
+    d[0] = (float)(r * cos(phi));
+    d[1] = (float)(r * sin(phi));
+    d[2] = (float)z;
+}
+
 static inline uint64_t lc_lcb_transfer_bytes(const lc_lcb_transfer *t) {
     return (uint64_t)t->dims * t->dims * t->dims * t->coeffs * 4u;
 }
@@ -225,6 +290,10 @@ _Static_assert(sizeof(lc_lcb_asset_vertex) == 36, "asset vertex layout");
 _Static_assert(sizeof(lc_lcb_transfer) == 192, "transfer layout");
 _Static_assert(sizeof(lc_lcb_sparse_point) == 32, "sparse point layout");
 _Static_assert(sizeof(lc_lcb_sparse_vertex) == 48, "sparse vertex layout");
+_Static_assert(sizeof(lc_lcb_probe_header) == 64, "probe header layout");
+_Static_assert(sizeof(lc_lcb_probe) == 16, "probe layout");
+_Static_assert(sizeof(lc_lcb_probe_cluster) == 40, "probe cluster layout");
+_Static_assert(sizeof(lc_lcb_probe_row) == 8, "probe row layout");
 
 /* --- link direction/cone packing ------------------------------------------------------- */
 
@@ -322,6 +391,18 @@ typedef struct lc_lcb_view {
     const lc_lcb_sparse_point *sparse_points; /* NULL when the bake has none (ASPT) */
     uint32_t n_sparse_points;
     const lc_lcb_sparse_vertex *sparse_vertices; /* n_asset_vertices records when sparse_points */
+    /* the probes solver (PRB*, PRC*, PRR*): probe_header NULL when the bake has none */
+    const lc_lcb_probe_header *probe_header;
+    const lc_lcb_probe *probes;
+    const uint32_t *probe_hits; /* n_probes * n_rays */
+    const lc_lcb_probe_cluster *probe_clusters;
+    const uint32_t *probe_cluster_probes;
+    uint64_t n_probe_cluster_probes;
+    const float *probe_basis;
+    uint64_t n_probe_basis;
+    const lc_lcb_probe_row *probe_rows;
+    const float *probe_u;
+    uint64_t n_probe_u;
 } lc_lcb_view;
 
 /* The asset's DNRT transfer grid, or NULL (no data: an older bake, or baked without). */

@@ -15,7 +15,12 @@ typedef struct lcb_stats {
     uint64_t owned, dilated, empty; /* lightmap texels */
     uint64_t file_size;
     double surfel_area;
+    uint64_t probe_bytes; /* the eight probe sections together */
+    double probe_mean_rank;
 } lcb_stats;
+
+/* The probes solver's sections (lcb.h), for their size in `info`. */
+static const char lcb_probe_ids[8][5] = {"PRBH", "PRBP", "PRBR", "PRCL", "PRCP", "PRCB", "PRRW", "PRRU"};
 
 static void lcb_gather(const lc_lcb *f, const lc_lcb_view *v, const cJSON *meta, lcb_stats *st) {
     memset(st, 0, sizeof *st);
@@ -38,6 +43,13 @@ static void lcb_gather(const lc_lcb *f, const lc_lcb_view *v, const cJSON *meta,
     for (uint32_t i = 0; i < lc_lcb_section_count(f); i++) {
         const lc_lcb_section *s = lc_lcb_section_at(f, i);
         if (s->offset + s->size > end) end = s->offset + s->size;
+        for (int k = 0; v->probe_header && k < 8; k++)
+            if (memcmp(s->id, lcb_probe_ids[k], 4) == 0) st->probe_bytes += s->size;
+    }
+    if (v->probe_header && v->probe_header->n_clusters) {
+        double sum = 0;
+        for (uint32_t i = 0; i < v->probe_header->n_clusters; i++) sum += v->probe_clusters[i].rank;
+        st->probe_mean_rank = sum / v->probe_header->n_clusters;
     }
     st->file_size = (end + LC_LCB_ALIGN - 1) / LC_LCB_ALIGN * LC_LCB_ALIGN;
     const cJSON *surf = cJSON_GetObjectItemCaseSensitive(meta, "surfels");
@@ -88,6 +100,20 @@ static void lcb_print_sparse(const lc_lcb_view *v, FILE *out) {
     fputc('\n', out);
 }
 
+/* The probes solver (PRB*, PRC*, PRR*), when the bake has it. */
+static void lcb_print_probes(const lc_lcb_view *v, const lcb_stats *st, FILE *out) {
+    const lc_lcb_probe_header *h = v->probe_header;
+    if (!h) return;
+    char b[32];
+    lcb_human_bytes(st->probe_bytes, b, sizeof b);
+    fprintf(out, "  probes      %u probes x %u rays, SH bands %u; %u clusters over %u rows, rank max %u mean %.1f\n",
+            h->n_probes, h->n_rays, h->sh_bands, h->n_clusters, h->n_rows, h->max_rank, st->probe_mean_rank);
+    fprintf(
+        out,
+        "              overlaps %u, receiver rays %u, support radius %.4g m, SVD error %.3g; %s in the probe sections\n",
+        h->overlaps, h->receiver_rays, h->support_radius, h->svd_error, b);
+}
+
 static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *meta, const lcb_stats *st,
                             const char *path, FILE *out) {
     char b[32];
@@ -131,6 +157,7 @@ static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *
     fprintf(out, "  assets      %u (%u vertices, %u triangles)\n", v->n_assets, v->n_asset_vertices,
             v->n_asset_triangles);
     lcb_print_sparse(v, out);
+    lcb_print_probes(v, st, out);
 
     fputs("sections\n", out);
     fprintf(out, "  %-4s  %12s  %10s  %12s  %s\n", "id", "records", "record", "bytes", "crc");
@@ -145,6 +172,34 @@ static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *
 
 /* Adds n to obj; returns 0 when cJSON ran out of memory. */
 static int lcb_add_num(cJSON *obj, const char *key, double n) { return cJSON_AddNumberToObject(obj, key, n) != NULL; }
+
+/* counts.probes, when the bake has the probes solver; returns 0 when cJSON ran out of memory. */
+static int lcb_json_probes(cJSON *cnt, const lc_lcb_view *v, const lcb_stats *st) {
+    const lc_lcb_probe_header *h = v->probe_header;
+    if (!h) return 1;
+    cJSON *p = cJSON_AddObjectToObject(cnt, "probes");
+    if (!p) return 0;
+    struct {
+        const char *k;
+        double v;
+    } nums[] = {
+        {"probes", h->n_probes},
+        {"rays", h->n_rays},
+        {"sh_bands", h->sh_bands},
+        {"clusters", h->n_clusters},
+        {"rows", h->n_rows},
+        {"max_rank", h->max_rank},
+        {"mean_rank", st->probe_mean_rank},
+        {"overlaps", h->overlaps},
+        {"receiver_rays", h->receiver_rays},
+        {"support_radius", h->support_radius},
+        {"svd_error", h->svd_error},
+        {"bytes", (double)st->probe_bytes},
+    };
+    for (size_t i = 0; i < sizeof nums / sizeof nums[0]; i++)
+        if (!lcb_add_num(p, nums[i].k, nums[i].v)) return 0;
+    return 1;
+}
 
 static int lcb_print_json(const lc_lcb *f, const lc_lcb_view *v, const cJSON *meta, const lcb_stats *st,
                           const char *path, FILE *out) {
@@ -202,6 +257,7 @@ static int lcb_print_json(const lc_lcb *f, const lc_lcb_view *v, const cJSON *me
         cJSON_AddItemToArray(asp, x);
     }
     if (!asp) goto err;
+    if (!lcb_json_probes(cnt, v, st)) goto err;
     cJSON *lm = cJSON_AddObjectToObject(cnt, "lightmap");
     uint64_t texels = (uint64_t)v->lightmap_width * v->lightmap_height;
     if (!lm || !lcb_add_num(lm, "width", v->lightmap_width) || !lcb_add_num(lm, "height", v->lightmap_height) ||

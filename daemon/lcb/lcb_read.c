@@ -68,6 +68,14 @@ enum {
     S_ATRD,
     S_ASPT,
     S_AVNN,
+    S_PRBH,
+    S_PRBP,
+    S_PRBR,
+    S_PRCL,
+    S_PRCP,
+    S_PRCB,
+    S_PRRW,
+    S_PRRU,
     S_COUNT
 };
 static const struct {
@@ -95,6 +103,14 @@ static const struct {
     {"ATRD", 1, 0, "int8_t"},
     {"ASPT", sizeof(lc_lcb_sparse_point), 0, "lc_lcb_sparse_point"},
     {"AVNN", sizeof(lc_lcb_sparse_vertex), 0, "lc_lcb_sparse_vertex"},
+    {"PRBH", sizeof(lc_lcb_probe_header), 0, "lc_lcb_probe_header"},
+    {"PRBP", sizeof(lc_lcb_probe), 0, "lc_lcb_probe"},
+    {"PRBR", sizeof(uint32_t), 0, "uint32_t"},
+    {"PRCL", sizeof(lc_lcb_probe_cluster), 0, "lc_lcb_probe_cluster"},
+    {"PRCP", sizeof(uint32_t), 0, "uint32_t"},
+    {"PRCB", sizeof(float), 0, "float"},
+    {"PRRW", sizeof(lc_lcb_probe_row), 0, "lc_lcb_probe_row"},
+    {"PRRU", sizeof(float), 0, "float"},
 };
 
 /* What META says; the sections are checked against it. */
@@ -268,8 +284,10 @@ static int lcb_find_sections(lcb_ctx *c, const lc_lcb *f) {
                             "%s: record size %u, expected %u (%s) — written by an incompatible lucent-bake; "
                             "re-run lucent-bake",
                             lcb_known[k].id, s->record_size, lcb_known[k].record, lcb_known[k].what);
-        /* The view counts in 32 bits; LINK/LKSH have no count field there. */
-        if (k != S_LINK && k != S_LKSH && s->count > UINT32_MAX)
+        /* The view counts in 32 bits; LINK/LKSH/PRBR have no count field there, and
+         * PRCP/PRCB/PRRU count in 64 bits. */
+        int wide = k == S_LINK || k == S_LKSH || k == S_PRBR || k == S_PRCP || k == S_PRCB || k == S_PRRU;
+        if (!wide && s->count > UINT32_MAX)
             return lcb_fail(c, "%s: %llu records, more than this reader supports (2^32-1)", lcb_known[k].id,
                             (unsigned long long)s->count);
     }
@@ -385,7 +403,9 @@ static int lcb_meta_fields(lcb_ctx *c, const cJSON *root) {
     if (lcb_meta_uint(c, root, "/hierarchy/levels", 1, UINT32_MAX - 1, &m->levels)) return -1;
     if (lcb_meta_uint(c, root, "/caches/count", 0, UINT32_MAX, &m->caches)) return -1;
     if (lcb_meta_uint(c, root, "/caches/texel", 0, m->caches, &m->texel)) return -1;
-    if (lcb_meta_uint(c, root, "/links/per_cache", 1, 1024, &m->per_cache)) return -1;
+    /* --solver probes writes no links (per_cache 0): allowed only with the probe sections,
+     * so every bake keeps a solver. */
+    if (lcb_meta_uint(c, root, "/links/per_cache", c->sec[S_PRBH] ? 0 : 1, 1024, &m->per_cache)) return -1;
     if (lcb_meta_uint(c, root, "/links/sh_bands", 0, 8, &m->link_sh)) return -1;
     /* the scene's lights (optional): their ids become protocol light ids, so UTF-8 */
     const cJSON *lights = lcb_json_at(root, "/lights");
@@ -832,6 +852,150 @@ static int lcb_check_sparse(lcb_ctx *c) {
     return 0;
 }
 
+/* The probes solver: the eight sections together or none; the header's sizes agree with the
+ * sections; clusters tile PRRW in order and their probes, basis and U lie inside PRCP, PRCB
+ * and PRRU; every index in range and every float finite, so the engine needs no checks. */
+static const int lcb_probe_secs[] = {S_PRBH, S_PRBP, S_PRBR, S_PRCL, S_PRCP, S_PRCB, S_PRRW, S_PRRU};
+#define LCB_PROBE_MAX_RAYS 65536u
+
+/* The one PRBH record (its count is checked first). */
+static int lcb_check_probe_header(lcb_ctx *c, const lc_lcb_probe_header *h) {
+    if (h->n_probes < 1 || h->n_probes != lcb_count(c, S_PRBP))
+        return lcb_fail(c, "PRBH: n_probes %u, PRBP has %llu probes (must be equal and >= 1)" LCB_INCONSISTENT,
+                        h->n_probes, (unsigned long long)lcb_count(c, S_PRBP));
+    if (h->n_rays < 1 || h->n_rays > LCB_PROBE_MAX_RAYS)
+        return lcb_fail(c, "PRBH: n_rays %u is not in 1..%u" LCB_INCONSISTENT, h->n_rays, LCB_PROBE_MAX_RAYS);
+    if (h->sh_bands < 1 || h->sh_bands > LC_LCB_PROBE_MAX_BANDS)
+        return lcb_fail(c, "PRBH: sh_bands %u is not in 1..%d" LCB_INCONSISTENT, h->sh_bands, LC_LCB_PROBE_MAX_BANDS);
+    if (h->n_clusters != lcb_count(c, S_PRCL))
+        return lcb_fail(c, "PRBH: n_clusters %u, PRCL has %llu clusters" LCB_INCONSISTENT, h->n_clusters,
+                        (unsigned long long)lcb_count(c, S_PRCL));
+    if (h->n_rows != lcb_count(c, S_PRRW))
+        return lcb_fail(c, "PRBH: n_rows %u, PRRW has %llu rows" LCB_INCONSISTENT, h->n_rows,
+                        (unsigned long long)lcb_count(c, S_PRRW));
+    if (h->max_rank < 1 || h->max_rank > LC_LCB_PROBE_MAX_RANK)
+        return lcb_fail(c, "PRBH: max_rank %u is not in 1..%d" LCB_INCONSISTENT, h->max_rank, LC_LCB_PROBE_MAX_RANK);
+    if (!(isfinite(h->support_radius) && h->support_radius >= 0))
+        return lcb_fail(c, "PRBH: support_radius %g is not finite and >= 0" LCB_INCONSISTENT,
+                        (double)h->support_radius);
+    if (!(isfinite(h->svd_error) && h->svd_error >= 0))
+        return lcb_fail(c, "PRBH: svd_error %g is not finite and >= 0" LCB_INCONSISTENT, (double)h->svd_error);
+    /* n_probes < 2^32 and n_rays <= 2^16 (checked above): the product fits 64 bits. */
+    uint64_t hits = (uint64_t)h->n_probes * h->n_rays;
+    if (lcb_count(c, S_PRBR) != hits)
+        return lcb_fail(c, "PRBR: %llu entries, but PRBH n_probes x n_rays is %u x %u = %llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_PRBR), h->n_probes, h->n_rays, (unsigned long long)hits);
+    return 0;
+}
+
+/* Clusters: in order over PRRW (cluster 0 at row 0, each starting where the last ended, the
+ * last ending at n_rows), each with rows and probes, rank 1..max_rank, and its basis and U
+ * inside PRCB and PRRU. Reads only PRCL, so it may run before the arrays it points into. */
+static int lcb_check_probe_clusters(lcb_ctx *c, const lc_lcb_probe_header *h) {
+    const lc_lcb_probe_cluster *cl = lcb_data(c, S_PRCL);
+    uint64_t n = lcb_count(c, S_PRCL), n_rows = lcb_count(c, S_PRRW), n_cp = lcb_count(c, S_PRCP);
+    uint64_t n_basis = lcb_count(c, S_PRCB), n_u = lcb_count(c, S_PRRU), coeffs = (uint64_t)h->sh_bands * h->sh_bands;
+    uint64_t row = 0; /* n <= 2^32-1 clusters of < 2^32 rows each: no overflow */
+    for (uint64_t i = 0; i < n; i++) {
+        const lc_lcb_probe_cluster *k = &cl[i];
+        unsigned long long ui = (unsigned long long)i;
+        if (k->first_row != row)
+            return lcb_fail(
+                c, "PRCL: cluster %llu first_row %u, expected %llu (clusters tile PRRW in order)" LCB_INCONSISTENT, ui,
+                k->first_row, (unsigned long long)row);
+        if (k->n_rows < 1 || k->n_probes < 1)
+            return lcb_fail(c, "PRCL: cluster %llu has n_rows %u, n_probes %u (both must be >= 1)" LCB_INCONSISTENT, ui,
+                            k->n_rows, k->n_probes);
+        if (row + k->n_rows > n_rows)
+            return lcb_fail(c, "PRCL: cluster %llu rows [%u, +%u) exceed PRRW (%llu rows)" LCB_INCONSISTENT, ui,
+                            k->first_row, k->n_rows, (unsigned long long)n_rows);
+        if ((uint64_t)k->first_probe + k->n_probes > n_cp)
+            return lcb_fail(c, "PRCL: cluster %llu probes [%u, +%u) exceed PRCP (%llu entries)" LCB_INCONSISTENT, ui,
+                            k->first_probe, k->n_probes, (unsigned long long)n_cp);
+        if (k->rank < 1 || k->rank > h->max_rank)
+            return lcb_fail(c, "PRCL: cluster %llu rank %u is not in 1..%u (PRBH max_rank)" LCB_INCONSISTENT, ui,
+                            k->rank, h->max_rank);
+        /* rank <= 256, n_probes < 2^32, coeffs <= 64, n_rows < 2^32: both sizes fit 64 bits;
+         * the offsets come from the file, so compare them without adding. */
+        uint64_t basis = (uint64_t)k->rank * k->n_probes * coeffs, u = (uint64_t)k->n_rows * k->rank;
+        if (k->basis_offset > n_basis || basis > n_basis - k->basis_offset)
+            return lcb_fail(c, "PRCL: cluster %llu basis [%llu, +%llu) exceeds PRCB (%llu floats)" LCB_INCONSISTENT, ui,
+                            (unsigned long long)k->basis_offset, (unsigned long long)basis,
+                            (unsigned long long)n_basis);
+        if (k->u_offset > n_u || u > n_u - k->u_offset)
+            return lcb_fail(c, "PRCL: cluster %llu U [%llu, +%llu) exceeds PRRU (%llu floats)" LCB_INCONSISTENT, ui,
+                            (unsigned long long)k->u_offset, (unsigned long long)u, (unsigned long long)n_u);
+        row += k->n_rows;
+    }
+    if (row != n_rows)
+        return lcb_fail(c, "PRCL: clusters end at row %llu, PRRW has %llu rows (they must tile it)" LCB_INCONSISTENT,
+                        (unsigned long long)row, (unsigned long long)n_rows);
+    return 0;
+}
+
+static int lcb_check_floats(lcb_ctx *c, int k) {
+    const float *x = lcb_data(c, k);
+    for (uint64_t i = 0; i < lcb_count(c, k); i++)
+        if (!isfinite(x[i]))
+            return lcb_fail(c, "%s: value %llu is not finite" LCB_INCONSISTENT, lcb_known[k].id, (unsigned long long)i);
+    return 0;
+}
+
+/* PRBP, PRBR, PRCP, PRRW, PRCB, PRRU: positions and values finite, indices in range. */
+static int lcb_check_probe_arrays(lcb_ctx *c, const lc_lcb_probe_header *h) {
+    const lc_lcb_probe *p = lcb_data(c, S_PRBP);
+    for (uint64_t i = 0; i < lcb_count(c, S_PRBP); i++)
+        if (!lcb_finite(p[i].position, 3))
+            return lcb_fail(c, "PRBP: probe %llu position is not finite" LCB_INCONSISTENT, (unsigned long long)i);
+    const uint32_t *hit = lcb_data(c, S_PRBR);
+    uint64_t n_surf = lcb_count(c, S_SURF);
+    for (uint64_t i = 0; i < lcb_count(c, S_PRBR); i++)
+        if (hit[i] != LC_NONE && hit[i] >= n_surf)
+            return lcb_fail(c,
+                            "PRBR: probe %llu ray %llu hits surfel %u >= %llu surfels (nor LC_NONE)" LCB_INCONSISTENT,
+                            (unsigned long long)(i / h->n_rays), (unsigned long long)(i % h->n_rays), hit[i],
+                            (unsigned long long)n_surf);
+    const uint32_t *cp = lcb_data(c, S_PRCP);
+    for (uint64_t i = 0; i < lcb_count(c, S_PRCP); i++)
+        if (cp[i] >= h->n_probes)
+            return lcb_fail(c, "PRCP: entry %llu is probe %u >= %u probes (PRBH n_probes)" LCB_INCONSISTENT,
+                            (unsigned long long)i, cp[i], h->n_probes);
+    const lc_lcb_probe_row *r = lcb_data(c, S_PRRW);
+    const lc_lcb_cache *ca = lcb_data(c, S_CACH);
+    uint64_t n_cache = lcb_count(c, S_CACH);
+    for (uint64_t i = 0; i < lcb_count(c, S_PRRW); i++) {
+        unsigned long long ui = (unsigned long long)i;
+        if (r[i].cache >= n_cache)
+            return lcb_fail(c, "PRRW: row %llu cache %u >= %llu caches" LCB_INCONSISTENT, ui, r[i].cache,
+                            (unsigned long long)n_cache);
+        /* CACH is validated: a cache is exactly a texel or a grid cache. */
+        if ((ca[r[i].cache].flags & LC_CACHE_TEXEL) ? r[i].coeff != 0 : r[i].coeff > 8)
+            return lcb_fail(c, "PRRW: row %llu coeff %u for %s cache %u, must be %s" LCB_INCONSISTENT, ui, r[i].coeff,
+                            (ca[r[i].cache].flags & LC_CACHE_TEXEL) ? "texel" : "grid", r[i].cache,
+                            (ca[r[i].cache].flags & LC_CACHE_TEXEL) ? "0" : "in 0..8");
+    }
+    return lcb_check_floats(c, S_PRCB) || lcb_check_floats(c, S_PRRU) ? -1 : 0;
+}
+
+static int lcb_check_probes(lcb_ctx *c) {
+    const int n_secs = (int)(sizeof lcb_probe_secs / sizeof lcb_probe_secs[0]);
+    int present = 0;
+    for (int i = 0; i < n_secs; i++) present += !!c->sec[lcb_probe_secs[i]];
+    if (present == 0) return 0;
+    for (int i = 0; i < n_secs; i++)
+        if (!c->sec[lcb_probe_secs[i]])
+            return lcb_fail(c,
+                            "%s: missing (the probe sections PRBH, PRBP, PRBR, PRCL, PRCP, PRCB, PRRW and PRRU come "
+                            "together)" LCB_INCONSISTENT,
+                            lcb_known[lcb_probe_secs[i]].id);
+    if (lcb_count(c, S_PRBH) != 1)
+        return lcb_fail(c, "PRBH: %llu records, expected exactly 1" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_PRBH));
+    const lc_lcb_probe_header *h = lcb_data(c, S_PRBH);
+    if (lcb_check_probe_header(c, h) || lcb_check_probe_clusters(c, h) || lcb_check_probe_arrays(c, h)) return -1;
+    return 0;
+}
+
 /* --- load ------------------------------------------------------------------------------ */
 
 static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
@@ -844,7 +1008,7 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     if (lcb_check_header(&c, f) || lcb_check_sections(&c, f) || lcb_find_sections(&c, f) || lcb_check_meta(&c, f) ||
         lcb_check_geometry(&c) || lcb_check_surfels(&c) || lcb_check_levels(&c) || lcb_check_nodes(&c) ||
         lcb_check_caches(&c) || lcb_check_links(&c) || lcb_check_assets(&c) || lcb_check_transfers(&c) ||
-        lcb_check_sparse(&c))
+        lcb_check_sparse(&c) || lcb_check_probes(&c))
         return -1;
 
     lc_lcb_view *v = &f->view;
@@ -891,6 +1055,17 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     v->sparse_points = LCB_ARR(S_ASPT);
     v->n_sparse_points = (uint32_t)lcb_count(&c, S_ASPT);
     v->sparse_vertices = LCB_ARR(S_AVNN);
+    v->probe_header = LCB_ARR(S_PRBH);
+    v->probes = LCB_ARR(S_PRBP);
+    v->probe_hits = LCB_ARR(S_PRBR);
+    v->probe_clusters = LCB_ARR(S_PRCL);
+    v->probe_cluster_probes = LCB_ARR(S_PRCP);
+    v->n_probe_cluster_probes = lcb_count(&c, S_PRCP);
+    v->probe_basis = LCB_ARR(S_PRCB);
+    v->n_probe_basis = lcb_count(&c, S_PRCB);
+    v->probe_rows = LCB_ARR(S_PRRW);
+    v->probe_u = LCB_ARR(S_PRRU);
+    v->n_probe_u = lcb_count(&c, S_PRRU);
 #undef LCB_ARR
     return 0;
 }
