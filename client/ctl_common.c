@@ -124,7 +124,8 @@ static const struct {
     {"unauthorized", "the server does not know this token; pass a valid one with --token or LUCENT_TOKEN"},
     {"unknown_type", "\"type\" is missing or not a lucent/1 message type; see PROTOCOL.md §4"},
     {"invalid",
-     "the field at the pointer is missing, has the wrong type or is too long; see PROTOCOL.md §4 for its form"},
+     "the field at the pointer is missing, has the wrong type, is too long or names something the server does "
+     "not offer (a solver not in welcome scene.solvers); see PROTOCOL.md §4 for its form"},
     {"out_of_range", "the number at the pointer is not finite or outside its range; see PROTOCOL.md §4 for ranges"},
     {"forbidden", "this token has the viewer role; use a controller token (--token / LUCENT_TOKEN)"},
     {"unknown_id", "no light or object has that id; 'lucentctl state' lists them"},

@@ -480,6 +480,8 @@ static const ctl_flag ctl_settings_flags[] = {
      "placed objects shadow and colour the indirect light (default true)"},
     {"--dnrt-blockers", "dnrt_blockers", CTL_FLAG_BOOL, 0, 0, NULL, "true|false",
      "ray-test static geometry between an object and what it shades (default true)"},
+    {"--solver", "solver", CTL_FLAG_CHOICE, 0, 0, "pic|probes", "pic|probes",
+     "light-transport solver, one the bake offers (welcome.scene.solvers; default the bake's)"},
     {NULL, NULL, 0, 0, 0, NULL, NULL, NULL},
 };
 
@@ -490,7 +492,9 @@ static void ctl_usage_settings(FILE *f) {
             "Changes relight settings (settings.set, PROTOCOL.md §4.9); only the options given\n"
             "are sent, at least one. Options:\n");
     ctl_print_flags(ctl_settings_flags, f);
-    fprintf(f, "\nexample: lucentctl settings set --bounces 2 --progressive true\n");
+    fprintf(f,
+            "\nexamples: lucentctl settings set --bounces 2 --progressive true\n"
+            "          lucentctl settings set --solver probes   (a bake made with --solver probes or both)\n");
 }
 
 int ctl_cmd_settings(int argc, char **argv) {

@@ -119,6 +119,7 @@ enum {
     LC_SET_CHROMA_BANDS,
     LC_SET_DNRT,
     LC_SET_DNRT_BLOCKERS,
+    LC_SET_SOLVER,
     LC_SET_COUNT
 };
 #define LC_SET_ALL ((1u << LC_SET_COUNT) - 1u)
@@ -128,7 +129,12 @@ typedef struct lc_proto_settings {
     int progressive, chroma_compression;
     int dnrt;          /* placed objects with transfer data affect the indirect light (default 1) */
     int dnrt_blockers; /* static geometry between object and receiver is tested with rays (default 1) */
+    int solver;        /* LC_PROTO_SOLVER_* (default: the bake's, the server's choice) */
 } lc_proto_settings;
+/* settings.solver "pic" | "probes" (§4.9), in the order of welcome.scene.solvers */
+enum { LC_PROTO_SOLVER_PIC = 0, LC_PROTO_SOLVER_PROBES, LC_PROTO_SOLVER_COUNT };
+/* "pic", "probes"; NULL for an unknown value. */
+const char *lc_proto_solver_name(int solver);
 
 /* One change. For removes, `target` holds the id; for material.set, `target` the name. */
 typedef struct lc_proto_op {
@@ -252,6 +258,7 @@ typedef struct lc_proto_welcome {
     const char *const *asset_geometry;     /* per asset its glTF's path; NULL: not sent */
     const lc_proto_asset_info *asset_info; /* per asset (n_assets); NULL: not sent */
     double clutter_rest;                   /* scene.clutter (§4.5): rest time in s; 0 = not sent */
+    uint32_t solvers;                      /* scene.solvers (§4.9): bit per LC_PROTO_SOLVER_* offered; 0 = not sent */
     uint32_t clutter_max_objects;
     const char *const *materials;
     uint32_t n_materials;

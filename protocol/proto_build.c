@@ -212,6 +212,8 @@ static cJSON *proto_settings_json(proto_b *b, const lc_proto_settings *S) {
     if (S->present & (1u << LC_SET_CHROMA_BANDS)) proto_add_u64(b, o, "chroma_bands", S->chroma_bands);
     if (S->present & (1u << LC_SET_DNRT)) proto_add_bool(b, o, "dnrt", S->dnrt);
     if (S->present & (1u << LC_SET_DNRT_BLOCKERS)) proto_add_bool(b, o, "dnrt_blockers", S->dnrt_blockers);
+    const char *solver = lc_proto_solver_name(S->solver);
+    if ((S->present & (1u << LC_SET_SOLVER)) && solver) proto_add_str(b, o, "solver", solver);
     return o;
 }
 
@@ -327,6 +329,13 @@ char *lc_proto_build_welcome(const lc_proto_id *id, const lc_proto_welcome *w) {
         proto_add_float(&b, cl, "rest", (float)w->clutter_rest);
         proto_add_u64(&b, cl, "max_objects", w->clutter_max_objects);
         proto_add(&b, scene, "clutter", cl);
+    }
+    if (w->solvers) {
+        const char *names[LC_PROTO_SOLVER_COUNT];
+        uint32_t n = 0;
+        for (int k = 0; k < LC_PROTO_SOLVER_COUNT; k++)
+            if (w->solvers & (1u << k)) names[n++] = lc_proto_solver_name(k);
+        proto_add_strs(&b, scene, "solvers", names, n);
     }
     proto_add_strs(&b, scene, "materials", w->materials, w->n_materials);
     proto_add(&b, m, "scene", scene);

@@ -41,6 +41,11 @@ static const char *const proto_light_type_names[] = {"point", "spot", "direction
 static const char *const proto_shape_names[] = {"quad", "disc"};
 static const char *const proto_mode_names[] = {"dynamic", "clutter", "auto"}; /* LC_OBJECT_MODE_* */
 static const char *const proto_env_names[] = {"none", "constant", "sh"};
+static const char *const proto_solver_names[LC_PROTO_SOLVER_COUNT] = {"pic", "probes"};
+
+const char *lc_proto_solver_name(int solver) {
+    return solver >= 0 && solver < LC_PROTO_SOLVER_COUNT ? proto_solver_names[solver] : NULL;
+}
 
 const char *lc_proto_type_name(lc_req_type t) { return (unsigned)t < LC_REQ_COUNT ? proto_type_names[t] : "unknown"; }
 
@@ -458,7 +463,11 @@ static int proto_enum_item(const cJSON *it, const char *p, const char *const *na
             *out = k;
             return 1;
         }
-    return proto_fail(err, LC_ERR_INVALID, p, "%s: unknown value", p);
+    char list[160] = ""; /* the allowed values, so the client sees what it may send */
+    size_t used = 0;
+    for (int k = 0; k < n && used < sizeof list; k++)
+        used += (size_t)snprintf(list + used, sizeof list - used, "%s%s", k ? ", " : "", names[k]);
+    return proto_fail(err, LC_ERR_INVALID, p, "%s: unknown value (one of: %s)", p, list);
 }
 
 static int proto_enum(const cJSON *obj, const char *key, const char *base, int required, const char *const *names,
@@ -659,6 +668,9 @@ static int proto_parse_settings(const cJSON *o, const char *p, lc_proto_settings
     if (r) S->present |= 1u << LC_SET_DNRT;
     if ((r = proto_bool(o, "dnrt_blockers", p, 0, &S->dnrt_blockers, err)) < 0) return -1;
     if (r) S->present |= 1u << LC_SET_DNRT_BLOCKERS;
+    /* which solvers the bake offers is the server's check (welcome.scene.solvers) */
+    if ((r = proto_enum(o, "solver", p, 0, proto_solver_names, LC_PROTO_SOLVER_COUNT, &S->solver, err)) < 0) return -1;
+    if (r) S->present |= 1u << LC_SET_SOLVER;
     return 0;
 }
 

@@ -78,8 +78,13 @@ lc_engine_settings lc_engine_default_settings(const lc_lcb *bake) {
                             .chroma_bands = v->sh_bands ? v->sh_bands : 3,
                             .sh_lightmap = 0,
                             .dnrt = 1,
-                            .dnrt_blockers = 1};
+                            .dnrt_blockers = 1,
+                            .solver = lc_engine_default_solver(v)};
     return s;
+}
+
+uint32_t lc_engine_default_solver(const lc_lcb_view *v) {
+    return v->links_per_cache > 0 ? LC_SOLVER_PIC : LC_SOLVER_PROBES;
 }
 
 /* --- Embree scenes ------------------------------------------------------------------------- */
@@ -158,6 +163,10 @@ void lc_engine_release(lc_engine *e) {
 
 const char *lc_engine_backend_name(const lc_engine *e) { return e->ops->name; }
 
+lc_backend_kind lc_engine_backend(const lc_engine *e) {
+    return e->ops == &lc_transport_egl ? LC_BACKEND_EGL : LC_BACKEND_CPU;
+}
+
 lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int threads, char *err, size_t errlen) {
     lc_engine *e = calloc(1, sizeof *e);
     if (!e) {
@@ -198,6 +207,17 @@ lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int thread
     /* Backend: AUTO tries EGL on a hardware device only (on llvmpipe the CPU backend is faster;
      * docs/ARCHITECTURE.md, Performance). */
     char berr[512] = "";
+    if (kind != LC_BACKEND_CPU && lc_engine_default_solver(v) == LC_SOLVER_PROBES) {
+        /* a probes-only bake: EGL could run no solver of it */
+        if (kind == LC_BACKEND_EGL) {
+            lc_set_err(err, errlen,
+                       "egl backend: this bake has only the probes solver, which runs on the CPU backend only "
+                       "(lucentd --backend cpu)");
+            goto err;
+        }
+        lc_info("engine", "backend auto: using cpu (the bake has only the probes solver, which runs on the CPU)");
+        kind = LC_BACKEND_CPU;
+    }
     if (kind == LC_BACKEND_EGL || kind == LC_BACKEND_AUTO) {
         e->ops = &lc_transport_egl;
         e->impl = e->ops->create(v, kind == LC_BACKEND_AUTO ? -1 : threads, berr, sizeof berr);
@@ -235,7 +255,31 @@ static int engine_finite(const float *x, int n, double limit) {
 static float engine_len(const float d[3]) { return sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]); }
 
 int lc_engine_validate_state(const lc_engine *e, const lc_engine_state *st, char *err, size_t errlen) {
-    return lc_engine_check_state(e->v, st, err, errlen);
+    if (lc_engine_check_state(e->v, st, err, errlen) != 0) return -1;
+    return lc_engine_check_solver(e->v, lc_engine_backend(e), st->settings.solver, err, errlen);
+}
+
+int lc_engine_check_solver(const lc_lcb_view *v, lc_backend_kind backend, uint32_t solver, char *err, size_t errlen) {
+    if (solver >= LC_SOLVER_COUNT) {
+        lc_set_err(err, errlen, "/settings/solver: unknown solver %u", solver);
+        return -1;
+    }
+    if (solver == LC_SOLVER_PROBES && !v->probe_header) {
+        lc_set_err(err, errlen,
+                   "/settings/solver: this bake has no probes solver (bake it with lucent-bake bake --solver probes "
+                   "or both)");
+        return -1;
+    }
+    if (solver == LC_SOLVER_PIC && v->links_per_cache == 0) {
+        lc_set_err(err, errlen, "/settings/solver: this bake has no PIC links (baked with --solver probes)");
+        return -1;
+    }
+    if (solver == LC_SOLVER_PROBES && backend == LC_BACKEND_EGL) {
+        lc_set_err(err, errlen,
+                   "/settings/solver: the probes solver runs on the CPU backend only (lucentd --backend cpu)");
+        return -1;
+    }
+    return 0;
 }
 
 int lc_engine_check_state(const lc_lcb_view *v, const lc_engine_state *st, char *err, size_t errlen) {
@@ -330,7 +374,7 @@ int lc_engine_check_state(const lc_lcb_view *v, const lc_engine_state *st, char 
         lc_set_err(err, errlen, "/settings/chroma_bands: %u is outside 1..bands (%u)", s->chroma_bands, s->bands);
         return -1;
     }
-    return 0;
+    return lc_engine_check_solver(v, LC_BACKEND_AUTO, s->solver, err, errlen);
 }
 
 /* --- direct light ---------------------------------------------------------------------------- */

@@ -65,6 +65,11 @@ typedef struct lc_engine_environment {
     float intensity; /* multiplies either */
 } lc_engine_environment;
 
+/* The light-transport solver: PIC (the bake's cache -> node links, LINK) or sparse radiance
+ * probes (engine/probes.h; the bake's PRB* sections). Both compute the same quantities. */
+typedef enum { LC_SOLVER_PIC = 0, LC_SOLVER_PROBES = 1 } lc_engine_solver;
+#define LC_SOLVER_COUNT 2
+
 typedef struct lc_engine_settings {
     uint32_t bounces;       /* indirect feedback passes per relight, 0..16 (see lc_engine_relight) */
     uint32_t bands;         /* SH bands of the cache / SH-lightmap output, 1..8 (the grid is always L2) */
@@ -74,6 +79,7 @@ typedef struct lc_engine_settings {
     int sh_lightmap;        /* also output the per-texel radiance SH lightmap */
     int dnrt;               /* placed objects shadow and colour the indirect light (engine/dnrt.h) */
     int dnrt_blockers;      /* ... tested for static geometry between object and receiver with rays */
+    uint32_t solver;        /* LC_SOLVER_PIC or LC_SOLVER_PROBES (engine/probes.h) */
 } lc_engine_settings;
 
 typedef struct lc_engine_state {
@@ -140,6 +146,8 @@ typedef struct lc_drt_info lc_drt_info; /* engine/drt.h */
 lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int threads, char *err, size_t errlen);
 void lc_engine_release(lc_engine *e);
 const char *lc_engine_backend_name(const lc_engine *e);
+/* The backend the engine runs on: LC_BACKEND_CPU or LC_BACKEND_EGL. */
+lc_backend_kind lc_engine_backend(const lc_engine *e);
 
 /* Validates state (finite numbers, ranges, asset indices; err names the field as a JSON
  * pointer-like path, e.g. "/lights/3/intensity") without relighting. */
@@ -147,6 +155,12 @@ int lc_engine_validate_state(const lc_engine *e, const lc_engine_state *state, c
 /* The same checks against a bake alone (no engine): the daemon runs them before it
  * acknowledges a change, on the service thread. */
 int lc_engine_check_state(const lc_lcb_view *bake, const lc_engine_state *state, char *err, size_t errlen);
+/* Whether settings.solver `solver` runs for this bake on `backend` (probes needs the bake's
+ * probe data and, for now, the CPU backend; PIC needs links). LC_BACKEND_AUTO: the bake's
+ * checks only (the backend not yet known). 0, or -1 with err naming /settings/solver. */
+int lc_engine_check_solver(const lc_lcb_view *bake, lc_backend_kind backend, uint32_t solver, char *err, size_t errlen);
+/* The solver a fresh state uses: PIC when the bake has links (links_per_cache > 0), else probes. */
+uint32_t lc_engine_default_solver(const lc_lcb_view *bake);
 
 /* Relights for `state`. Work whose inputs did not change is skipped (e.g. moving an
  * object redoes direct light but not the sky's per-surfel rays unless the environment is
@@ -172,7 +186,7 @@ int lc_engine_clutter_info(const lc_engine *e, const char *object_id, lc_drt_inf
 
 /* Default settings: bounces 1 (two passes) with progressive on, so further bounces
  * accumulate over successive relights; bands = the bake's; no chroma compression; DNRT on,
- * with blocker rays. */
+ * with blocker rays; the bake's default solver (lc_engine_default_solver). */
 lc_engine_settings lc_engine_default_settings(const lc_lcb *bake);
 
 #endif

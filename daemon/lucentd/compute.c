@@ -43,8 +43,9 @@ struct lc_compute {
     int ready;                               /* guarded by lock: 1 engine up, -1 failed */
     char start_err[512];
     char backend_name[16];
-    int joined;               /* service thread only: lc_compute_stop has joined the thread */
-    uint64_t failures;        /* guarded by lock: relights that failed */
+    lc_backend_kind backend_kind; /* set before ready = 1, read only after */
+    int joined;                   /* service thread only: lc_compute_stop has joined the thread */
+    uint64_t failures;            /* guarded by lock: relights that failed */
     uint64_t failed_revision; /* guarded by lock: revision of the last failed relight (0 = the last one succeeded) */
     char failure[256];        /* guarded by lock: why it failed */
     lc_drt_ops **clutter_in;  /* guarded by lock: operators handed over, not yet attached */
@@ -170,6 +171,7 @@ static void *compute_main(void *arg) {
         c->ready = -1;
     } else {
         snprintf(c->backend_name, sizeof c->backend_name, "%s", lc_engine_backend_name(e));
+        c->backend_kind = lc_engine_backend(e);
         c->ready = 1;
     }
     pthread_cond_broadcast(&c->cond);
@@ -415,6 +417,8 @@ uint64_t lc_compute_count(lc_compute *c) {
 }
 
 const char *lc_compute_backend(lc_compute *c) { return c->backend_name; }
+
+lc_backend_kind lc_compute_backend_kind(lc_compute *c) { return c->backend_kind; }
 
 void lc_compute_clutter_give(lc_compute *c, lc_drt_ops *ops) {
     if (!ops) return;

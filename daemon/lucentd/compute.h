@@ -99,5 +99,7 @@ void lc_compute_release(lc_compute *c);
  * count of failed relights in *failures and the cause in why. Any thread. */
 uint64_t lc_compute_failure(lc_compute *c, uint64_t *failures, char *why, size_t whylen);
 const char *lc_compute_backend(lc_compute *c);
+/* The same as LC_BACKEND_CPU or LC_BACKEND_EGL (which solvers the state may pick). */
+lc_backend_kind lc_compute_backend_kind(lc_compute *c);
 
 #endif

@@ -703,7 +703,8 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
         lc_error("server", "%s", err);
         goto done;
     }
-    lc_compute_submit(s->compute, &s->state, NULL); /* the first frame: the restored state */
+    lc_state_set_backend(&s->state, lc_compute_backend_kind(s->compute)); /* settings.solver: what it runs */
+    lc_compute_submit(s->compute, &s->state, NULL);                       /* the first frame: the restored state */
     signal(SIGINT, server_on_signal);
     signal(SIGTERM, server_on_signal);
     signal(SIGHUP, server_on_signal);

@@ -86,6 +86,7 @@ static void server_welcome(lc_server *s, lc_session *ss, const lc_proto_id *id) 
         w.clutter_rest = s->cfg->clutter_rest;
         w.clutter_max_objects = (uint32_t)s->cfg->clutter_max_objects;
     }
+    w.solvers = lc_state_solvers(&s->state);
     w.materials = s->material_names;
     w.n_materials = s->v->n_materials;
     w.limits = s->limits;

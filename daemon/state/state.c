@@ -10,6 +10,10 @@
 
 #include "util/log.h"
 
+_Static_assert((int)LC_SOLVER_PIC == (int)LC_PROTO_SOLVER_PIC && (int)LC_SOLVER_PROBES == (int)LC_PROTO_SOLVER_PROBES &&
+                   LC_SOLVER_COUNT == (int)LC_PROTO_SOLVER_COUNT,
+               "settings.solver maps to lc_engine_settings.solver as is");
+
 static void state_err(lc_proto_error *err, lc_proto_errcode code, int batch, uint32_t op, const char *field,
                       const char *fmt, const char *arg) {
     if (!err) return;
@@ -36,6 +40,8 @@ int lc_state_init(lc_state *s, const lc_lcb *bake, const lc_state_limits *limits
     s->settings.chroma_bands = d.chroma_bands;
     s->settings.dnrt = d.dnrt;
     s->settings.dnrt_blockers = d.dnrt_blockers;
+    s->settings.solver = (int)d.solver;
+    s->backend = LC_BACKEND_AUTO;
     s->environment.kind = 0;
     s->environment.intensity = 1;
     return 0;
@@ -128,6 +134,7 @@ static lc_proto_settings state_merge_settings(lc_proto_settings cur, const lc_pr
     if (n->present & (1u << LC_SET_CHROMA_BANDS)) cur.chroma_bands = n->chroma_bands;
     if (n->present & (1u << LC_SET_DNRT)) cur.dnrt = n->dnrt;
     if (n->present & (1u << LC_SET_DNRT_BLOCKERS)) cur.dnrt_blockers = n->dnrt_blockers;
+    if (n->present & (1u << LC_SET_SOLVER)) cur.solver = n->solver;
     cur.present = LC_SET_ALL;
     return cur;
 }
@@ -193,6 +200,14 @@ static int state_apply_one(lc_state *s, const lc_proto_op *op, int batch, uint32
         if (next.chroma_bands < 1 || next.chroma_bands > next.bands) {
             state_err(err, LC_ERR_OUT_OF_RANGE, batch, i, "/settings/chroma_bands", "%s",
                       "chroma_bands must be in 1..bands");
+            return -1;
+        }
+        /* here, not in the whole-state check, so the pointer names the op */
+        char why[200];
+        if ((n->present & (1u << LC_SET_SOLVER)) &&
+            lc_engine_check_solver(s->scene, s->backend, (uint32_t)n->solver, why, sizeof why) != 0) {
+            const char *msg = strncmp(why, "/settings/solver: ", 18) == 0 ? why + 18 : why; /* the pointer says it */
+            state_err(err, LC_ERR_INVALID, batch, i, "/settings/solver", "%s", msg);
             return -1;
         }
         s->settings = next;
@@ -362,11 +377,35 @@ int lc_state_restore(lc_state *s, const lc_proto_parsed_state *p, lc_proto_error
     next.environment = p->environment;
     lc_proto_settings st = state_merge_settings(next.settings, &p->settings);
     if (st.chroma_bands > st.bands) st.chroma_bands = st.bands;
+    char why[200];
+    if (lc_engine_check_solver(next.scene, next.backend, (uint32_t)st.solver, why, sizeof why) != 0) {
+        lc_warn("state", "snapshot settings.solver '%s' dropped (%s); using the bake's default",
+                lc_proto_solver_name(st.solver) ? lc_proto_solver_name(st.solver) : "?", why);
+        st.solver = (int)lc_engine_default_solver(next.scene);
+    }
     next.settings = st;
     next.revision = p->revision;
     lc_state_release(s);
     *s = next;
     return 0;
+}
+
+void lc_state_set_backend(lc_state *s, lc_backend_kind backend) {
+    s->backend = backend;
+    char why[200];
+    if (lc_engine_check_solver(s->scene, backend, (uint32_t)s->settings.solver, why, sizeof why) == 0) return;
+    uint32_t d = lc_engine_default_solver(s->scene);
+    if (lc_engine_check_solver(s->scene, backend, d, NULL, 0) != 0) return; /* the relights will say why */
+    lc_warn("state", "settings.solver '%s' cannot run here (%s); using '%s'", lc_proto_solver_name(s->settings.solver),
+            why, lc_proto_solver_name((int)d));
+    s->settings.solver = (int)d;
+}
+
+uint32_t lc_state_solvers(const lc_state *s) {
+    uint32_t bits = 0;
+    for (uint32_t k = 0; k < LC_SOLVER_COUNT; k++)
+        if (lc_engine_check_solver(s->scene, s->backend, k, NULL, 0) == 0) bits |= 1u << k;
+    return bits;
 }
 
 int lc_state_to_proto(const lc_state *s, lc_proto_state *out, lc_proto_material_state **mats) {
@@ -459,6 +498,7 @@ int lc_state_to_engine(const lc_state *s, lc_engine_state *out, lc_engine_light 
     out->settings.sh_lightmap = 0;
     out->settings.dnrt = s->settings.dnrt;
     out->settings.dnrt_blockers = s->settings.dnrt_blockers;
+    out->settings.solver = (uint32_t)s->settings.solver;
     out->revision = s->revision;
     return 0;
 }

@@ -27,10 +27,14 @@ typedef struct lc_state {
     float (*emission)[3]; /* per bake material */
     lc_proto_environment environment;
     lc_proto_settings settings; /* every field present */
+    /* The relight engine's backend, once lucentd knows it (lc_state_set_backend): which
+     * solvers settings.solver may pick. LC_BACKEND_AUTO: the bake's alone. */
+    lc_backend_kind backend;
 } lc_state;
 
 /* Initial state: no lights or objects (the bake's own lights are added by lc_state_seed),
- * the bake's material emission, no environment, engine default settings. */
+ * the bake's material emission, no environment, engine default settings (settings.solver:
+ * the bake's default, lc_engine_default_solver). */
 int lc_state_init(lc_state *s, const lc_lcb *bake, const lc_state_limits *limits);
 /* Adds the bake's own lights (KHR_lights_punctual, in META "lights") to a fresh state, as
  * validated as a client's light.set; the revision stays. Returns 0 or -1 with err (a light
@@ -45,8 +49,17 @@ int lc_state_clone(lc_state *dst, const lc_state *src);
  * single change, "/ops/2/light/id" inside a batch) and leaves the state untouched. */
 int lc_state_apply(lc_state *s, const lc_proto_op *ops, uint32_t n_ops, int batch, lc_proto_error *err);
 
-/* Replaces the whole state (restore from a snapshot); validates names and limits. */
+/* Replaces the whole state (restore from a snapshot); validates names and limits. A
+ * snapshot without settings.solver (older), or with one the bake no longer offers (logged),
+ * keeps the bake's default. */
 int lc_state_restore(lc_state *s, const lc_proto_parsed_state *p, lc_proto_error *err);
+
+/* Narrows settings.solver to what the engine's backend runs (the probes solver: CPU only).
+ * A state whose solver it cannot run falls back to the bake's default if that runs (logged;
+ * not a change: the revision stays). */
+void lc_state_set_backend(lc_state *s, lc_backend_kind backend);
+/* welcome.scene.solvers: bit per LC_PROTO_SOLVER_* that settings.set may pick. */
+uint32_t lc_state_solvers(const lc_state *s);
 
 /* Views for messages / the snapshot file (pointers into s; materials array malloc'd into
  * *mats, caller frees). */

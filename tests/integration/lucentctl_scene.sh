@@ -96,14 +96,14 @@ expect_exit 2 "env: expected a subcommand" $T "$CTL" env
 expect_exit 0 "" $T "$CTL" settings set --bounces 1 --bands 3 --progressive false --chroma-compression true --chroma-bands 2
 grep -qE "^ok: settings set \(revision [0-9]+\)$" "$TMP/out" || fail "settings set printed: $(head -c 200 "$TMP/out")"
 state
-json_check "$TMP/state.json" 'j["settings"] == {"bounces": 1, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2, "dnrt": True, "dnrt_blockers": True}'
+json_check "$TMP/state.json" 'j["settings"] == {"bounces": 1, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2, "dnrt": True, "dnrt_blockers": True, "solver": "pic"}'
 expect_exit 0 "" $T "$CTL" settings set --bounces 2   # only the given field changes
 state
-json_check "$TMP/state.json" 'j["settings"] == {"bounces": 2, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2, "dnrt": True, "dnrt_blockers": True}'
+json_check "$TMP/state.json" 'j["settings"] == {"bounces": 2, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2, "dnrt": True, "dnrt_blockers": True, "solver": "pic"}'
 expect_exit 0 "" $T "$CTL" settings set --dnrt false --dnrt-blockers false
 grep -qE "^ok: settings set \(revision [0-9]+\)$" "$TMP/out" || fail "settings set --dnrt printed: $(head -c 200 "$TMP/out")"
 state
-json_check "$TMP/state.json" 'j["settings"] == {"bounces": 2, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2, "dnrt": False, "dnrt_blockers": False}'
+json_check "$TMP/state.json" 'j["settings"] == {"bounces": 2, "bands": 3, "progressive": False, "chroma_compression": True, "chroma_bands": 2, "dnrt": False, "dnrt_blockers": False, "solver": "pic"}'
 expect_exit 0 "" $T "$CTL" settings set --dnrt true
 state
 json_check "$TMP/state.json" 'j["settings"]["dnrt"] is True and j["settings"]["dnrt_blockers"] is False'
@@ -113,6 +113,12 @@ state
 json_check "$TMP/state.json" 'j["settings"]["dnrt"] is True and j["settings"]["dnrt_blockers"] is True'
 expect_exit 2 "settings set: --dnrt-blockers 'sometimes': expected true or false" $T "$CTL" settings set --dnrt-blockers sometimes
 expect_exit 1 "out_of_range at /settings/bounces" $T "$CTL" settings set --bounces 99
+# the solver: this PIC bake offers pic only (welcome.scene.solvers)
+expect_exit 0 "" $T "$CTL" settings set --solver pic
+expect_exit 1 "invalid at /settings/solver" $T "$CTL" settings set --solver probes
+expect_exit 2 "settings set: --solver 'radiosity': expected pic|probes" $T "$CTL" settings set --solver radiosity
+state
+json_check "$TMP/state.json" 'j["settings"]["solver"] == "pic"'
 expect_exit 0 "" $T "$CTL" settings set --help
 grep -q -- "--chroma-compression true|false" "$TMP/out" || fail "settings set --help lacks --chroma-compression"
 grep -q -- "--dnrt true|false" "$TMP/out" || fail "settings set --help lacks --dnrt"

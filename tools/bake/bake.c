@@ -14,6 +14,7 @@
 #include "bake/exposure.h"
 #include "bake/grid.h"
 #include "bake/hierarchy.h"
+#include "bake/probes.h"
 #include "bake/links.h"
 #include "bake/relocate.h"
 #include "bake/rt.h"
@@ -37,7 +38,7 @@
 
 /* --- helpers ------------------------------------------------------------------------------ */
 
-#define BAKE_N_STAGES 11
+#define BAKE_N_STAGES 12
 
 /* Records a finished stage and, unless quiet, says so (one line per stage: the long ones
  * also draw their own progress). */
@@ -463,8 +464,9 @@ typedef struct bake_job {
     uint32_t *seen; /* per surfel: caches that see it (--exposure only) */
     lc_link_stats ls;
     lc_exposure_stats es;
-    bake_assets assets;    /* 10. dynamic-object assets */
-    lc_lcb_material *mats; /* 11. the file's sections */
+    lc_probebake probes;   /* 10. the probes solver (--solver probes|both) */
+    bake_assets assets;    /* 11. dynamic-object assets */
+    lc_lcb_material *mats; /* 12. the file's sections */
     lc_lcb_vertex *verts;
     lc_lcb_triangle *tris;
     cJSON *meta;
@@ -477,6 +479,7 @@ static void bake_job_release(bake_job *b) {
     cJSON_free(b->meta_text);
     cJSON_Delete(b->meta);
     bake_assets_release(&b->assets);
+    lc_probebake_release(&b->probes);
     free(b->mats);
     free(b->verts);
     free(b->tris);
@@ -625,6 +628,7 @@ static int bake_link_counts(bake_job *b, char *err, size_t errlen) {
  * areas weighed by how many caches see them. */
 static int bake_links(bake_job *b, char *err, size_t errlen) {
     const lc_bake_settings *s = b->s;
+    if (s->solver == LC_BAKE_SOLVER_PROBES) return 0; /* no PIC: LINK stays empty, every link_count 0 */
     b->n_links = (uint64_t)b->n_caches * (uint64_t)s->links;
     if (b->n_links > (1ull << 31) / sizeof(lc_lcb_link)) {
         lc_set_err(err, errlen, "%u caches x %d links is over 2 GiB of links; lower --links or --atlas-size",
@@ -664,6 +668,37 @@ static int bake_links(bake_job *b, char *err, size_t errlen) {
     if (!s->quiet && b->seen)
         lc_info("bake", "exposure: %u surfels (%.2f%% of the area) seen by no cache", b->es.unseen,
                 100.0 * b->es.unseen_area / lc_mesh_total_area(&b->scene.mesh));
+    return 0;
+}
+
+/* The probes solver's data (bake/probes.h), unless the bake is PIC only. */
+static int bake_probes(bake_job *b, char *err, size_t errlen) {
+    const lc_bake_settings *s = b->s;
+    if (s->solver == LC_BAKE_SOLVER_PIC) return 0;
+    lc_probebake_params pp = {.count = (uint32_t)s->probes,
+                              .density = s->probe_density,
+                              .relight_rays = (uint32_t)s->probe_relight_rays,
+                              .sh_bands = (uint32_t)s->probe_bands,
+                              .overlaps = (uint32_t)s->probe_overlaps,
+                              .receiver_rays = (uint32_t)s->probe_receiver_rays,
+                              .cluster_rows = (uint32_t)s->probe_cluster,
+                              .max_rank = (uint32_t)s->probe_rank,
+                              .svd_error = s->probe_svd_error,
+                              .visibility = s->probe_visibility,
+                              .seed = (uint64_t)s->seed,
+                              .threads = s->threads};
+    if (lc_probebake_run(b->rt, b->scene.bounds_min, b->scene.bounds_max, b->surfels, b->n_surfels, b->caches,
+                         b->n_caches, &pp, &b->probes, err, errlen) != 0)
+        return 1;
+    const lc_probebake *pb = &b->probes;
+    if (!s->quiet)
+        lc_info("bake",
+                "probes: %u (of %u free voxels), support radius %.3f m, %.1f probes per receiver, %u clusters of "
+                "mean rank %.1f (worst error %.4f); receiver rays that hit a point no probe sees: %.1f%% (texels), "
+                "%.1f%% (grid); %.2f + %.2f + %.2f + %.2f s",
+                pb->header.n_probes, pb->n_candidates, pb->header.support_radius, pb->mean_probes_used,
+                pb->header.n_clusters, pb->mean_rank, pb->worst_error, 100 * pb->orphan_fraction[0],
+                100 * pb->orphan_fraction[1], pb->seconds[0], pb->seconds[1], pb->seconds[2], pb->seconds[3]);
     return 0;
 }
 
@@ -792,11 +827,31 @@ static int bake_meta(bake_job *b, char *err, size_t errlen) {
     cJSON_AddNumberToObject(jc, "moved", b->rs.moved);
     cJSON_AddNumberToObject(jc, "inside", b->rs.inside);
     cJSON *jk = cJSON_AddObjectToObject(meta, "links");
-    cJSON_AddNumberToObject(jk, "per_cache", s->links);
+    cJSON_AddNumberToObject(jk, "per_cache", s->solver == LC_BAKE_SOLVER_PROBES ? 0 : s->links);
     cJSON_AddNumberToObject(jk, "sh_bands", s->link_sh ? s->bands : 0);
     cJSON_AddNumberToObject(jk, "mean_used", b->ls.mean_links_used);
     cJSON_AddNumberToObject(jk, "mean_solid_angle", b->ls.mean_solid_angle);
     cJSON_AddNumberToObject(jk, "rays", (double)b->ls.rays);
+    cJSON *jsv = cJSON_AddArrayToObject(meta, "solvers");
+    if (s->solver != LC_BAKE_SOLVER_PROBES) cJSON_AddItemToArray(jsv, cJSON_CreateString("pic"));
+    if (s->solver != LC_BAKE_SOLVER_PIC) {
+        cJSON_AddItemToArray(jsv, cJSON_CreateString("probes"));
+        const lc_probebake *pb = &b->probes;
+        cJSON *jp = cJSON_AddObjectToObject(meta, "probes");
+        cJSON_AddNumberToObject(jp, "count", pb->header.n_probes);
+        cJSON_AddNumberToObject(jp, "candidates", pb->n_candidates);
+        cJSON_AddNumberToObject(jp, "support_radius", pb->header.support_radius);
+        cJSON_AddNumberToObject(jp, "probes_per_receiver", pb->mean_probes_used);
+        cJSON_AddNumberToObject(jp, "clusters", pb->header.n_clusters);
+        cJSON_AddNumberToObject(jp, "rows", pb->header.n_rows);
+        cJSON_AddNumberToObject(jp, "mean_rank", pb->mean_rank);
+        cJSON_AddNumberToObject(jp, "worst_error", pb->worst_error);
+        cJSON_AddNumberToObject(jp, "orphan_rays_texel", pb->orphan_fraction[0]);
+        cJSON_AddNumberToObject(jp, "orphan_rays_grid", pb->orphan_fraction[1]);
+        cJSON_AddNumberToObject(jp, "rays", (double)pb->rays);
+        double st[4] = {pb->seconds[0], pb->seconds[1], pb->seconds[2], pb->seconds[3]};
+        cJSON_AddItemToObject(jp, "stage_seconds", cJSON_CreateDoubleArray(st, 4));
+    }
     bake_meta_lists(b, meta);
     b->meta_text = cJSON_PrintUnformatted(meta);
     return b->meta_text ? 0 : bake_oom(err, errlen);
@@ -823,6 +878,18 @@ static int bake_add_sections(bake_job *b, char *err, size_t errlen) {
     add_rc |= lc_lcb_writer_add(w, "LINK", sizeof(lc_lcb_link), b->links, b->n_links);
     if (b->link_sh)
         add_rc |= lc_lcb_writer_add(w, "LKSH", sizeof(uint16_t), b->link_sh, b->n_links * s->bands * s->bands);
+    const lc_probebake *pb = &b->probes;
+    if (pb->probes) {
+        add_rc |= lc_lcb_writer_add(w, "PRBH", sizeof(lc_lcb_probe_header), &pb->header, 1);
+        add_rc |= lc_lcb_writer_add(w, "PRBP", sizeof(lc_lcb_probe), pb->probes, pb->header.n_probes);
+        add_rc |=
+            lc_lcb_writer_add(w, "PRBR", sizeof(uint32_t), pb->hits, (uint64_t)pb->header.n_probes * pb->header.n_rays);
+        add_rc |= lc_lcb_writer_add(w, "PRCL", sizeof(lc_lcb_probe_cluster), pb->clusters, pb->header.n_clusters);
+        add_rc |= lc_lcb_writer_add(w, "PRCP", sizeof(uint32_t), pb->cluster_probes, pb->n_cluster_probes);
+        add_rc |= lc_lcb_writer_add(w, "PRCB", sizeof(float), pb->basis, pb->n_basis);
+        add_rc |= lc_lcb_writer_add(w, "PRRW", sizeof(lc_lcb_probe_row), pb->rows, pb->header.n_rows);
+        add_rc |= lc_lcb_writer_add(w, "PRRU", sizeof(float), pb->u, pb->n_u);
+    }
     if (b->assets.n_assets) {
         add_rc |= lc_lcb_writer_add(w, "ASET", sizeof(lc_lcb_asset), b->assets.assets, b->assets.n_assets);
         add_rc |= lc_lcb_writer_add(w, "AVRT", sizeof(lc_lcb_asset_vertex), b->assets.vertices, b->assets.n_vertices);
@@ -883,17 +950,10 @@ static const struct {
     const char *name;
     int (*run)(bake_job *b, char *err, size_t errlen);
 } bake_stages[] = {
-    {"import", bake_import_scene},
-    {"lightmap-uv", bake_lightmap_uv},
-    {"bvh", bake_bvh},
-    {"texels", bake_texel_caches},
-    {"grid", bake_grid_caches},
-    {"relocate", bake_relocate},
-    {"surfels", bake_surfels},
-    {"hierarchy", bake_hierarchy},
-    {"links", bake_links},
-    {"assets", bake_dynamic_assets},
-    {"write", bake_write},
+    {"import", bake_import_scene}, {"lightmap-uv", bake_lightmap_uv}, {"bvh", bake_bvh},
+    {"texels", bake_texel_caches}, {"grid", bake_grid_caches},        {"relocate", bake_relocate},
+    {"surfels", bake_surfels},     {"hierarchy", bake_hierarchy},     {"links", bake_links},
+    {"probes", bake_probes},       {"assets", bake_dynamic_assets},   {"write", bake_write},
 };
 _Static_assert(sizeof bake_stages / sizeof bake_stages[0] == BAKE_N_STAGES, "BAKE_N_STAGES counts the stages");
 

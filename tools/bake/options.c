@@ -113,6 +113,29 @@ static const lc_opt bake_options[] = {
      "outer volume radius / inner half side: beyond the grid the effect falls off as 1/d^2 up to here", NULL, NULL},
     {"mr-points", LC_OPT_INT, OFF(mr_points), 0, 65535, "256", NULL,
      "LightSkin sparse points per asset, with each vertex's 8 nearest (mixed-reality light; 0 = none)", NULL, NULL},
+    {"solver", LC_OPT_ENUM, OFF(solver), 0, 0, "pic", "pic|probes|both",
+     "light transport the bake holds: PIC links, sparse radiance probes, or both (lucentd's settings.solver picks)",
+     NULL, NULL},
+    {"probes", LC_OPT_INT, OFF(probes), 0, 4096, "0", NULL,
+     "probes solver: radiance probes (0 = --probe-density x the scene's bounding volume, at least 8)", NULL, NULL},
+    {"probe-density", LC_OPT_FLOAT, OFF(probe_density), 1e-6, 1e6, "0.02", NULL,
+     "probes solver: probes per cubic metre when --probes is 0", NULL, NULL},
+    {"probe-relight-rays", LC_OPT_INT, OFF(probe_relight_rays), 1, 65536, "512", NULL,
+     "probes solver: rays per probe that relight it", NULL, NULL},
+    {"probe-bands", LC_OPT_INT, OFF(probe_bands), 1, 8, "8", NULL, "probes solver: SH bands of a probe", NULL, NULL},
+    {"probe-overlaps", LC_OPT_INT, OFF(probe_overlaps), 1, 64, "10", NULL,
+     "probes solver: probes a receiver reconstructs from, at most", NULL, NULL},
+    {"probe-receiver-rays", LC_OPT_INT, OFF(probe_receiver_rays), 1, 65536, "256", NULL,
+     "probes solver: rays per receiver for its transport", NULL, NULL},
+    {"probe-cluster", LC_OPT_INT, OFF(probe_cluster), 1, 8192, "1024", NULL,
+     "probes solver: receivers per compressed cluster, at most", NULL, NULL},
+    {"probe-rank", LC_OPT_INT, OFF(probe_rank), 1, 256, "32", NULL, "probes solver: SVD rank per cluster, at most",
+     NULL, NULL},
+    {"probe-svd-error", LC_OPT_FLOAT, OFF(probe_svd_error), 0, 0.999, "0.01", NULL,
+     "probes solver: relative Frobenius truncation error per cluster (larger clusters split until met)", NULL, NULL},
+    {"probe-visibility", LC_OPT_BOOL, OFF(probe_visibility), 0, 1, "true", NULL,
+     "probes solver: a probe lights only the points it sees (off: the naive weights that leak through walls)", NULL,
+     NULL},
     {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "random seed (same seed, same bytes)", NULL, NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", NULL, NULL},
     {"stats-json", LC_OPT_STRING, OFF(stats_json), 0, LC_BAKE_PATH_MAX, NULL, NULL,
@@ -171,6 +194,10 @@ int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, ch
     lc_bake_apply_preset(s, (lc_bake_quality)probe.quality);
     int npos = lc_opt_parse(bake_options, s, argc, argv, start, positional, max_pos, err, errlen);
     if (npos < 0) return -1;
+    if (s->probe_cluster < s->probe_rank) {
+        lc_set_err(err, errlen, "--probe-cluster %d is below --probe-rank %d", s->probe_cluster, s->probe_rank);
+        return -1;
+    }
     if ((double)s->links > 2.0 * s->surfels - 1) {
         lc_set_err(err, errlen, "--links %d exceeds the hierarchy's %d nodes (raise --surfels)", s->links,
                    2 * s->surfels - 1);

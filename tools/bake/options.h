@@ -10,6 +10,8 @@
 #define LC_BAKE_MAX_ASSETS 64
 #define LC_BAKE_PATH_MAX 1024
 
+typedef enum { LC_BAKE_SOLVER_PIC = 0, LC_BAKE_SOLVER_PROBES, LC_BAKE_SOLVER_BOTH } lc_bake_solver;
+
 typedef enum { LC_QUALITY_DRAFT = 0, LC_QUALITY_MODERATE, LC_QUALITY_HIGH, LC_QUALITY_ULTRA } lc_bake_quality;
 
 typedef struct lc_bake_asset_arg {
@@ -60,6 +62,17 @@ typedef struct lc_bake_settings {
     double transfer_extent; /* inner half side in bounding radii */
     double transfer_outer;  /* outer radius / inner half side */
     int mr_points;          /* LightSkin sparse points per asset (bake/sparse.h), 0 = none */
+    int solver;             /* LC_BAKE_SOLVER_*: which solvers' data the bake holds */
+    int probes;             /* the probes solver (bake/probes.h): target count, 0 = from the density */
+    double probe_density;   /* probes per m^3 of the scene's bounds when probes is 0 */
+    int probe_relight_rays; /* per probe */
+    int probe_bands;        /* the probes' SH bands */
+    int probe_overlaps;     /* probes per receiver at most */
+    int probe_receiver_rays;
+    int probe_cluster; /* rows per cluster at most */
+    int probe_rank;    /* SVD rank at most */
+    double probe_svd_error;
+    int probe_visibility; /* the thesis's visibility match (off: the naive, leaking weights) */
 } lc_bake_settings;
 
 /* The option table (NULL-terminated). */

@@ -5,6 +5,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "engine/probes.h"
 #include "engine/transport.h"
 #include "util/clock.h"
 #include "util/log.h"
@@ -28,7 +29,8 @@ typedef struct tcpu {
     uint32_t *dnrt_list; /* their corner caches outside the feedback list */
     uint32_t n_dnrt_list, dnrt_list_cap;
     float cone[256][8];
-    int threads; /* the parallel-for's workers: the engine's setting */
+    int threads;       /* the parallel-for's workers: the engine's setting */
+    lc_probes *probes; /* the probes solver, made on first use (settings.solver probes) */
 } tcpu;
 
 static void tcpu_texel_weights(const lc_lcb_view *v, const float cone[256][8], float *out);
@@ -43,6 +45,7 @@ static void tcpu_release(void *impl) {
     free(t->texel_w);
     free(t->dnrt_c);
     free(t->dnrt_list);
+    lc_probes_release(t->probes);
     free(t);
 }
 
@@ -552,6 +555,8 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     if (in->reset_feedback) memset(t->e_ind, 0, (size_t)v->n_surfels * 3 * sizeof(float));
     double ms_pull = 0, ms_gather = 0, ms_bounce = 0, ms_dnrt = 0, ms_drt = 0;
     if (in->dnrt && tcpu_dnrt_corner_list(t, in->dnrt, err, errlen) != 0) return -1;
+    const int probes = st->solver == LC_SOLVER_PROBES;
+    if (probes && !t->probes && !(t->probes = lc_probes_create(v, err, errlen))) return -1;
 
     for (uint32_t pass = 0; pass <= st->bounces; pass++) {
         int last = pass == st->bounces;
@@ -571,7 +576,9 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
                                chroma,
                                lc_transport_texel_bands(st),
                                lc_transport_texel_band1(st)};
-        lc_parallel_for(t->threads, last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
+        if (probes) /* every receiver each pass: the probes' cost does not shrink with fewer */
+            lc_probes_gather(t->probes, t->out.radiosity, (uint32_t)bands, t->out.cache_sh, t->coeff_cap, t->threads);
+        else lc_parallel_for(t->threads, last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
         double t4 = lc_clock_ms();
         ms_gather += t4 - t3;
         if (last) { /* the objects' SH before any object changes the caches */
@@ -581,7 +588,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
             t4 = t5;
         }
         if (in->dnrt) {
-            if (!last && t->n_dnrt_list) {
+            if (!last && t->n_dnrt_list && !probes) {
                 job.list = t->dnrt_list; /* a few caches: on this thread (a fork-join costs more) */
                 tcpu_gather_range(&job, 0, t->n_dnrt_list, 0);
             }

@@ -161,10 +161,141 @@ static void test_dnrt(const fixture *f) {
     CHECK(j && s4.settings.bounces == 3 && s4.settings.dnrt == 1 && s4.settings.dnrt_blockers == 1 &&
               s4.settings.present == LC_SET_ALL,
           "old records: settings dnrt and dnrt_blockers on");
+    CHECK(j && s4.settings.solver == LC_PROTO_SOLVER_PIC, "old records: the bake's default solver");
     if (j) lc_journal_close(j);
     remove_state_dir(old);
     lc_state_release(&s4);
     lc_state_release(&s);
+}
+
+/* settings.solver: the bake's default, applied, mapped to the engine, refused (invalid,
+ * /settings/solver) when the bake or the backend cannot run it, journaled and snapshotted;
+ * older records load with the bake's default. The fixture bake has only PIC; views with
+ * probe data (a header is all the checks read) stand in for --solver both / probes. */
+static void test_solver(const fixture *f) {
+    lc_state_limits lim = {.max_lights = 3, .max_objects = 2};
+    lc_state s;
+    lc_proto_error e;
+    char err[256];
+    CHECK(lc_engine_default_solver(f->v) == LC_SOLVER_PIC &&
+              lc_engine_default_settings(f->bake).solver == LC_SOLVER_PIC,
+          "a PIC bake defaults to pic");
+    CHECK(lc_state_init(&s, f->bake, &lim) == 0 && s.settings.solver == LC_PROTO_SOLVER_PIC &&
+              (s.settings.present & (1u << LC_SET_SOLVER)),
+          "fresh state: the bake's default solver");
+    CHECK(lc_state_solvers(&s) == 1u << LC_PROTO_SOLVER_PIC, "a PIC bake offers pic: %x", lc_state_solvers(&s));
+    lc_proto_op probes, pic, bounces;
+    CHECK(parse_op("{\"type\":\"settings.set\",\"settings\":{\"solver\":\"probes\"}}", &probes) == 0 &&
+              parse_op("{\"type\":\"settings.set\",\"settings\":{\"solver\":\"pic\"}}", &pic) == 0 &&
+              parse_op("{\"type\":\"settings.set\",\"settings\":{\"bounces\":2}}", &bounces) == 0,
+          "ops parse");
+    uint64_t rev = s.revision;
+    CHECK(lc_state_apply(&s, &probes, 1, 0, &e) != 0 && !strcmp(e.code, "invalid") &&
+              !strcmp(e.pointer, "/settings/solver") && strstr(e.message, "this bake has no probes solver") &&
+              s.revision == rev && s.settings.solver == LC_PROTO_SOLVER_PIC,
+          "probes refused on a PIC bake: %s %s %s", e.code, e.pointer, e.message);
+    lc_proto_op two[2] = {bounces, probes};
+    CHECK(lc_state_apply(&s, two, 2, 1, &e) != 0 && !strcmp(e.pointer, "/ops/1/settings/solver") &&
+              s.settings.bounces != 2,
+          "in a batch the pointer names the op: %s", e.pointer);
+    CHECK(lc_state_apply(&s, &pic, 1, 0, &e) == 0 && s.settings.solver == LC_PROTO_SOLVER_PIC, "pic accepted");
+    lc_engine_state es = {0};
+    es.settings = lc_engine_default_settings(f->bake);
+    es.settings.solver = LC_SOLVER_PROBES;
+    CHECK(lc_engine_check_state(f->v, &es, err, sizeof err) != 0 &&
+              !strcmp(err,
+                      "/settings/solver: this bake has no probes solver (bake it with lucent-bake bake --solver probes "
+                      "or both)"),
+          "engine refuses probes: %s", err);
+    CHECK(lc_engine_validate_state(f->engine, &es, err, sizeof err) != 0, "the engine itself refuses it too");
+    es.settings.solver = 7;
+    CHECK(lc_engine_check_state(f->v, &es, err, sizeof err) != 0 && strstr(err, "/settings/solver"), "unknown: %s",
+          err);
+
+    /* --solver both: either solver; probes maps to the engine and survives journal + snapshot */
+    lc_lcb_probe_header hdr = {.n_probes = 1, .n_rays = 1, .sh_bands = 1, .max_rank = 1};
+    lc_lcb_view both = *f->v, only = *f->v;
+    both.probe_header = only.probe_header = &hdr;
+    only.links_per_cache = 0;
+    s.scene = &both;
+    CHECK(lc_state_solvers(&s) == ((1u << LC_PROTO_SOLVER_PIC) | (1u << LC_PROTO_SOLVER_PROBES)), "both offered: %x",
+          lc_state_solvers(&s));
+    char dir[] = "/tmp/lc_solver_XXXXXX";
+    CHECK(mkdtemp(dir) != NULL, "mkdtemp");
+    lc_state s1, s2, s3, s4;
+    lc_state_init(&s1, f->bake, &lim);
+    s1.scene = &both;
+    lc_journal *j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s1, err, sizeof err);
+    CHECK(j && lc_state_apply(&s1, &probes, 1, 0, &e) == 0 && s1.settings.solver == LC_PROTO_SOLVER_PROBES &&
+              lc_journal_append(j, &probes, 1, s1.revision, err, sizeof err) == 0,
+          "probes accepted on a both bake and journaled: %s %s", e.message, err);
+    lc_engine_light *el;
+    lc_engine_object *eo;
+    float *em;
+    CHECK(lc_state_to_engine(&s1, &es, &el, &eo, &em) == 0 && es.settings.solver == LC_SOLVER_PROBES,
+          "engine settings: probes");
+    free(el);
+    free(eo);
+    free(em);
+    if (j) lc_journal_close(j);
+    lc_state_init(&s2, f->bake, &lim);
+    s2.scene = &both;
+    j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s2, err, sizeof err);
+    CHECK(j && s2.settings.solver == LC_PROTO_SOLVER_PROBES && s2.revision == s1.revision, "journal replay: %s", err);
+    CHECK(j && lc_journal_compact(j, &s2, err, sizeof err) == 0, "compact: %s", err);
+    if (j) lc_journal_close(j);
+    lc_state_init(&s3, f->bake, &lim);
+    s3.scene = &both;
+    j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s3, err, sizeof err);
+    CHECK(j && s3.settings.solver == LC_PROTO_SOLVER_PROBES, "snapshot keeps probes: %s", err);
+    if (j) lc_journal_close(j);
+    /* the same snapshot over the PIC-only bake (rebaked): the bake's default, not a failure */
+    lc_state_init(&s4, f->bake, &lim);
+    j = lc_journal_open(dir, LC_FSYNC_ALWAYS, &s4, err, sizeof err);
+    CHECK(j && s4.settings.solver == LC_PROTO_SOLVER_PIC, "snapshot solver the bake lacks: default: %s", err);
+    if (j) lc_journal_close(j);
+    remove_state_dir(dir);
+
+    /* the EGL backend runs PIC only: a probes state falls back, probes is refused, not offered */
+    lc_state_set_backend(&s1, LC_BACKEND_EGL);
+    CHECK(s1.settings.solver == LC_PROTO_SOLVER_PIC && lc_state_solvers(&s1) == 1u << LC_PROTO_SOLVER_PIC,
+          "egl: back to pic, only pic offered");
+    CHECK(lc_state_apply(&s1, &probes, 1, 0, &e) != 0 && !strcmp(e.pointer, "/settings/solver") &&
+              strstr(e.message, "the probes solver runs on the CPU backend only (lucentd --backend cpu)"),
+          "egl refuses probes: %s", e.message);
+    lc_state_set_backend(&s3, LC_BACKEND_CPU);
+    CHECK(s3.settings.solver == LC_PROTO_SOLVER_PROBES, "cpu keeps probes");
+
+    /* --solver probes: the default is probes, pic is refused; an older snapshot (no solver)
+     * over such a bake loads as probes */
+    CHECK(lc_engine_default_solver(&only) == LC_SOLVER_PROBES, "a probes-only bake defaults to probes");
+    s.scene = &only;
+    CHECK(lc_state_solvers(&s) == 1u << LC_PROTO_SOLVER_PROBES, "probes only offered");
+    CHECK(lc_state_apply(&s, &pic, 1, 0, &e) != 0 && !strcmp(e.pointer, "/settings/solver") &&
+              strstr(e.message, "this bake has no PIC links (baked with --solver probes)"),
+          "pic refused on a probes bake: %s", e.message);
+    CHECK(lc_state_apply(&s, &probes, 1, 0, &e) == 0 && s.settings.solver == LC_PROTO_SOLVER_PROBES,
+          "probes accepted: %s", e.message);
+    char old[] = "/tmp/lc_solver_old_XXXXXX";
+    CHECK(mkdtemp(old) != NULL, "mkdtemp");
+    write_file(old, "snapshot.json",
+               "{\"type\":\"state\",\"revision\":3,\"lights\":[],\"objects\":[],\"materials\":[],"
+               "\"environment\":{\"type\":\"none\",\"color\":[1,1,1],\"intensity\":1},\"settings\":{\"bounces\":2,"
+               "\"bands\":3,\"progressive\":true,\"chroma_compression\":false,\"chroma_bands\":3,\"dnrt\":true}}");
+    lc_state s5;
+    lc_state_init(&s5, f->bake, &lim);
+    s5.scene = &only;
+    j = lc_journal_open(old, LC_FSYNC_ALWAYS, &s5, err, sizeof err);
+    CHECK(j && s5.revision == 3 && s5.settings.solver == LC_PROTO_SOLVER_PROBES, "old snapshot: the bake's default");
+    if (j) lc_journal_close(j);
+    remove_state_dir(old);
+    s.scene = f->v;
+    lc_state_release(&s);
+    lc_state_release(&s1);
+    lc_state_release(&s2);
+    lc_state_release(&s3);
+    lc_state_release(&s4);
+    lc_state_release(&s5);
 }
 
 int main(void) {
@@ -334,6 +465,7 @@ int main(void) {
     lc_state_release(&s4);
     lc_state_release(&s5);
     test_dnrt(&f);
+    test_solver(&f);
     fixture_release(&f);
     CHECK_DONE();
 }

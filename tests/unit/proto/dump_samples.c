@@ -95,6 +95,7 @@ int main(int argc, char **argv) {
         1,
         "{\"type\":\"settings.set\",\"settings\":{\"bounces\":2,\"bands\":3,\"progressive\":true,\"chroma_compression\":true,\"chroma_bands\":2}}");
     client(1, "{\"type\":\"settings.set\",\"settings\":{\"dnrt\":false,\"dnrt_blockers\":true}}");
+    client(1, "{\"type\":\"settings.set\",\"settings\":{\"solver\":\"probes\",\"bounces\":1}}");
     client(
         1,
         "{\"type\":\"batch\",\"id\":\"b1\",\"ops\":[{\"type\":\"light.set\",\"light\":" L_POINT "},"
@@ -144,6 +145,8 @@ int main(int argc, char **argv) {
     client(0, "{\"type\":\"settings.set\",\"settings\":{\"bands\":2.5}}");
     client(0, "{\"type\":\"settings.set\",\"settings\":{\"dnrt\":\"yes\"}}");
     client(0, "{\"type\":\"settings.set\",\"settings\":{\"dnrt_blockers\":0}}");
+    client(0, "{\"type\":\"settings.set\",\"settings\":{\"solver\":\"radiosity\"}}");
+    client(0, "{\"type\":\"settings.set\",\"settings\":{\"solver\":1}}");
     client(0, "{\"type\":\"object.set\",\"object\":{\"id\":\"o\",\"asset\":\"chair\",\"dnrt\":5}}");
     client(0, "{\"type\":\"batch\",\"ops\":[]}");
     client(0, "{\"type\":\"batch\",\"ops\":[{\"type\":\"batch\",\"ops\":[{\"type\":\"snapshot\"}]}]}");
@@ -198,6 +201,10 @@ int main(int argc, char **argv) {
     w.n_assets = 2;
     w.asset_info = info;
     emit("valid", lc_proto_build_welcome(NULL, &w));
+    /* with scene.solvers (a --solver both bake) */
+    w.solvers = (1u << LC_PROTO_SOLVER_PIC) | (1u << LC_PROTO_SOLVER_PROBES);
+    emit("valid", lc_proto_build_welcome(NULL, &w));
+    w.solvers = 0;
     emit("valid", lc_proto_build_ok(&sid, 43));
     emit("valid", lc_proto_build_ok(NULL, 0));
     lc_proto_error e = {"out_of_range", "/ops/3/light/intensity", "intensity must be in [0, 1e9]"};

@@ -1645,7 +1645,7 @@ static void test_dnrt_fields(void) {
     lc_proto_request_release(&r);
     INVALID("{\"type\":\"settings.set\",\"settings\":{\"dnrt\":1}}", "invalid", "/settings/dnrt");
     INVALID("{\"type\":\"settings.set\",\"settings\":{\"dnrt_blockers\":null}}", "invalid", "/settings/dnrt_blockers");
-    CHECK(LC_SET_ALL == 0x7F, "seven settings fields: %x", LC_SET_ALL);
+    CHECK(LC_SET_ALL == 0xFF, "eight settings fields (solver the eighth): %x", LC_SET_ALL);
 
     /* journal records: build_op -> parse gives the same op, the new fields included */
     const char *msgs[] = {
@@ -1738,6 +1738,103 @@ static void test_dnrt_fields(void) {
           "asset_info transfer");
     CHECK(cJSON_IsObject(o2) && o2->child == NULL, "an asset without transfer data is {} (key made valid UTF-8)");
     cJSON_Delete(j);
+}
+
+/* settings.solver "pic" | "probes": parsed like an enum (the server checks which the bake
+ * offers), refused with /settings/solver otherwise, carried by journal records and state
+ * text; an older snapshot lacks it; welcome.scene.solvers lists the offered ones. */
+static void test_solver_fields(void) {
+    lc_proto_request r;
+    PARSE_OK("{\"type\":\"settings.set\",\"settings\":{\"solver\":\"probes\"}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].settings.present == 1u << LC_SET_SOLVER &&
+              r.ops[0].settings.solver == LC_PROTO_SOLVER_PROBES,
+          "solver probes alone: present %x", r.n_ops ? r.ops[0].settings.present : 0);
+    lc_proto_request_release(&r);
+    PARSE_OK("{\"type\":\"settings.set\",\"settings\":{\"solver\":\"pic\",\"bounces\":3}}", &r);
+    CHECK(r.n_ops == 1 && r.ops[0].settings.present == ((1u << LC_SET_SOLVER) | (1u << LC_SET_BOUNCES)) &&
+              r.ops[0].settings.solver == LC_PROTO_SOLVER_PIC && r.ops[0].settings.bounces == 3,
+          "solver pic + bounces");
+    lc_proto_request_release(&r);
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"solver\":\"radiosity\"}}", "invalid", "/settings/solver");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"solver\":\"PIC\"}}", "invalid", "/settings/solver");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"solver\":1}}", "invalid", "/settings/solver");
+    INVALID("{\"type\":\"settings.set\",\"settings\":{\"solver\":null}}", "invalid", "/settings/solver");
+    INVALID("{\"type\":\"batch\",\"ops\":[{\"type\":\"settings.set\",\"settings\":{\"solver\":\"\"}}]}", "invalid",
+            "/ops/0/settings/solver");
+    lc_proto_error e;
+    const char *bad = "{\"type\":\"settings.set\",\"settings\":{\"solver\":\"x\"}}";
+    CHECK(parse(bad, &r, &e) != 0 && strstr(e.message, "pic, probes") != NULL, "the error lists the solvers: %s",
+          e.message);
+    lc_proto_request_release(&r);
+    CHECK(!strcmp(lc_proto_solver_name(LC_PROTO_SOLVER_PIC), "pic") &&
+              !strcmp(lc_proto_solver_name(LC_PROTO_SOLVER_PROBES), "probes") && !lc_proto_solver_name(2) &&
+              !lc_proto_solver_name(-1),
+          "solver names");
+
+    /* journal record round trip */
+    lc_proto_request a, b;
+    PARSE_OK("{\"type\":\"settings.set\",\"settings\":{\"solver\":\"probes\"}}", &a);
+    char *s = a.n_ops == 1 ? lc_proto_build_op(&a.ops[0]) : NULL;
+    CHECK(s && strstr(s, "\"solver\":\"probes\"") != NULL, "the op says solver probes: %s", s ? s : "NULL");
+    if (s) {
+        PARSE_OK(s, &b);
+        CHECK(b.n_ops == 1 && !memcmp(&a.ops[0], &b.ops[0], sizeof a.ops[0]), "solver op round trip: %s", s);
+        lc_proto_request_release(&b);
+    }
+    free(s);
+    lc_proto_request_release(&a);
+
+    /* state text: solver written, read back; a snapshot without it parses without the bit */
+    lc_proto_state st = {0};
+    st.settings.present = LC_SET_ALL;
+    st.settings.bounces = 1;
+    st.settings.bands = st.settings.chroma_bands = 3;
+    st.settings.solver = LC_PROTO_SOLVER_PROBES;
+    char *text = lc_proto_build_state(NULL, &st);
+    lc_proto_parsed_state p;
+    int rc = text ? lc_proto_parse_state(text, strlen(text), &p, &e) : -1;
+    CHECK(rc == 0 && strstr(text, "\"solver\":\"probes\"") && p.settings.present == LC_SET_ALL &&
+              p.settings.solver == LC_PROTO_SOLVER_PROBES,
+          "state solver round trip: %s", text ? text : "NULL");
+    if (rc == 0) lc_proto_parsed_state_free(&p);
+    free(text);
+    const char *old = "{\"type\":\"state\",\"revision\":7,\"lights\":[],\"objects\":[],\"materials\":[],"
+                      "\"environment\":{\"type\":\"none\"},\"settings\":{\"bounces\":1,\"dnrt\":true}}";
+    rc = lc_proto_parse_state(old, strlen(old), &p, &e);
+    CHECK(rc == 0 && !(p.settings.present & (1u << LC_SET_SOLVER)), "old snapshot: no solver (present %x)",
+          rc == 0 ? p.settings.present : 0);
+    if (rc == 0) lc_proto_parsed_state_free(&p);
+
+    /* welcome.scene.solvers: only when given, in protocol order */
+    const char *mats[] = {"white"};
+    lc_proto_welcome w = {0};
+    w.server = "lucentd/0.1.0";
+    w.role = "viewer";
+    w.lightmap_width = w.lightmap_height = w.tile = 32;
+    w.grid_cell = 0.5f;
+    w.grid_dims[0] = w.grid_dims[1] = w.grid_dims[2] = 2;
+    w.bands = 3;
+    w.materials = mats;
+    w.n_materials = 1;
+    lc_proto_default_limits(&w.limits);
+    cJSON *j = reparse(lc_proto_build_welcome(NULL, &w));
+    CHECK(j && !cJSON_GetObjectItem(cJSON_GetObjectItem(j, "scene"), "solvers"), "no solvers when not given");
+    cJSON_Delete(j);
+    static const struct {
+        uint32_t bits;
+        const char *want;
+    } cases[] = {{1u << LC_PROTO_SOLVER_PIC, "[\"pic\"]"},
+                 {1u << LC_PROTO_SOLVER_PROBES, "[\"probes\"]"},
+                 {(1u << LC_PROTO_SOLVER_PIC) | (1u << LC_PROTO_SOLVER_PROBES), "[\"pic\",\"probes\"]"}};
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        w.solvers = cases[i].bits;
+        j = reparse(lc_proto_build_welcome(NULL, &w));
+        char *got = cJSON_PrintUnformatted(cJSON_GetObjectItem(cJSON_GetObjectItem(j, "scene"), "solvers"));
+        CHECK(got && !strcmp(got, cases[i].want), "welcome solvers %x: %s, expected %s", cases[i].bits,
+              got ? got : "NULL", cases[i].want);
+        cJSON_free(got);
+        cJSON_Delete(j);
+    }
 }
 
 /* --- lucent/1.1 MR messages (§8.1-8.3, 8.5, 8.7) -------------------------------------------- */
@@ -2116,6 +2213,7 @@ int main(void) {
     test_utf8_builders();
     test_nul_escape();
     test_dnrt_fields();
+    test_solver_fields();
     test_clutter_fields();
     test_mr_hello();
     test_mr_begin();

@@ -1,0 +1,166 @@
+/* probes: the probes solver's runtime (probes.h). Runs on the engine's thread. */
+#include "engine/probes.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "util/log.h"
+#include "util/parallel.h"
+#include "util/sh.h"
+
+struct lc_probes {
+    const lc_lcb_view *v;
+    uint32_t coeffs;
+    float *ray_sh;    /* n_rays x coeffs: y_j(dir_k) x (4 pi / n_rays) / pi */
+    float *lambda;    /* n_probes x coeffs x 3 */
+    float *basis_out; /* per cluster rank x 3, at b_off */
+    uint64_t *b_off;  /* per cluster */
+    float *cache_sh;  /* the gather's target (borrowed for one call) */
+    const float *rad; /* the gather's radiosity (borrowed for one call) */
+    uint32_t bands, stride;
+};
+
+lc_probes *lc_probes_create(const lc_lcb_view *v, char *err, size_t errlen) {
+    const lc_lcb_probe_header *h = v->probe_header;
+    if (!h) {
+        lc_set_err(err, errlen,
+                   "probes solver: the bake has none (bake with lucent-bake bake --solver probes or both)");
+        return NULL;
+    }
+    lc_probes *p = calloc(1, sizeof *p);
+    if (!p) goto oom;
+    p->v = v;
+    p->coeffs = h->sh_bands * h->sh_bands;
+    p->ray_sh = malloc((size_t)h->n_rays * p->coeffs * sizeof *p->ray_sh);
+    p->lambda = malloc((size_t)h->n_probes * p->coeffs * 3 * sizeof *p->lambda);
+    p->b_off = malloc(((size_t)h->n_clusters + 1) * sizeof *p->b_off);
+    if (!p->ray_sh || !p->lambda || !p->b_off) goto oom;
+    float y[LC_SH_MAX_COEFFS];
+    for (uint32_t k = 0; k < h->n_rays; k++) {
+        float d[3];
+        lc_probe_ray_dir(k, h->n_rays, d);
+        lc_sh_eval((int)h->sh_bands, d, y);
+        for (uint32_t j = 0; j < p->coeffs; j++) p->ray_sh[(size_t)k * p->coeffs + j] = y[j] * 4.0f / (float)h->n_rays;
+    }
+    uint64_t at = 0;
+    for (uint32_t c = 0; c < h->n_clusters; c++) {
+        p->b_off[c] = at;
+        at += (uint64_t)v->probe_clusters[c].rank * 3;
+    }
+    p->basis_out = malloc((at + 1) * sizeof *p->basis_out);
+    if (!p->basis_out) goto oom;
+    return p;
+oom:
+    lc_probes_release(p);
+    lc_set_err(err, errlen, "probes solver: out of memory");
+    return NULL;
+}
+
+void lc_probes_release(lc_probes *p) {
+    if (!p) return;
+    free(p->ray_sh);
+    free(p->lambda);
+    free(p->basis_out);
+    free(p->b_off);
+    free(p);
+}
+
+const float *lc_probes_sh(const lc_probes *p) { return p->lambda; }
+
+/* lambda[p][j] = sum_k B[hit] / pi * y_j(dir_k) * 4 pi / n_rays */
+static void probes_sh_range(void *ctx, size_t begin, size_t end, int thread) {
+    (void)thread;
+    lc_probes *p = ctx;
+    const lc_lcb_probe_header *h = p->v->probe_header;
+    const uint32_t nc = p->coeffs;
+    for (size_t i = begin; i < end; i++) {
+        float *lam = p->lambda + i * nc * 3;
+        memset(lam, 0, (size_t)nc * 3 * sizeof *lam);
+        const uint32_t *hits = p->v->probe_hits + i * h->n_rays;
+        for (uint32_t k = 0; k < h->n_rays; k++) {
+            if (hits[k] == LC_NONE) continue;
+            const float *b = p->rad + 3 * (size_t)hits[k], *ys = p->ray_sh + (size_t)k * nc;
+            for (uint32_t j = 0; j < nc; j++) {
+                lam[3 * j + 0] += ys[j] * b[0];
+                lam[3 * j + 1] += ys[j] * b[1];
+                lam[3 * j + 2] += ys[j] * b[2];
+            }
+        }
+    }
+}
+
+/* A cluster's row value into its cache's record (probes.h: how each kind of cache holds it). */
+static void probes_store(const lc_probes *p, const lc_lcb_probe_row *row, const float e[3]) {
+    const lc_lcb_cache *c = &p->v->caches[row->cache];
+    float *dst = p->cache_sh + (size_t)row->cache * p->stride * 3;
+    if (c->flags & LC_CACHE_TEXEL) {
+        if (p->bands < 2) {
+            const float s = 1.0f / (float)(2.0 * M_PI * 0.282094791774);
+            for (int k = 0; k < 3; k++) dst[k] = e[k] * s;
+            return;
+        }
+        const float y[3] = {0.488602511903f * c->normal[1], 0.488602511903f * c->normal[2],
+                            0.488602511903f * c->normal[0]};
+        for (int m = 0; m < 3; m++)
+            for (int k = 0; k < 3; k++) dst[3 * (1 + m) + k] = e[k] * y[m];
+        return;
+    }
+    uint32_t j = row->coeff;
+    if (j >= p->bands * p->bands) return;
+    const float inv_a = (float)(1.0 / lc_sh_cosine_factor(j == 0 ? 0 : j < 4 ? 1 : 2));
+    for (int k = 0; k < 3; k++) dst[3 * j + k] = e[k] * inv_a;
+}
+
+/* Per cluster: b = (S V^T) lambda, then each row's U . b. */
+static void probes_cluster_range(void *ctx, size_t begin, size_t end, int thread) {
+    (void)thread;
+    lc_probes *p = ctx;
+    const lc_lcb_view *v = p->v;
+    const uint32_t nc = p->coeffs;
+    for (size_t ci = begin; ci < end; ci++) {
+        const lc_lcb_probe_cluster *cl = &v->probe_clusters[ci];
+        const uint32_t *probes = v->probe_cluster_probes + cl->first_probe;
+        const uint32_t cols = cl->n_probes * nc;
+        float *b = p->basis_out + p->b_off[ci];
+        for (uint32_t r = 0; r < cl->rank; r++) {
+            const float *row = v->probe_basis + cl->basis_offset + (size_t)r * cols;
+            float s0 = 0, s1 = 0, s2 = 0;
+            for (uint32_t q = 0; q < cl->n_probes; q++) {
+                const float *lam = p->lambda + (size_t)probes[q] * nc * 3, *w = row + (size_t)q * nc;
+                for (uint32_t j = 0; j < nc; j++) {
+                    s0 += w[j] * lam[3 * j + 0];
+                    s1 += w[j] * lam[3 * j + 1];
+                    s2 += w[j] * lam[3 * j + 2];
+                }
+            }
+            b[3 * r + 0] = s0, b[3 * r + 1] = s1, b[3 * r + 2] = s2;
+        }
+        for (uint32_t i = 0; i < cl->n_rows; i++) {
+            const float *u = v->probe_u + cl->u_offset + (size_t)i * cl->rank;
+            float e[3] = {0, 0, 0};
+            for (uint32_t r = 0; r < cl->rank; r++) {
+                e[0] += u[r] * b[3 * r + 0];
+                e[1] += u[r] * b[3 * r + 1];
+                e[2] += u[r] * b[3 * r + 2];
+            }
+            probes_store(p, &v->probe_rows[cl->first_row + i], e);
+        }
+    }
+}
+
+void lc_probes_gather(lc_probes *p, const float *radiosity, uint32_t bands, float *cache_sh, uint32_t stride,
+                      int threads) {
+    const lc_lcb_view *v = p->v;
+    const uint32_t nc = bands * bands;
+    for (uint32_t c = 0; c < v->n_caches; c++)
+        memset(cache_sh + (size_t)c * stride * 3, 0, (size_t)nc * 3 * sizeof *cache_sh);
+    p->rad = radiosity;
+    p->cache_sh = cache_sh;
+    p->bands = bands;
+    p->stride = stride;
+    lc_parallel_for(threads, v->probe_header->n_probes, 4, probes_sh_range, p);
+    lc_parallel_for(threads, v->probe_header->n_clusters, 4, probes_cluster_range, p);
+    p->rad = NULL;
+    p->cache_sh = NULL;
+}

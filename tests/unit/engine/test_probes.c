@@ -1,0 +1,276 @@
+/* The probes solver (tools/bake/probes.h, engine/probes.h) against closed forms and the
+ * claims of the method: a closed emitting box converges to pi Le / (1 - rho) (this catches
+ * the thesis's missing cosine: without it the box reads 2 pi L), its probes' SH is that of a
+ * constant field; the compressed transport stays within its SVD error of the exact one; two
+ * rooms side by side: a light in one does not reach the other, while the naive weights
+ * (no visibility match) leak; the bake is the same for any thread count; a probes-only bake
+ * defaults to probes and refuses PIC. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "engine/probes.h"
+#include "util/sh.h"
+#include "engine_fixture.h"
+
+/* Mean texel irradiance (green) over texels whose cache is in [x0, x1) along x. */
+static double mean_texel(const fixture *f, const lc_engine_frame *fr, float x0, float x1) {
+    double sum = 0;
+    int n = 0;
+    for (uint32_t c = 0; c < f->v->n_texel_caches; c++) {
+        const lc_lcb_cache *cc = &f->v->caches[c];
+        if (cc->position[0] < x0 || cc->position[0] >= x1) continue;
+        sum += fr->lightmap[3 * (size_t)cc->index + 1];
+        n++;
+    }
+    return n ? sum / n : 0;
+}
+
+static int relight(fixture *f, uint32_t solver, uint32_t bounces, const lc_engine_frame **fr) {
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f->bake);
+    st.settings.solver = solver;
+    st.settings.bounces = bounces;
+    st.settings.progressive = 0;
+    char err[256];
+    int rc = lc_engine_relight(f->engine, &st, fr, err, sizeof err);
+    CHECK(rc == 0, "relight (solver %u): %s", solver, err);
+    return rc;
+}
+
+static const char *box_flags[] = {"--solver",      "both", "--surfels",      "4096", "--links",  "160",
+                                  "--atlas-size",  "32",   "--grid-max-dim", "5",    "--probes", "8",
+                                  "--probe-bands", "3",    "--threads",      "2",    NULL};
+
+static void test_closed_box(void) {
+    static char obj[1 << 16];
+    obj[0] = 0;
+    fixture_inward_box(obj, sizeof obj, 1.0f, 4, "wall", 1);
+    fixture f;
+    if (fixture_bake(&f, obj, "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n", box_flags) != 0) {
+        CHECK(0, "closed box bake failed");
+        return;
+    }
+    CHECK(f.v->probe_header && f.v->probe_header->n_probes >= 1, "the bake has probes");
+    const lc_engine_frame *fr;
+    if (relight(&f, LC_SOLVER_PROBES, 12, &fr) != 0) goto out;
+    const double expect = M_PI * 1.0 / (1.0 - 0.5);
+    double worst = 0;
+    for (uint32_t c = 0; c < f.v->n_texel_caches; c++)
+        worst = fmax(worst, fabs(fr->lightmap[3 * (size_t)f.v->caches[c].index + 1] / expect - 1));
+    double mean = mean_texel(&f, fr, -1, 2);
+    fprintf(stderr, "closed box, probes: mean %.4f (expected %.4f), worst texel %.2f%%\n", mean, expect, 100 * worst);
+    CHECK(fabs(mean / expect - 1) < 0.02, "closed box, probes: mean texel irradiance %.4f, expected %.4f", mean,
+          expect);
+    CHECK(worst < 0.04, "closed box, probes: worst texel off by %.2f%%", worst * 100);
+    /* the grid's irradiance for +y at interior cells */
+    double gsum = 0;
+    int ng = 0;
+    for (uint32_t i = 0; i < fr->grid_dims[0] * fr->grid_dims[1] * fr->grid_dims[2]; i++) {
+        const lc_lcb_cache *c = &f.v->caches[f.v->grid[i]];
+        const float *p = c->position;
+        if ((c->flags & LC_CACHE_INSIDE) || p[0] < 0.1f || p[0] > 0.9f || p[1] < 0.1f || p[1] > 0.9f || p[2] < 0.1f ||
+            p[2] > 0.9f)
+            continue;
+        const float *g = fr->grid_sh + 27 * (size_t)i;
+        gsum += g[1] * 0.282094791774 + g[2 * 3 + 1] * 0.488602511903 + g[6 * 3 + 1] * 0.315391565253 * 2.0;
+        ng++;
+    }
+    CHECK(ng > 0 && fabs(gsum / ng / expect - 1) < 0.03, "closed box, probes: grid irradiance %.4f vs %.4f (%d cells)",
+          ng ? gsum / ng : 0, expect, ng);
+    /* the probes' SH of the converged, uniform radiance L = B / pi: y_00 coefficient
+     * L sqrt(4 pi), the rest ~0 (the relight directions are a spherical Fibonacci set) */
+    char err[256];
+    lc_probes *pr = lc_probes_create(f.v, err, sizeof err);
+    CHECK(pr != NULL, "lc_probes_create: %s", err);
+    if (pr) {
+        float *sh = calloc((size_t)f.v->n_caches * LC_SH_MAX_COEFFS * 3, sizeof *sh);
+        lc_probes_gather(pr, fr->surfel_radiosity, 3, sh, LC_SH_MAX_COEFFS, 1);
+        const float *lam = lc_probes_sh(pr);
+        const uint32_t nc = f.v->probe_header->sh_bands * f.v->probe_header->sh_bands;
+        double b = 0;
+        for (uint32_t s = 0; s < f.v->n_surfels; s++) b += fr->surfel_radiosity[3 * s + 1] / f.v->n_surfels;
+        const double l00 = b / M_PI * sqrt(4 * M_PI);
+        double worst0 = 0, worst_hi = 0;
+        for (uint32_t p = 0; p < f.v->probe_header->n_probes; p++) {
+            worst0 = fmax(worst0, fabs(lam[(size_t)p * nc * 3 + 1] / l00 - 1));
+            for (uint32_t j = 1; j < nc; j++) worst_hi = fmax(worst_hi, fabs(lam[((size_t)p * nc + j) * 3 + 1]) / l00);
+        }
+        CHECK(worst0 < 0.02, "probe SH of a uniform field: y_00 off by %.2f%% (expected %.4f)", worst0 * 100, l00);
+        CHECK(worst_hi < 0.02, "probe SH of a uniform field: a higher coefficient is %.3f of y_00", worst_hi);
+        free(sh);
+        lc_probes_release(pr);
+    }
+out:
+    fixture_release(&f);
+}
+
+/* Two closed rooms 5 cm apart: [0,1]^3 with an emitting ceiling, [1.05,2.05] x [0,1]^2 dark. */
+static void two_rooms(char *obj, size_t cap) {
+    obj[0] = 0;
+    fixture_inward_box(obj, cap, 1.0f, 2, "room", 1);
+    char b[1 << 15];
+    b[0] = 0;
+    fixture_inward_box(b, sizeof b, 1.0f, 2, "room", 1 + 6 * 9);
+    /* room B: shift every vertex by 1.05 in x */
+    size_t len = strlen(obj);
+    for (char *line = strtok(b, "\n"); line; line = strtok(NULL, "\n")) {
+        float x, y, z;
+        if (sscanf(line, "v %f %f %f", &x, &y, &z) == 3)
+            len += (size_t)snprintf(obj + len, cap - len, "v %g %g %g\n", x + 1.05f, y, z);
+        else len += (size_t)snprintf(obj + len, cap - len, "%s\n", line);
+    }
+    /* the light: a small emitting quad just under room A's ceiling, facing down */
+    len += (size_t)snprintf(obj + len, cap - len,
+                            "usemtl light\nv 0.4 0.98 0.4\nv 0.6 0.98 0.4\nv 0.6 0.98 0.6\nv 0.4 0.98 0.6\n"
+                            "f -4 -3 -2 -1\n");
+}
+
+static void test_leak(void) {
+    static char obj[1 << 16];
+    two_rooms(obj, sizeof obj);
+    const char *mtl = "newmtl room\nKd 0.6 0.6 0.6\nnewmtl light\nKd 0 0 0\nKe 20 20 20\n";
+    double ratio[2] = {0, 0};
+    for (int vis = 0; vis < 2; vis++) {
+        const char *flags[] = {"--solver",
+                               "probes",
+                               "--surfels",
+                               "8192",
+                               "--atlas-size",
+                               "48",
+                               "--grid-max-dim",
+                               "6",
+                               "--probes",
+                               "16",
+                               "--probe-bands",
+                               "4",
+                               vis ? "--probe-visibility" : "--no-probe-visibility",
+                               NULL};
+        fixture f;
+        if (fixture_bake(&f, obj, mtl, flags) != 0) {
+            CHECK(0, "two rooms bake failed");
+            return;
+        }
+        const lc_engine_frame *fr;
+        if (relight(&f, LC_SOLVER_PROBES, 4, &fr) == 0) {
+            double a = mean_texel(&f, fr, -1, 1.0f), b = mean_texel(&f, fr, 1.05f, 3);
+            ratio[vis] = a > 0 ? b / a : 1;
+            CHECK(a > 0, "two rooms: room A is lit (%.4f)", a);
+        }
+        fixture_release(&f);
+    }
+    fprintf(stderr, "two rooms: room B / room A light %.4f%% with the visibility match, %.2f%% naive\n", 100 * ratio[1],
+            100 * ratio[0]);
+    CHECK(ratio[1] < 0.005, "two rooms, visibility match: room B gets %.3f%% of room A's light", 100 * ratio[1]);
+    CHECK(ratio[0] > 0.05, "two rooms, naive weights: room B gets only %.2f%% (the leak test cannot see a leak)",
+          100 * ratio[0]);
+}
+
+/* The compressed transport against the exact one (clusters no larger than their rank), and
+ * the same bake bytes for 1 and 2 threads. */
+static void test_compression_and_determinism(void) {
+    static char obj[1 << 16];
+    two_rooms(obj, sizeof obj);
+    const char *mtl = "newmtl room\nKd 0.6 0.6 0.6\nnewmtl light\nKd 0 0 0\nKe 20 20 20\n";
+    const char *exact[] = {"--solver",
+                           "probes",
+                           "--surfels",
+                           "8192",
+                           "--atlas-size",
+                           "32",
+                           "--grid-max-dim",
+                           "5",
+                           "--probes",
+                           "12",
+                           "--probe-bands",
+                           "4",
+                           "--probe-svd-error",
+                           "0",
+                           "--probe-rank",
+                           "16",
+                           "--probe-cluster",
+                           "16",
+                           NULL};
+    const char *lossy[] = {
+        "--solver", "probes", "--surfels",     "8192", "--atlas-size",      "32",   "--grid-max-dim", "5",
+        "--probes", "12",     "--probe-bands", "4",    "--probe-svd-error", "0.05", "--threads",      "1",
+        NULL};
+    const char *lossy2[] = {
+        "--solver", "probes", "--surfels",     "8192", "--atlas-size",      "32",   "--grid-max-dim", "5",
+        "--probes", "12",     "--probe-bands", "4",    "--probe-svd-error", "0.05", "--threads",      "2",
+        NULL};
+    fixture fe, fl, f2;
+    if (fixture_bake(&fe, obj, mtl, exact) != 0 || fixture_bake(&fl, obj, mtl, lossy) != 0 ||
+        fixture_bake(&f2, obj, mtl, lossy2) != 0) {
+        CHECK(0, "compression bakes failed");
+        return;
+    }
+    const lc_lcb_view *a = fl.v, *b = f2.v;
+    int same = a->probe_header->n_clusters == b->probe_header->n_clusters && a->n_probe_basis == b->n_probe_basis &&
+        a->n_probe_u == b->n_probe_u && !memcmp(a->probes, b->probes, a->probe_header->n_probes * sizeof *a->probes) &&
+        !memcmp(a->probe_basis, b->probe_basis, a->n_probe_basis * sizeof(float)) &&
+        !memcmp(a->probe_u, b->probe_u, a->n_probe_u * sizeof(float)) &&
+        !memcmp(a->probe_rows, b->probe_rows, a->probe_header->n_rows * sizeof *a->probe_rows);
+    CHECK(same, "probes bake: 1 and 2 threads give the same probe sections");
+    const lc_engine_frame *fr;
+    size_t texels = (size_t)fe.v->lightmap_width * fe.v->lightmap_height;
+    float *ref = malloc(texels * 3 * sizeof *ref);
+    if (ref && relight(&fe, LC_SOLVER_PROBES, 2, &fr) == 0) {
+        memcpy(ref, fr->lightmap, texels * 3 * sizeof *ref);
+        if (relight(&fl, LC_SOLVER_PROBES, 2, &fr) == 0) {
+            double num = 0, den = 0;
+            for (size_t i = 0; i < texels * 3; i++) {
+                num += ((double)fr->lightmap[i] - ref[i]) * ((double)fr->lightmap[i] - ref[i]);
+                den += (double)ref[i] * ref[i];
+            }
+            double rel = den > 0 ? sqrt(num / den) : 1;
+            fprintf(stderr, "compressed (SVD error 0.05, %u clusters) vs exact (%u): relative RMS %.4f\n",
+                    fl.v->probe_header->n_clusters, fe.v->probe_header->n_clusters, rel);
+            CHECK(den > 0 && rel < 0.05, "compressed vs exact transport: relative RMS difference %.4f (SVD error 0.05)",
+                  rel);
+            CHECK(rel > 0, "compressed vs exact transport: identical (the lossy bake kept everything?)");
+        }
+    }
+    free(ref);
+    fixture_release(&fe);
+    fixture_release(&fl);
+    fixture_release(&f2);
+}
+
+/* A probes-only bake: the engine's default solver is probes and PIC is refused by field. */
+static void test_probes_only(void) {
+    static char obj[1 << 16];
+    obj[0] = 0;
+    fixture_inward_box(obj, sizeof obj, 1.0f, 2, "wall", 1);
+    const char *flags[] = {
+        "--solver", "probes",        "--surfels", "2048", "--atlas-size", "16", "--grid-max-dim", "4", "--probes",
+        "4",        "--probe-bands", "2",         NULL};
+    fixture f;
+    if (fixture_bake(&f, obj, "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n", flags) != 0) {
+        CHECK(0, "probes-only bake failed");
+        return;
+    }
+    CHECK(f.v->links_per_cache == 0, "probes-only bake: no links (%u per cache)", f.v->links_per_cache);
+    CHECK(lc_engine_default_solver(f.v) == LC_SOLVER_PROBES, "probes-only bake: default solver probes");
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f.bake);
+    CHECK(st.settings.solver == LC_SOLVER_PROBES, "default settings pick probes (%u)", st.settings.solver);
+    st.settings.solver = LC_SOLVER_PIC;
+    const lc_engine_frame *fr;
+    char err[256] = "";
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) != 0 && strstr(err, "/settings/solver"),
+          "PIC on a probes-only bake refused naming /settings/solver: '%s'", err);
+    const lc_engine_frame *ok;
+    if (relight(&f, LC_SOLVER_PROBES, 8, &ok) == 0)
+        CHECK(mean_texel(&f, ok, -1, 2) > 0, "probes-only bake lights the box");
+    fixture_release(&f);
+}
+
+int main(void) {
+    test_closed_box();
+    test_leak();
+    test_compression_and_determinism();
+    test_probes_only();
+    CHECK_DONE();
+}
