@@ -227,16 +227,16 @@ typedef struct lc_lcb_sparse_vertex {
  * 9 rows, coeff j the cosine-convolved L2 irradiance SH coefficient E_j = A_l L_j. RGB
  * throughout (the matrices are shared by the channels). */
 typedef struct lc_lcb_probe_header {
-    uint32_t n_probes;       /* PRBP records, >= 1 */
-    uint32_t n_rays;         /* relight rays per probe, 1..65536 */
-    uint32_t sh_bands;       /* the probes' SH bands, 1..LC_LCB_PROBE_MAX_BANDS; coeffs = bands^2 */
-    uint32_t n_clusters;     /* PRCL records */
-    uint32_t n_rows;         /* PRRW records */
-    uint32_t max_rank;       /* the largest cluster rank, 1..LC_LCB_PROBE_MAX_RANK */
-    uint32_t overlaps;       /* the most probes one receiver uses (information) */
-    uint32_t receiver_rays;  /* rays per receiver the bake traced (information) */
-    float support_radius;    /* metres (information) */
-    float svd_error;         /* the truncation error each cluster met, relative Frobenius (information) */
+    uint32_t n_probes;      /* PRBP records, >= 1 */
+    uint32_t n_rays;        /* relight rays per probe, 1..65536 */
+    uint32_t sh_bands;      /* the probes' SH bands, 1..LC_LCB_PROBE_MAX_BANDS; coeffs = bands^2 */
+    uint32_t n_clusters;    /* PRCL records */
+    uint32_t n_rows;        /* PRRW records */
+    uint32_t max_rank;      /* the largest cluster rank, 1..LC_LCB_PROBE_MAX_RANK */
+    uint32_t overlaps;      /* the most probes one receiver uses (information) */
+    uint32_t receiver_rays; /* rays per receiver the bake traced (information) */
+    float support_radius;   /* metres (information) */
+    float svd_error;        /* the truncation error each cluster met, relative Frobenius (information) */
     uint32_t reserved[6];
 } lc_lcb_probe_header;
 
