@@ -24,7 +24,7 @@ static int cmp_double(const void *a, const void *b) {
 }
 
 typedef struct {
-    char file[512], backend[16];
+    char file[512], backend[16], solver[8];
     uint32_t surfels, caches, links, bands, nodes;
     double stage_ms[LC_STAGE_COUNT], total_ms, peak_mib;
     double gather_links; /* links evaluated per relight (all passes) */
@@ -80,7 +80,9 @@ static void bench_state(const lc_lcb_view *v, int run, lc_engine_light *light, l
     st->revision = (uint64_t)run + 1;
 }
 
-static int bench_one(const char *path, lc_backend_kind kind, int runs, int bounces, bench_row *row) {
+/* One bake, backend and solver: 0, 1 (failed), 3 (no such backend here), 4 (the solver does
+ * not run on this bake or backend: skipped). */
+static int bench_one(const char *path, lc_backend_kind kind, uint32_t solver, int runs, int bounces, bench_row *row) {
     char err[512];
     lc_lcb *bake = NULL;
     lc_engine *e = NULL;
@@ -98,8 +100,13 @@ static int bench_one(const char *path, lc_backend_kind kind, int runs, int bounc
         goto done;
     }
     const lc_lcb_view *v = lc_lcb_get(bake);
+    if (lc_engine_check_solver(v, lc_engine_backend(e), solver, err, sizeof err) != 0) {
+        rc = 4;
+        goto done;
+    }
     lc_engine_settings settings = lc_engine_default_settings(bake);
     settings.bounces = (uint32_t)bounces;
+    settings.solver = solver;
     lc_engine_light light;
     lc_engine_state st;
     const lc_engine_frame *fr;
@@ -123,6 +130,7 @@ static int bench_one(const char *path, lc_backend_kind kind, int runs, int bounc
     memset(row, 0, sizeof *row);
     snprintf(row->file, sizeof row->file, "%s", path);
     snprintf(row->backend, sizeof row->backend, "%s", lc_engine_backend_name(e));
+    snprintf(row->solver, sizeof row->solver, "%s", solver == LC_SOLVER_PROBES ? "probes" : "pic");
     row->surfels = v->n_surfels;
     row->caches = v->n_caches;
     row->links = v->links_per_cache;
@@ -424,12 +432,13 @@ int main(int argc, char **argv) {
     int nrows = 0, failed = 0;
     for (int f = 0; f < nfiles; f++) {
         lc_backend_kind kinds[2] = {LC_BACKEND_CPU, LC_BACKEND_EGL};
-        for (int k = 0; k < 2; k++) {
-            if (!bench_backend_wanted(backend, k)) continue;
-            int rc = bench_one(files[f], kinds[k], runs, bounces, &rows[nrows]);
-            if (rc == 0) nrows++;
-            else if (!(rc == 3 && !strcmp(backend, "both"))) failed = 1; /* an absent EGL is not a failure in "both" */
-        }
+        for (int k = 0; k < 2; k++)
+            for (uint32_t sv = 0; sv < LC_SOLVER_COUNT && bench_backend_wanted(backend, k) && nrows < 127; sv++) {
+                int rc = bench_one(files[f], kinds[k], sv, runs, bounces, &rows[nrows]);
+                if (rc == 0) nrows++;
+                else if (rc == 3 && !strcmp(backend, "both")) break; /* an absent EGL is not a failure in "both" */
+                else if (rc != 4) failed = 1;
+            }
     }
     bench_dnrt_row drows[128];
     int ndrows = 0;
@@ -461,13 +470,13 @@ int main(int argc, char **argv) {
         }
     }
     printf("\nrelight after one light change, median of %d runs, %d feedback bounce(s), ms\n", runs, bounces);
-    printf("%-28s %-4s %7s %7s %5s", "bake", "bk", "surfels", "caches", "links");
+    printf("%-28s %-4s %-6s %7s %7s %5s", "bake", "bk", "solver", "surfels", "caches", "links");
     for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8s", stage_names[s]);
     printf(" %8s %8s\n", "total", "peakMiB");
     for (int i = 0; i < nrows; i++) {
         const char *base = strrchr(rows[i].file, '/');
-        printf("%-28.28s %-4s %7u %7u %5u", base ? base + 1 : rows[i].file, rows[i].backend, rows[i].surfels,
-               rows[i].caches, rows[i].links);
+        printf("%-28.28s %-4s %-6s %7u %7u %5u", base ? base + 1 : rows[i].file, rows[i].backend, rows[i].solver,
+               rows[i].surfels, rows[i].caches, rows[i].links);
         for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8.2f", rows[i].stage_ms[s]);
         printf(" %8.2f %8.0f\n", rows[i].total_ms, rows[i].peak_mib);
     }
@@ -497,10 +506,10 @@ int main(int argc, char **argv) {
         fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"memcpy_gbps\": %.2f, \"results\": [", runs, bounces, bw);
         for (int i = 0; i < nrows; i++) {
             fprintf(out,
-                    "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"surfels\": %u, \"caches\": %u, \"links\": %u, "
-                    "\"bands\": %u, \"stages_ms\": {",
-                    i ? "," : "", rows[i].file, rows[i].backend, rows[i].surfels, rows[i].caches, rows[i].links,
-                    rows[i].bands);
+                    "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"solver\": \"%s\", \"surfels\": %u, "
+                    "\"caches\": %u, \"links\": %u, \"bands\": %u, \"stages_ms\": {",
+                    i ? "," : "", rows[i].file, rows[i].backend, rows[i].solver, rows[i].surfels, rows[i].caches,
+                    rows[i].links, rows[i].bands);
             for (int s = 0; s < LC_STAGE_COUNT; s++)
                 fprintf(out, "%s\"%s\": %.4f", s ? ", " : "", stage_names[s], rows[i].stage_ms[s]);
             fprintf(out,
