@@ -22,6 +22,30 @@ static uint64_t fuzz_bytes(const void *p, size_t n) {
     return s;
 }
 
+/* The probes solver's arrays, every index followed as the runtime (engine/probes.c) does. */
+static uint64_t fuzz_probes(const lc_lcb_view *v) {
+    const lc_lcb_probe_header *h = v->probe_header;
+    if (!h) return 0;
+    uint64_t s = 0;
+    const uint32_t nc = h->sh_bands * h->sh_bands;
+    for (uint64_t i = 0; i < (uint64_t)h->n_probes * h->n_rays; i++)
+        if (v->probe_hits[i] != LC_NONE) s += v->surfels[v->probe_hits[i]].material;
+    for (uint32_t c = 0; c < h->n_clusters; c++) {
+        const lc_lcb_probe_cluster *cl = &v->probe_clusters[c];
+        for (uint32_t q = 0; q < cl->n_probes; q++) {
+            const lc_lcb_probe *p = &v->probes[v->probe_cluster_probes[cl->first_probe + q]];
+            s += fuzz_bytes(p, sizeof *p);
+        }
+        s += fuzz_bytes(v->probe_basis + cl->basis_offset, (size_t)cl->rank * cl->n_probes * nc * sizeof(float));
+        s += fuzz_bytes(v->probe_u + cl->u_offset, (size_t)cl->n_rows * cl->rank * sizeof(float));
+        for (uint32_t r = 0; r < cl->n_rows; r++) {
+            const lc_lcb_probe_row *row = &v->probe_rows[cl->first_row + r];
+            s += v->caches[row->cache].flags + row->coeff;
+        }
+    }
+    return s;
+}
+
 static void fuzz_touch(const lc_lcb *f) {
     const lc_lcb_view *v = lc_lcb_get(f);
     uint64_t s = fuzz_bytes(v->meta_json, v->meta_len + 1);
@@ -65,6 +89,7 @@ static void fuzz_touch(const lc_lcb *f) {
         }
     }
     for (uint32_t i = 0; i < v->n_materials; i++) s += strlen(v->materials[i].name);
+    s += fuzz_probes(v);
     for (uint32_t i = 0; i < lc_lcb_section_count(f); i++) s += lc_lcb_section_at(f, i)->crc;
     sink += s;
 
