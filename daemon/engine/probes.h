@@ -32,7 +32,8 @@ void lc_probes_release(lc_probes *p);
 void lc_probes_gather(lc_probes *p, const float *radiosity, uint32_t bands, float *cache_sh, uint32_t stride,
                       int threads);
 
-/* The probes' radiance SH of the last gather: n_probes x coeffs x 3 (RGB per coefficient). */
+/* The probes' radiance SH of the last gather: n_probes x 3 x coeffs (each channel's
+ * coefficients contiguous). */
 const float *lc_probes_sh(const lc_probes *p);
 
 #endif
