@@ -207,17 +207,6 @@ lc_engine *lc_engine_create(const lc_lcb *bake, lc_backend_kind kind, int thread
     /* Backend: AUTO tries EGL on a hardware device only (on llvmpipe the CPU backend is faster;
      * docs/ARCHITECTURE.md, Performance). */
     char berr[512] = "";
-    if (kind != LC_BACKEND_CPU && lc_engine_default_solver(v) == LC_SOLVER_PROBES) {
-        /* a probes-only bake: EGL could run no solver of it */
-        if (kind == LC_BACKEND_EGL) {
-            lc_set_err(err, errlen,
-                       "egl backend: this bake has only the probes solver, which runs on the CPU backend only "
-                       "(lucentd --backend cpu)");
-            goto err;
-        }
-        lc_info("engine", "backend auto: using cpu (the bake has only the probes solver, which runs on the CPU)");
-        kind = LC_BACKEND_CPU;
-    }
     if (kind == LC_BACKEND_EGL || kind == LC_BACKEND_AUTO) {
         e->ops = &lc_transport_egl;
         e->impl = e->ops->create(v, kind == LC_BACKEND_AUTO ? -1 : threads, berr, sizeof berr);
@@ -260,6 +249,7 @@ int lc_engine_validate_state(const lc_engine *e, const lc_engine_state *st, char
 }
 
 int lc_engine_check_solver(const lc_lcb_view *v, lc_backend_kind backend, uint32_t solver, char *err, size_t errlen) {
+    (void)backend; /* both backends run both solvers */
     if (solver >= LC_SOLVER_COUNT) {
         lc_set_err(err, errlen, "/settings/solver: unknown solver %u", solver);
         return -1;
@@ -272,11 +262,6 @@ int lc_engine_check_solver(const lc_lcb_view *v, lc_backend_kind backend, uint32
     }
     if (solver == LC_SOLVER_PIC && v->links_per_cache == 0) {
         lc_set_err(err, errlen, "/settings/solver: this bake has no PIC links (baked with --solver probes)");
-        return -1;
-    }
-    if (solver == LC_SOLVER_PROBES && backend == LC_BACKEND_EGL) {
-        lc_set_err(err, errlen,
-                   "/settings/solver: the probes solver runs on the CPU backend only (lucentd --backend cpu)");
         return -1;
     }
     return 0;

@@ -156,8 +156,8 @@ int lc_engine_validate_state(const lc_engine *e, const lc_engine_state *state, c
  * acknowledges a change, on the service thread. */
 int lc_engine_check_state(const lc_lcb_view *bake, const lc_engine_state *state, char *err, size_t errlen);
 /* Whether settings.solver `solver` runs for this bake on `backend` (probes needs the bake's
- * probe data and, for now, the CPU backend; PIC needs links). LC_BACKEND_AUTO: the bake's
- * checks only (the backend not yet known). 0, or -1 with err naming /settings/solver. */
+ * probe data, PIC its links; both backends run both, so `backend` is there for one that may
+ * not). 0, or -1 with err naming /settings/solver. */
 int lc_engine_check_solver(const lc_lcb_view *bake, lc_backend_kind backend, uint32_t solver, char *err, size_t errlen);
 /* The solver a fresh state uses: PIC when the bake has links (links_per_cache > 0), else probes. */
 uint32_t lc_engine_default_solver(const lc_lcb_view *bake);

@@ -54,7 +54,7 @@ int lc_state_apply(lc_state *s, const lc_proto_op *ops, uint32_t n_ops, int batc
  * keeps the bake's default. */
 int lc_state_restore(lc_state *s, const lc_proto_parsed_state *p, lc_proto_error *err);
 
-/* Narrows settings.solver to what the engine's backend runs (the probes solver: CPU only).
+/* Narrows settings.solver to what the engine's backend runs (today both run both solvers).
  * A state whose solver it cannot run falls back to the bake's default if that runs (logged;
  * not a change: the revision stays). */
 void lc_state_set_backend(lc_state *s, lc_backend_kind backend);

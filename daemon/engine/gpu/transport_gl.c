@@ -3,7 +3,8 @@
  *
  *   per pass: radiosity.comp (B = B0 + albedo E_ind), pull.comp once per BFS level bottom-up,
  *             chroma.comp (RGB -> YCoCg at the nodes, when compressing), gather.comp (cache
- *             SH; compiled per band count), dnrt.comp (placed objects, engine/dnrt.h: prep,
+ *             SH; compiled per band count; with settings.solver probes, probes.comp in its place:
+ *             gpu/probes_gl.h), dnrt.comp (placed objects, engine/dnrt.h: prep,
  *             then apply once per object), feedback.comp (E_ind per surfel)
  *   then:     lightmap.comp, grid.comp, objects.comp
  *
@@ -39,6 +40,7 @@
 #include "gpu/drt_gl.h"
 #include "gpu/egl_context.h"
 #include "gpu/gl_util.h"
+#include "gpu/probes_gl.h"
 #include "util/clock.h"
 #include "util/log.h"
 #include "util/sh.h"
@@ -87,8 +89,9 @@ typedef struct tgl {
     size_t bind_limit; /* bytes one SSBO binding may span */
     size_t ssbo_align; /* binding offset alignment */
     GLuint prog[TGL_N_PROGS];
-    GLuint dnrt_prep, dnrt_apply;                            /* dnrt.comp, both stages */
-    lc_drt_gl *drt;                                          /* drt.comp: clutter operators (owned) */
+    GLuint dnrt_prep, dnrt_apply; /* dnrt.comp, both stages */
+    lc_drt_gl *drt;               /* drt.comp: clutter operators (owned) */
+    lc_probes_gl *probes;         /* probes.comp: the probes solver's gather, made on first use (owned) */
     GLuint gather[LC_SH_MAX_BANDS + 1][LC_SH_MAX_BANDS + 1]; /* [bands][Co/Cg bands], compiled on first use */
     /* Static (create): */
     GLuint b_surfels, b_nodes, b_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
@@ -125,6 +128,7 @@ static void tgl_release(void *impl) {
         if (t->dnrt_prep) glDeleteProgram(t->dnrt_prep);
         if (t->dnrt_apply) glDeleteProgram(t->dnrt_apply);
         lc_drt_gl_release(t->drt);
+        lc_probes_gl_release(t->probes);
         GLuint bufs[] = {t->b_surfels, t->b_nodes,    t->b_links,  t->b_caches,   t->b_lm_index,  t->b_grid_index,
                          t->b_cone,    t->b_shk,      t->b_list,   t->b_b0,       t->b_radiosity, t->b_e_ind,
                          t->b_flux,    t->b_cache_sh, t->b_sh9,    t->b_lightmap, t->b_grid_sh,   t->b_obj_pos,
@@ -774,7 +778,7 @@ static void tgl_dnrt_apply(tgl *t, const lc_dnrt_frame *f, const lc_engine_setti
  * caches the list skipped; then the objects' incident SH and the receivers' sums. */
 static void tgl_dnrt(tgl *t, GLuint gather, const lc_transport_input *in, int last) {
     const lc_engine_settings *st = &in->settings;
-    if (tgl_gather_uses_list(t, last) && t->n_dn_list) {
+    if (tgl_gather_uses_list(t, last) && t->n_dn_list && st->solver != LC_SOLVER_PROBES) {
         tgl_gather_setup(t, gather, st);
         tgl_gather_list(t, gather, st, t->b_dn_list, t->n_dn_list);
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
@@ -831,7 +835,16 @@ static int tgl_pass(tgl *t, GLuint gather, const lc_transport_input *in, int las
     tgl_stamp(t, ts, LC_STAGE_PULL);
     if (lc_transport_chroma(st)) tgl_to_ycocg(t);
     tgl_stamp(t, ts, LC_STAGE_CHROMA);
-    tgl_gather(t, gather, st, last);
+    if (st->solver == LC_SOLVER_PROBES) { /* every receiver each pass, as the CPU backend */
+        lc_probes_gl_pass pp = {.radiosity = t->b_radiosity,
+                                .caches = t->b_caches,
+                                .cache_sh = t->b_cache_sh,
+                                .sh9 = t->b_sh9,
+                                .nc = st->bands * st->bands};
+        if (lc_probes_gl_gather(t->probes, &pp, err, errlen) != 0) return -1;
+    } else {
+        tgl_gather(t, gather, st, last);
+    }
     tgl_stamp(t, ts, LC_STAGE_GATHER);
     if (last && (in->dnrt || in->n_drt)) { /* the objects' SH before any object changes the caches */
         tgl_grid(t, (int)st->bands);
@@ -876,6 +889,9 @@ static int tgl_run(void *impl, const lc_transport_input *in, lc_engine_frame *fr
     const lc_engine_settings *st = &in->settings;
     GLuint gather = tgl_prepare(t, st, err, errlen);
     if (!gather) return -1;
+    if (st->solver == LC_SOLVER_PROBES && !t->probes &&
+        !(t->probes = lc_probes_gl_create(v, t->bind_limit, t->ssbo_align, err, errlen)))
+        return -1;
     tgl_stamps ts = {0};
     int rc = 0;
     double rb[LC_STAGE_COUNT] = {0};

@@ -256,13 +256,12 @@ static void test_solver(const fixture *f) {
     if (j) lc_journal_close(j);
     remove_state_dir(dir);
 
-    /* the EGL backend runs PIC only: a probes state falls back, probes is refused, not offered */
+    /* both backends run both solvers: on EGL a probes state stays, both are offered */
     lc_state_set_backend(&s1, LC_BACKEND_EGL);
-    CHECK(s1.settings.solver == LC_PROTO_SOLVER_PIC && lc_state_solvers(&s1) == 1u << LC_PROTO_SOLVER_PIC,
-          "egl: back to pic, only pic offered");
-    CHECK(lc_state_apply(&s1, &probes, 1, 0, &e) != 0 && !strcmp(e.pointer, "/settings/solver") &&
-              strstr(e.message, "the probes solver runs on the CPU backend only (lucentd --backend cpu)"),
-          "egl refuses probes: %s", e.message);
+    CHECK(s1.settings.solver == LC_PROTO_SOLVER_PROBES &&
+              lc_state_solvers(&s1) == (1u << LC_PROTO_SOLVER_PIC | 1u << LC_PROTO_SOLVER_PROBES),
+          "egl: probes kept, both offered");
+    CHECK(lc_state_apply(&s1, &probes, 1, 0, &e) == 0, "egl accepts probes: %s", e.message);
     lc_state_set_backend(&s3, LC_BACKEND_CPU);
     CHECK(s3.settings.solver == LC_PROTO_SOLVER_PROBES, "cpu keeps probes");
 

@@ -338,6 +338,38 @@ done:
 
 /* Bakes scenes/cornell-box with the given quality and compares EGL with CPU (bounces 2,
  * bands 3), printing per-stage times of a few relights. */
+/* The probes solver (engine/probes.h) on EGL against the CPU: cache SH, lightmap, grid, objects
+ * for 3 and 1 output bands, progressive, with a DNRT object in the box (its intermediate passes
+ * gather no corner list: the probes compute every receiver). */
+static void test_cornell_probes(lc_engine *gpu, const fixture *f, const char *quality) {
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f->bake);
+    st.settings.solver = LC_SOLVER_PROBES;
+    st.settings.bounces = 2;
+    st.settings.progressive = 1;
+    lc_engine_object obj = {.asset = 0, .scale = {1.5f, 1.5f, 1.5f}, .rotation = {0, 0, 0, 1}, .visible = 1};
+    snprintf(obj.id, sizeof obj.id, "cube");
+    obj.translation[0] = 0.3f, obj.translation[2] = 0.3f;
+    char label[96];
+    double worst = 0;
+    for (int i = 0; i < 4; i++) {
+        st.settings.bands = i < 2 ? 3 : 1;
+        st.objects = i % 2 ? &obj : NULL;
+        st.n_objects = i % 2 ? 1 : 0;
+        st.revision = (uint64_t)(100 + i);
+        snprintf(label, sizeof label, "cornell %s probes, bands %u%s", quality, st.settings.bands,
+                 st.n_objects ? ", a DNRT cube" : "");
+        const lc_engine_frame *fg;
+        worst = fmax(worst, relight_both_frame(gpu, f->engine, f->v, &st, label, i == 0, &fg));
+        if (fg && i == 0) {
+            double sum = 0;
+            for (size_t k = 0; k < (size_t)fg->lightmap_width * fg->lightmap_height * 3; k++) sum += fg->lightmap[k];
+            CHECK(sum > 0, "%s: the probes' lightmap is black", label);
+        }
+    }
+    fprintf(stderr, "cornell %s probes: worst EGL/CPU difference %.3g\n", quality, worst);
+}
+
 static void test_cornell(const char *quality, int runs) {
     char path[512];
     char *obj = slurp(check_source_path("scenes/cornell-box/cornell-box.obj", path, sizeof path));
@@ -353,7 +385,9 @@ static void test_cornell(const char *quality, int runs) {
     /* The cube asset with its DNRT transfer grid (the bake's default --transfer). */
     char cube_arg[600];
     snprintf(cube_arg, sizeof cube_arg, "cube=%s", check_source_path("scenes/cornell-box/cube.obj", path, sizeof path));
-    const char *flags[] = {"--quality", quality, "--asset", cube_arg, NULL};
+    /* With the probes solver's data too (both solvers on one bake: PIC's data is the same). */
+    const char *flags[] = {"--quality",     quality, "--asset",           cube_arg, "--solver", "both", "--probes", "8",
+                           "--probe-bands", "4",     "--probe-svd-error", "0.05",   NULL};
     fixture f;
     int rc = fixture_bake(&f, obj, mtl, flags);
     free(obj);
@@ -391,6 +425,7 @@ static void test_cornell(const char *quality, int runs) {
         fprintf(stderr, "cornell %s: worst EGL/CPU difference %.3g\n", quality, worst);
         test_cornell_dnrt(gpu, &f, quality);
         test_cornell_drt(gpu, &f, quality);
+        test_cornell_probes(gpu, &f, quality);
         lc_engine_release(gpu);
     }
     fixture_release(&f);
