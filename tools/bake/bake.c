@@ -684,6 +684,7 @@ static int bake_probes(bake_job *b, char *err, size_t errlen) {
                               .cluster_rows = (uint32_t)s->probe_cluster,
                               .max_rank = (uint32_t)s->probe_rank,
                               .svd_error = s->probe_svd_error,
+                              .band_weight = s->probe_band_weight,
                               .visibility = s->probe_visibility,
                               .seed = (uint64_t)s->seed,
                               .threads = s->threads};

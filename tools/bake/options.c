@@ -133,6 +133,8 @@ static const lc_opt bake_options[] = {
      NULL, NULL},
     {"probe-svd-error", LC_OPT_FLOAT, OFF(probe_svd_error), 0, 0.999, "0.01", NULL,
      "probes solver: relative Frobenius truncation error per cluster (larger clusters split until met)", NULL, NULL},
+    {"probe-band-weight", LC_OPT_FLOAT, OFF(probe_band_weight), 0, 8, "0", NULL,
+     "probes solver: the SVD error weighs SH band l by (l + 1)^-W (0: every coefficient alike)", NULL, NULL},
     {"probe-visibility", LC_OPT_BOOL, OFF(probe_visibility), 0, 1, "true", NULL,
      "probes solver: a probe lights only the points it sees (off: the naive weights that leak through walls)", NULL,
      NULL},

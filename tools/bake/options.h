@@ -72,6 +72,7 @@ typedef struct lc_bake_settings {
     int probe_cluster; /* rows per cluster at most */
     int probe_rank;    /* SVD rank at most */
     double probe_svd_error;
+    double probe_band_weight;
     int probe_visibility; /* the thesis's visibility match (off: the naive, leaking weights) */
 } lc_bake_settings;
 

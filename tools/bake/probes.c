@@ -98,6 +98,7 @@ typedef struct {
     lc_surfel_hash hash;
     pb_sh sh;
     uint32_t coeffs;
+    double band_w2[LC_SH_MAX_COEFFS]; /* per coefficient: the SVD's column weight squared */
     lc_vec3 bmin, bmax;
     /* placement */
     float *cand; /* candidates' positions, 3 each */
@@ -517,13 +518,16 @@ static double pb_row_dot(const pb_job *j, const pb_row *a, const pb_row *b) {
         for (uint32_t y = 0; y < rb->n_sup; y++) {
             if (sa[x] != sb[y]) continue;
             const float *p = va + (size_t)x * j->coeffs, *q = vb + (size_t)y * j->coeffs;
-            for (uint32_t c = 0; c < j->coeffs; c++) s += (double)p[c] * q[c];
+            for (uint32_t c = 0; c < j->coeffs; c++) s += j->band_w2[c] * p[c] * q[c];
         }
     return s;
 }
 
 /* Truncated SVD of one cluster through the eigenvectors of its Gram matrix: U = the top
- * eigenvectors, S V^T = U^T A, and the error from the dropped eigenvalues (= s_i^2). */
+ * eigenvectors, S V^T = U^T A, and the error from the dropped eigenvalues (= s_i^2). The Gram
+ * matrix weighs band l's columns by (l + 1)^-band_weight, so rank goes where the light is
+ * (and not to the rows' Monte Carlo noise in the high bands); the basis stored is U^T A
+ * unweighted, the exact projection. */
 static int pb_compress_one(pb_job *j, const uint32_t *order, pb_cluster *cl) {
     const uint32_t n = cl->hi - cl->lo, nc = j->coeffs, ov = j->prm->overlaps;
     const uint32_t want = n < j->prm->max_rank ? n : j->prm->max_rank;
@@ -871,6 +875,8 @@ int lc_probebake_run(const lc_rt *rt, const float bmin[3], const float bmax[3], 
                 .bmin = lc_v3_load(bmin),
                 .bmax = lc_v3_load(bmax)};
     pb_sh_init(&j.sh, (int)prm->sh_bands);
+    for (uint32_t l = 0; l < prm->sh_bands; l++) /* (l + 1)^-p: the error counted where radiance has its energy */
+        for (uint32_t m = 0; m <= 2 * l; m++) j.band_w2[l * l + m] = pow(l + 1.0, -2.0 * prm->band_weight);
     double t0 = lc_clock_ms() * 1e-3;
     if (n_surfels && lc_surfel_hash_build(&j.hash, surfels, n_surfels) != 0) goto oom;
     if (pb_place(&j, err, errlen) != 0) goto fail;

@@ -44,7 +44,8 @@ typedef struct lc_probebake_params {
     uint32_t receiver_rays; /* per receiver */
     uint32_t cluster_rows;  /* rows per cluster at most (thesis: 1024) */
     uint32_t max_rank;      /* SVD rank at most (thesis: 32) */
-    double svd_error;       /* relative Frobenius truncation error per cluster */
+    double svd_error;       /* relative Frobenius truncation error per cluster (band-weighted) */
+    double band_weight;     /* the SVD weighs SH band l by (l + 1)^-band_weight; 0: plain Frobenius */
     int visibility;         /* 1: V_i as the thesis; 0: V_i = 1 (naive weights, for the leak test) */
     uint64_t seed;
     int threads;
