@@ -17,10 +17,11 @@
 #include "util/sh.h"
 #include "util/vec.h"
 
-#define PB_MIN_SUPPORT 4u  /* a receiver uses at least this many probes, however far */
-#define PB_TEST_DIRS 26    /* placement test rays: the cube's faces, edges and corners */
-#define PB_MAX_PROBES 4096 /* the target count at most */
-#define PB_GRID_ROWS 9     /* a grid cache's rows: its L2 irradiance SH */
+#define PB_MIN_SUPPORT 4u    /* a receiver uses at least this many probes, however far */
+#define PB_TEST_DIRS 26      /* placement test rays: the cube's faces, edges and corners */
+#define PB_MAX_PROBES 4096   /* the target count at most */
+#define PB_GRID_ROWS 9       /* a grid cache's rows: its L2 irradiance SH */
+#define PB_MAX_CANDIDATES 64 /* probes a receiver's support is chosen from (2 x overlaps, at most) */
 
 /* --- SH with a precomputed normalisation --------------------------------------------------- */
 
@@ -117,6 +118,7 @@ typedef struct {
     uint32_t n_rows;
     uint64_t *ray_count; /* per receiver */
     uint64_t *orphans;   /* per receiver */
+    void *hit_scratch;   /* per thread: receiver_rays hits (pb_hit) */
     lc_progress *progress;
 } pb_job;
 
@@ -332,77 +334,35 @@ static float pb_support_radius(const pb_job *j) {
     return used ? (float)(sum / used) : 1.0f;
 }
 
-/* A receiver's probes (within the radius, at most overlaps, at least PB_MIN_SUPPORT) and their
- * kernel weights. */
-static uint32_t pb_support(const pb_job *j, const float p[3], uint32_t *idx, float *w) {
-    float d2[LC_LCB_PROBE_MAX_RANK];
-    uint32_t got = pb_nearest(j, p, j->prm->overlaps, idx, d2);
-    uint32_t keep = 0;
-    while (keep < got && d2[keep] < j->radius * j->radius) keep++;
-    uint32_t at_least = PB_MIN_SUPPORT < got ? PB_MIN_SUPPORT : got;
-    if (keep < at_least) keep = at_least;
-    float r = fmaxf(j->radius, 1.25f * sqrtf(d2[keep - 1]));
-    for (uint32_t i = 0; i < keep; i++) w[i] = pb_kernel(sqrtf(d2[i]) / r);
-    return keep;
-}
-
 /* --- 4. transport ------------------------------------------------------------------------- */
 
-/* One receiver ray's hit y, shared by the probes that see it: adds weight * share_i * y_j(psi_i)
- * to row_vals (n_sup x coeffs) times each of the n_out factors (grid: the 9 SH outputs). */
-static void pb_splat(const pb_job *j, const pb_recv *r, const uint32_t *sup, const float *w, const float y[3],
-                     const float ng[3], const float *out_w, uint32_t n_out, float *row_vals, uint64_t *rays,
-                     uint64_t *orphans) {
-    const uint32_t nc = j->coeffs;
-    float vis[LC_LCB_PROBE_MAX_RANK], psi[LC_LCB_PROBE_MAX_RANK][3], wsum = 0;
-    float pm = fmaxf(fabsf(y[0]), fmaxf(fabsf(y[1]), fabsf(y[2])));
-    float lift = lc_ray_lift_point(pm);
-    float org[3] = {y[0] + ng[0] * lift, y[1] + ng[1] * lift, y[2] + ng[2] * lift};
-    for (uint32_t i = 0; i < r->n_sup; i++) {
-        const float *pp = j->probes[sup[i]].position;
-        float to[3] = {pp[0] - y[0], pp[1] - y[1], pp[2] - y[2]};
-        float dist = sqrtf(to[0] * to[0] + to[1] * to[1] + to[2] * to[2]);
-        vis[i] = 0;
-        if (w[i] <= 0 || dist <= lift) continue;
-        if (j->prm->visibility && to[0] * ng[0] + to[1] * ng[1] + to[2] * ng[2] <= 0) continue; /* behind y */
-        for (int k = 0; k < 3; k++) psi[i][k] = -to[k] / dist;                                  /* probe -> y */
-        float d[3] = {-psi[i][0], -psi[i][1], -psi[i][2]};
-        if (j->prm->visibility) {
-            (*rays)++;
-            if (lc_rt_occluded(j->rt, org, d, 0.0f, dist - lift)) continue;
-        }
-        vis[i] = w[i];
-        wsum += w[i];
-    }
-    if (wsum <= 0) {
-        (*orphans)++;
-        return;
-    }
-    float ysh[LC_SH_MAX_COEFFS];
-    for (uint32_t i = 0; i < r->n_sup; i++) {
-        if (vis[i] <= 0) continue;
-        pb_sh_eval(&j->sh, psi[i], ysh);
-        float share = vis[i] / wsum;
-        for (uint32_t o = 0; o < n_out; o++) {
-            float f = share * out_w[o];
-            if (f == 0) continue;
-            float *dst = row_vals + o * j->row_stride + (size_t)i * nc;
-            for (uint32_t c = 0; c < nc; c++) dst[c] += f * ysh[c];
-        }
-    }
+/* A receiver ray's hit: where, its surface's normal (facing the receiver), the weights of the
+ * rows it feeds, and which candidate probes see it. */
+typedef struct {
+    float y[3], ng[3];
+    float out_w[PB_GRID_ROWS];
+    uint64_t seen; /* bit i: candidate i sees y */
+} pb_hit;
+
+/* Whether the probe at pp sees hit y (in front of its surface, nothing between). */
+static int pb_sees(const pb_job *j, const float pp[3], const pb_hit *h, uint64_t *rays) {
+    float to[3] = {pp[0] - h->y[0], pp[1] - h->y[1], pp[2] - h->y[2]};
+    float dist = sqrtf(to[0] * to[0] + to[1] * to[1] + to[2] * to[2]);
+    float pm = fmaxf(fabsf(h->y[0]), fmaxf(fabsf(h->y[1]), fabsf(h->y[2]))), lift = lc_ray_lift_point(pm);
+    if (!j->prm->visibility) return dist > lift;
+    if (dist <= lift || to[0] * h->ng[0] + to[1] * h->ng[1] + to[2] * h->ng[2] <= 0) return 0; /* behind y */
+    float org[3] = {h->y[0] + h->ng[0] * lift, h->y[1] + h->ng[1] * lift, h->y[2] + h->ng[2] * lift};
+    float d[3] = {to[0] / dist, to[1] / dist, to[2] / dist};
+    (*rays)++;
+    return !lc_rt_occluded(j->rt, org, d, 0.0f, dist - lift);
 }
 
-static void pb_transport_one(pb_job *j, uint32_t ri) {
-    pb_recv *r = &j->recv[ri];
-    const lc_lcb_cache *c = &j->caches[r->cache];
+/* The receiver's rays (cosine-weighted hemisphere for a texel cache, the sphere for a grid
+ * cache) and the front faces they hit, with each hit's row weights. Returns the hits. */
+static uint32_t pb_trace(const pb_job *j, const lc_lcb_cache *c, pb_hit *hits, uint64_t *rays) {
     const uint32_t m = j->prm->receiver_rays;
-    uint32_t *sup = j->sup + (size_t)ri * j->prm->overlaps;
-    float *w = j->sup_w + (size_t)ri * j->prm->overlaps;
-    r->n_sup = pb_support(j, c->position, sup, w);
-    float *vals = j->vals + (size_t)r->first_row * j->row_stride;
     const int texel = (c->flags & LC_CACHE_TEXEL) != 0;
-    lc_vec3 n = lc_v3_load(c->normal), t = lc_v3(1, 0, 0), b = lc_v3(0, 1, 0);
-    lc_vec3 org = lc_v3_load(c->position);
+    lc_vec3 n = lc_v3_load(c->normal), t = lc_v3(1, 0, 0), b = lc_v3(0, 1, 0), org = lc_v3_load(c->position);
     if (texel) {
         n = lc_v3_norm(n);
         lc_v3_basis(n, &t, &b);
@@ -411,36 +371,116 @@ static void pb_transport_one(pb_job *j, uint32_t ri) {
     }
     float o3[3];
     lc_v3_store(o3, org);
-    lc_rng rng = lc_rng_seed(j->prm->seed ^ 0x5052424Full, r->cache);
+    lc_rng rng = lc_rng_seed(j->prm->seed ^ 0x5052424Full, (uint64_t)(c - j->caches));
     float rot = lc_rng_float(&rng);
+    uint32_t n_hits = 0;
     for (uint32_t k = 0; k < m; k++) {
         float u = ((float)k + 0.5f) / (float)m, phi = 2.0f * (float)M_PI * ((float)k * 0.6180339887f + rot);
-        float z = texel ? sqrtf(1.0f - u) : 1.0f - 2.0f * u; /* cosine-weighted hemisphere | sphere */
+        float z = texel ? sqrtf(1.0f - u) : 1.0f - 2.0f * u;
         float s = sqrtf(fmaxf(0.0f, 1.0f - z * z)), x = s * cosf(phi), y = s * sinf(phi);
         float d[3];
         lc_v3_store(
             d, texel ? lc_v3_add(lc_v3_add(lc_v3_scale(t, x), lc_v3_scale(b, y)), lc_v3_scale(n, z)) : lc_v3(x, y, z));
         lc_hit hit;
-        j->ray_count[ri]++;
+        (*rays)++;
         if (!lc_rt_intersect(j->rt, o3, d, 0.0f, INFINITY, &hit) || hit.backface) continue;
-        float hp[3] = {o3[0] + d[0] * hit.t, o3[1] + d[1] * hit.t, o3[2] + d[2] * hit.t};
-        float out_w[PB_GRID_ROWS];
+        pb_hit *h = &hits[n_hits++];
+        for (int a = 0; a < 3; a++) h->y[a] = o3[a] + d[a] * hit.t, h->ng[a] = hit.ng[a];
+        h->seen = 0;
         if (texel) {
-            out_w[0] = (float)M_PI / (float)m; /* cosine-weighted: E = pi/m sum L */
-        } else {                               /* E_lm = A_l L_lm, L_lm = 4 pi/m sum L y_lm(d) */
+            h->out_w[0] = (float)M_PI / (float)m; /* cosine-weighted: E = pi/m sum L */
+        } else {                                  /* E_lm = A_l L_lm, L_lm = 4 pi/m sum L y_lm(d) */
             float yd[9];
             lc_sh_eval_fast(3, d[0], d[1], d[2], yd);
             for (int o = 0; o < PB_GRID_ROWS; o++)
-                out_w[o] = (float)(4.0 * M_PI / m * lc_sh_cosine_factor(o == 0 ? 0 : o < 4 ? 1 : 2)) * yd[o];
+                h->out_w[o] = (float)(4.0 * M_PI / m * lc_sh_cosine_factor(o == 0 ? 0 : o < 4 ? 1 : 2)) * yd[o];
         }
-        pb_splat(j, r, sup, w, hp, hit.ng, out_w, r->n_rows, vals, &j->ray_count[ri], &j->orphans[ri]);
+    }
+    return n_hits;
+}
+
+/* The support among the candidates (nearest first, d2 their squared distances): those within
+ * the radius that see any hit (the thesis's support, less the useless), then, while there is
+ * room, the candidate that sees the most hits no chosen probe sees (a probe further away may
+ * be the only one to see under a table), at least PB_MIN_SUPPORT. Writes the chosen candidates'
+ * indices (into the candidate list) to pick; returns how many. */
+static uint32_t pb_choose(const pb_job *j, const pb_hit *hits, uint32_t n_hits, const float *d2, uint32_t n_cand,
+                          uint32_t *pick) {
+    uint32_t n = 0, want = j->prm->overlaps < n_cand ? j->prm->overlaps : n_cand;
+    uint64_t chosen = 0, covered_any = 0;
+    for (uint32_t h = 0; h < n_hits; h++) covered_any |= hits[h].seen;
+    for (uint32_t i = 0; i < n_cand && n < want; i++)
+        if (d2[i] < j->radius * j->radius && (covered_any >> i & 1)) pick[n++] = i, chosen |= 1ull << i;
+    while (n < want) {
+        uint32_t best = LC_NONE, best_new = 0;
+        for (uint32_t i = 0; i < n_cand; i++) {
+            if (chosen >> i & 1) continue;
+            uint32_t fresh = 0;
+            for (uint32_t h = 0; h < n_hits; h++) fresh += (hits[h].seen >> i & 1) && !(hits[h].seen & chosen);
+            if (fresh > best_new) best = i, best_new = fresh;
+        }
+        if (best == LC_NONE) break;
+        pick[n++] = best, chosen |= 1ull << best;
+    }
+    uint32_t at_least = PB_MIN_SUPPORT < n_cand ? PB_MIN_SUPPORT : n_cand;
+    for (uint32_t i = 0; i < n_cand && n < at_least; i++)
+        if (!(chosen >> i & 1)) pick[n++] = i, chosen |= 1ull << i;
+    return n;
+}
+
+/* One receiver: its hits, the candidates' visibility, its support and weights, then each
+ * hit shared by the chosen probes that see it (the thesis's K_ij, with the cosine). */
+static void pb_transport_one(pb_job *j, uint32_t ri, pb_hit *hits) {
+    pb_recv *r = &j->recv[ri];
+    const lc_lcb_cache *c = &j->caches[r->cache];
+    uint32_t cand[PB_MAX_CANDIDATES], pick[PB_MAX_CANDIDATES];
+    float d2[PB_MAX_CANDIDATES];
+    uint32_t want = 2 * j->prm->overlaps < PB_MAX_CANDIDATES ? 2 * j->prm->overlaps : PB_MAX_CANDIDATES;
+    uint32_t n_cand = pb_nearest(j, c->position, want, cand, d2);
+    uint32_t n_hits = pb_trace(j, c, hits, &j->ray_count[ri]);
+    for (uint32_t h = 0; h < n_hits; h++)
+        for (uint32_t i = 0; i < n_cand; i++)
+            if (pb_sees(j, j->probes[cand[i]].position, &hits[h], &j->ray_count[ri])) hits[h].seen |= 1ull << i;
+    uint32_t n_sup = pb_choose(j, hits, n_hits, d2, n_cand, pick);
+    uint32_t *sup = j->sup + (size_t)ri * j->prm->overlaps;
+    float w[PB_MAX_CANDIDATES], rx = j->radius;
+    for (uint32_t i = 0; i < n_sup; i++) rx = fmaxf(rx, 1.25f * sqrtf(d2[pick[i]]));
+    for (uint32_t i = 0; i < n_sup; i++) {
+        sup[i] = cand[pick[i]];
+        w[i] = pb_kernel(sqrtf(d2[pick[i]]) / rx);
+    }
+    r->n_sup = n_sup;
+    float *vals = j->vals + (size_t)r->first_row * j->row_stride, ysh[LC_SH_MAX_COEFFS];
+    const uint32_t nc = j->coeffs;
+    for (uint32_t h = 0; h < n_hits; h++) {
+        float wsum = 0;
+        for (uint32_t i = 0; i < n_sup; i++) wsum += (hits[h].seen >> pick[i] & 1) ? w[i] : 0;
+        if (wsum <= 0) {
+            j->orphans[ri]++;
+            continue;
+        }
+        for (uint32_t i = 0; i < n_sup; i++) {
+            if (!(hits[h].seen >> pick[i] & 1) || w[i] <= 0) continue;
+            const float *pp = j->probes[sup[i]].position;
+            float psi[3] = {hits[h].y[0] - pp[0], hits[h].y[1] - pp[1], hits[h].y[2] - pp[2]}; /* probe -> y */
+            float len = sqrtf(psi[0] * psi[0] + psi[1] * psi[1] + psi[2] * psi[2]);
+            for (int k = 0; k < 3; k++) psi[k] /= len;
+            pb_sh_eval(&j->sh, psi, ysh);
+            float share = w[i] / wsum;
+            for (uint32_t o = 0; o < r->n_rows; o++) {
+                float f = share * hits[h].out_w[o];
+                if (f == 0) continue;
+                float *dst = vals + o * j->row_stride + (size_t)i * nc;
+                for (uint32_t k = 0; k < nc; k++) dst[k] += f * ysh[k];
+            }
+        }
     }
 }
 
 static void pb_transport_range(void *ctx, size_t begin, size_t end, int thread) {
-    (void)thread;
     pb_job *j = ctx;
-    for (size_t i = begin; i < end; i++) pb_transport_one(j, (uint32_t)i);
+    pb_hit *hits = (pb_hit *)j->hit_scratch + (size_t)thread * j->prm->receiver_rays;
+    for (size_t i = begin; i < end; i++) pb_transport_one(j, (uint32_t)i, hits);
     lc_progress_add(j->progress, end - begin);
 }
 
@@ -816,12 +856,15 @@ static void pb_job_release(pb_job *j) {
     free(j->rows);
     free(j->ray_count);
     free(j->orphans);
+    free(j->hit_scratch);
 }
 
 /* Stages 4-5 and their statistics, after placement and the relight rays. */
 static int pb_transport_and_compress(pb_job *j, lc_probebake *out, double *t0, char *err, size_t errlen) {
     int n_recv = pb_receivers(j);
     if (n_recv < 0) goto oom;
+    j->hit_scratch = malloc((size_t)lc_parallel_threads(j->prm->threads) * j->prm->receiver_rays * sizeof(pb_hit));
+    if (!j->hit_scratch) goto oom;
     j->progress = lc_progress_begin("probes: transport", (uint64_t)n_recv);
     lc_parallel_for(j->prm->threads, (size_t)n_recv, 4, pb_transport_range, j);
     lc_progress_end(j->progress);

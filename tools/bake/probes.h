@@ -8,8 +8,10 @@
  *      probes spread evenly (thesis 3.2.2.1);
  *   2. relight rays: per probe the surfel each of n_rays spherical-Fibonacci rays hits;
  *   3. support: one radius r, the mean distance from a receiver to its overlaps-th nearest
- *      probe (thesis 3.2.2.2); a receiver uses the probes within r (at most overlaps, at
- *      least the 4 nearest), weighted w(d / r_x);
+ *      probe (thesis 3.2.2.2); a receiver uses the probes within r that see any of its hit
+ *      points, then (up to overlaps, from its 2 x overlaps nearest) those that see most of
+ *      the hits no chosen probe sees (under a table the probes above it see nothing), at
+ *      least 4, weighted w(d / r_x);
  *   4. transport (thesis eqs 4-7, with the cosine the thesis's estimator drops): per
  *      receiver, rays (cosine-weighted hemisphere for texel caches, the sphere for grid
  *      caches); at each hit y the probes that see y share it by weight,
