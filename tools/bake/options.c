@@ -117,7 +117,9 @@ static const lc_opt bake_options[] = {
      "light transport the bake holds: PIC links, sparse radiance probes, or both (lucentd's settings.solver picks)",
      NULL, NULL},
     {"probes", LC_OPT_INT, OFF(probes), 0, 4096, "0", NULL,
-     "probes solver: radiance probes (0 = --probe-density x the scene's bounding volume, at least 8)", NULL, NULL},
+     "probes solver: radiance probes (0 = --probe-density x the scene's bounding volume, at least one per 400 "
+     "lightmap texels and 8)",
+     NULL, NULL},
     {"probe-density", LC_OPT_FLOAT, OFF(probe_density), 1e-6, 1e6, "0.02", NULL,
      "probes solver: probes per cubic metre when --probes is 0", NULL, NULL},
     {"probe-relight-rays", LC_OPT_INT, OFF(probe_relight_rays), 1, 65536, "512", NULL,

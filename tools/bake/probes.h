@@ -38,7 +38,8 @@
 #include "lcb/lcb.h"
 
 typedef struct lc_probebake_params {
-    uint32_t count;         /* target probes; 0: density x the scene's bounding volume */
+    uint32_t count;         /* target probes; 0: density x the scene's bounding volume, at least
+                               one per 400 texel caches and 8 */
     double density;         /* probes per m^3 when count is 0 (thesis 3.1.1: about 0.02) */
     uint32_t relight_rays;  /* per probe (thesis: 512) */
     uint32_t sh_bands;      /* probe SH bands (thesis: order 7 = 8 bands) */
