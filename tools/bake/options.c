@@ -133,7 +133,7 @@ static const lc_opt bake_options[] = {
      "probes solver: receivers per compressed cluster, at most", NULL, NULL},
     {"probe-rank", LC_OPT_INT, OFF(probe_rank), 1, 256, "32", NULL, "probes solver: SVD rank per cluster, at most",
      NULL, NULL},
-    {"probe-svd-error", LC_OPT_FLOAT, OFF(probe_svd_error), 0, 0.999, "0.01", NULL,
+    {"probe-svd-error", LC_OPT_FLOAT, OFF(probe_svd_error), 0, 0.999, "0.05", NULL,
      "probes solver: relative Frobenius truncation error per cluster (larger clusters split until met)", NULL, NULL},
     {"probe-band-weight", LC_OPT_FLOAT, OFF(probe_band_weight), 0, 8, "0", NULL,
      "probes solver: the SVD error weighs SH band l by (l + 1)^-W (0: every coefficient alike)", NULL, NULL},
