@@ -29,11 +29,12 @@ cleanup() {
 trap cleanup EXIT INT TERM
 
 # Serve the Cornell box baked here (draft) with one dynamic-object asset, so
-# object.set/object.remove are testable. A failed bake fails the run: a fallback to another
+# object.set/object.remove are testable, and with both solvers (PIC the default), so
+# settings.solver probes is too. A failed bake fails the run: a fallback to another
 # bake would hide the failure, and a bake without the asset would only skip the object cases.
 BAKE="$TMP/scene.lcb"
 if ! "$LUCENT_BAKE" bake "$SCENE/cornell-box.obj" -o "$BAKE" --quality draft --asset cube="$SCENE/cube.obj" \
-     --quiet --no-write-glb > "$TMP/bake.log" 2>&1 || [ ! -s "$BAKE" ]; then
+     --solver both --probes 8 --probe-bands 4 --quiet --no-write-glb > "$TMP/bake.log" 2>&1 || [ ! -s "$BAKE" ]; then
   echo "FAIL: the conformance bake failed (lucent-bake bake $SCENE/cornell-box.obj --asset cube=$SCENE/cube.obj);"
   echo "      without its asset the object cases (object.set / object.remove) cannot run. lucent-bake said:"
   sed 's/^/      /' "$TMP/bake.log"
