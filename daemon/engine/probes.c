@@ -36,13 +36,7 @@ lc_probes *lc_probes_create(const lc_lcb_view *v, char *err, size_t errlen) {
     p->lambda = malloc((size_t)h->n_probes * p->coeffs * 3 * sizeof *p->lambda);
     p->b_off = malloc(((size_t)h->n_clusters + 1) * sizeof *p->b_off);
     if (!p->ray_sh || !p->lambda || !p->b_off) goto oom;
-    float y[LC_SH_MAX_COEFFS];
-    for (uint32_t k = 0; k < h->n_rays; k++) {
-        float d[3];
-        lc_probe_ray_dir(k, h->n_rays, d);
-        lc_sh_eval((int)h->sh_bands, d, y);
-        for (uint32_t j = 0; j < p->coeffs; j++) p->ray_sh[(size_t)k * p->coeffs + j] = y[j] * 4.0f / (float)h->n_rays;
-    }
+    lc_probes_ray_sh(h, p->ray_sh);
     uint64_t at = 0;
     for (uint32_t c = 0; c < h->n_clusters; c++) {
         p->b_off[c] = at;
@@ -55,6 +49,17 @@ oom:
     lc_probes_release(p);
     lc_set_err(err, errlen, "probes solver: out of memory");
     return NULL;
+}
+
+void lc_probes_ray_sh(const lc_lcb_probe_header *h, float *out) {
+    const uint32_t nc = h->sh_bands * h->sh_bands;
+    float y[LC_SH_MAX_COEFFS];
+    for (uint32_t k = 0; k < h->n_rays; k++) {
+        float d[3];
+        lc_probe_ray_dir(k, h->n_rays, d);
+        lc_sh_eval((int)h->sh_bands, d, y);
+        for (uint32_t j = 0; j < nc; j++) out[(size_t)k * nc + j] = y[j] * 4.0f / (float)h->n_rays;
+    }
 }
 
 void lc_probes_release(lc_probes *p) {

@@ -32,6 +32,10 @@ void lc_probes_release(lc_probes *p);
 void lc_probes_gather(lc_probes *p, const float *radiosity, uint32_t bands, float *cache_sh, uint32_t stride,
                       int threads);
 
+/* The relight rays' SH table both backends use: out[k * bands^2 + j] = y_j(dir_k) x
+ * (4 pi / n_rays) / pi, so lambda = sum_k out[k] B[hit k] (n_rays x bands^2 floats). */
+void lc_probes_ray_sh(const lc_lcb_probe_header *h, float *out);
+
 /* The probes' radiance SH of the last gather: n_probes x 3 x coeffs (each channel's
  * coefficients contiguous). */
 const float *lc_probes_sh(const lc_probes *p);

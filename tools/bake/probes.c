@@ -95,7 +95,7 @@ typedef struct {
     const lc_lcb_surfel *surfels;
     uint32_t n_surfels;
     const lc_lcb_cache *caches;
-    uint32_t n_caches;
+    uint32_t n_caches, n_texel; /* n_texel: the texel caches among them */
     const lc_probebake_params *prm;
     lc_surfel_hash hash;
     pb_sh sh;
@@ -217,9 +217,7 @@ static int pb_place(pb_job *j, char *err, size_t errlen) {
     double ex = fmax(ext.x, 1e-3), ey = fmax(ext.y, 1e-3), ez = fmax(ext.z, 1e-3), volume = ex * ey * ez;
     /* Auto: the density, but at least one probe per PB_RECEIVERS_PER_PROBE texel caches (a
      * furnished room's volume gives too few: the conference room 8, 43.6% error; 64, 22.5%). */
-    uint32_t n_texel = 0;
-    for (uint32_t c = 0; c < j->n_caches; c++) n_texel += (j->caches[c].flags & LC_CACHE_TEXEL) != 0;
-    double by_receivers = ceil((double)n_texel / PB_RECEIVERS_PER_PROBE);
+    double by_receivers = ceil((double)j->n_texel / PB_RECEIVERS_PER_PROBE);
     double want =
         prm->count ? prm->count : fmin(PB_MAX_PROBES, fmax(8.0, fmax(round(volume * prm->density), by_receivers)));
     uint32_t target = (uint32_t)want;
@@ -327,9 +325,7 @@ static float pb_support_radius(const pb_job *j) {
     uint32_t want = j->prm->overlaps < j->n_probes ? j->prm->overlaps : j->n_probes;
     uint32_t idx[LC_LCB_PROBE_MAX_RANK];
     float d2[LC_LCB_PROBE_MAX_RANK];
-    uint32_t n_texel = 0;
-    for (uint32_t c = 0; c < j->n_caches; c++) n_texel += (j->caches[c].flags & LC_CACHE_TEXEL) != 0;
-    uint32_t step = n_texel > 4096 ? n_texel / 4096 : 1, seen = 0;
+    uint32_t step = j->n_texel > 4096 ? j->n_texel / 4096 : 1, seen = 0;
     double sum = 0;
     uint32_t used = 0;
     for (uint32_t c = 0; c < j->n_caches; c++) {
@@ -925,6 +921,7 @@ int lc_probebake_run(const lc_rt *rt, const float bmin[3], const float bmax[3], 
                 .bmin = lc_v3_load(bmin),
                 .bmax = lc_v3_load(bmax)};
     pb_sh_init(&j.sh, (int)prm->sh_bands);
+    for (uint32_t c = 0; c < n_caches; c++) j.n_texel += (caches[c].flags & LC_CACHE_TEXEL) != 0;
     for (uint32_t l = 0; l < prm->sh_bands; l++) /* (l + 1)^-p: the error counted where radiance has its energy */
         for (uint32_t m = 0; m <= 2 * l; m++) j.band_w2[l * l + m] = pow(l + 1.0, -2.0 * prm->band_weight);
     double t0 = lc_clock_ms() * 1e-3;

@@ -5,9 +5,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "engine/probes.h"
 #include "gpu/gl_util.h"
 #include "util/log.h"
-#include "util/sh.h"
 
 #define PGL_LOCAL 64
 
@@ -127,13 +127,7 @@ lc_probes_gl *lc_probes_gl_create(const lc_lcb_view *v, size_t bind_limit, size_
     }
     ray_sh = malloc((size_t)h->n_rays * g->nc * sizeof *ray_sh);
     if (!ray_sh) goto oom;
-    float y[LC_SH_MAX_COEFFS];
-    for (uint32_t k = 0; k < h->n_rays; k++) { /* as lc_probes_create */
-        float d[3];
-        lc_probe_ray_dir(k, h->n_rays, d);
-        lc_sh_eval((int)h->sh_bands, d, y);
-        for (uint32_t j = 0; j < g->nc; j++) ray_sh[(size_t)k * g->nc + j] = y[j] * 4.0f / (float)h->n_rays;
-    }
+    lc_probes_ray_sh(h, ray_sh); /* the CPU backend's table */
     const size_t hits = (size_t)h->n_probes * h->n_rays * 4, lambda = (size_t)h->n_probes * 3 * g->nc * 4;
     if (hits > bind_limit || lambda > bind_limit || v->n_probe_cluster_probes * 4 > bind_limit) {
         lc_set_err(err, errlen, "probes (egl): %u probes x %u rays are over one binding (%zu bytes)", h->n_probes,
