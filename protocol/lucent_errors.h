@@ -30,6 +30,10 @@
     X(FRAME_TOO_LARGE, "frame_too_large", "an MR upload frame over the session's `max_frame` (§8.5)", "stays")        \
     X(MR_NOT_ENABLED, "mr_not_enabled",                                                                               \
       "`mr.begin` without the `mr` capability, or an upload frame outside an MR session (§8)", "stays")               \
+    X(READ_ONLY, "read_only",                                                                                         \
+      "a cluster replica (§9) that cannot reach its change log, or has not caught up with it yet, refuses changes; " \
+      "reads and frames keep working: retry later or on another replica",                                             \
+      "stays")                                                                                                        \
     X(INTERNAL, "internal",                                                                                           \
       "server fault (logged); also sent without `id` to every client when the relight of an acknowledged "            \
       "revision failed (the message names the revision; `/healthz` answers 503 until a relight succeeds)",            \

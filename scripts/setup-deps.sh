@@ -9,7 +9,7 @@ packages=(
   libembree-dev libassimp-dev libopenimageio-dev openimageio-tools
   libcjson-dev libwebsockets-dev libssl-dev libpng-dev zlib1g-dev
   libepoxy-dev libegl-dev libegl1-mesa-dev libgl1-mesa-dri libgl-dev
-  liblapacke-dev libblas-dev
+  liblapacke-dev libblas-dev libhiredis-dev
 )
 # The browser viewer's bundle (npm: three.js, esbuild): Debian's node and npm, unless a node
 # is already installed (another distribution of it brings its own npm).
@@ -20,6 +20,8 @@ if [ "${1:-}" != "--build" ]; then
     python3-websockets python3-pytest python3-jsonschema jq
     # scripts/fuzz.sh: clang + its libFuzzer/sanitizer runtimes, llvm-symbolizer for the reports
     clang libclang-rt-14-dev llvm
+    # lucentd --cluster's tests start their own Redis
+    redis-server
     # promtool (checks lucentd's /metrics text)
     prometheus
     # the style check (.clang-format), the shutdown test under valgrind, TLS test certificates

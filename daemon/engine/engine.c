@@ -55,7 +55,8 @@ struct lc_engine {
     lc_engine_environment env;
     lc_engine_settings settings;
     int have_state;
-    lc_dnrt *dnrt; /* placed objects in the indirect light (dnrt.h) */
+    int reset_next; /* lc_engine_reset_feedback: the next relight starts without carried light */
+    lc_dnrt *dnrt;  /* placed objects in the indirect light (dnrt.h) */
     /* Clutter operators (drt.h), owned; `clutter_active` are those that applied in the last
      * relight (a prefix-free subset, in attach order), `clutter_dirty` when the set changed. */
     lc_drt_ops **clutter;
@@ -673,6 +674,8 @@ static int engine_compute_b0(lc_engine *e, const lc_engine_state *st, const floa
     return 0;
 }
 
+void lc_engine_reset_feedback(lc_engine *e) { e->reset_next = 1; }
+
 int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_frame **frame, char *err,
                       size_t errlen) {
     const lc_lcb_view *v = e->v;
@@ -749,7 +752,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
 
     lc_transport_input in = {.b0 = e->b0,
                              .settings = st->settings,
-                             .reset_feedback = !st->settings.progressive || first,
+                             .reset_feedback = !st->settings.progressive || first || e->reset_next,
                              .object_pos = e->object_pos,
                              .n_objects = st->n_objects,
                              .dnrt = dnrt->n_objects ? dnrt : NULL,
@@ -771,6 +774,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     e->env = st->environment;
     e->settings = st->settings;
     e->have_state = 1;
+    e->reset_next = 0;
     fr.lightmap_width = v->lightmap_width;
     fr.lightmap_height = v->lightmap_height;
     lc_lmfilter_apply(e->lmfilter, fr.lightmap, e->lightmap);

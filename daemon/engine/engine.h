@@ -162,6 +162,11 @@ int lc_engine_check_solver(const lc_lcb_view *bake, lc_backend_kind backend, uin
 /* The solver a fresh state uses: PIC when the bake has links (links_per_cache > 0), else probes. */
 uint32_t lc_engine_default_solver(const lc_lcb_view *bake);
 
+/* The next relight starts from no carried indirect light, as the first does: its result (and
+ * its progressive successors') then depends only on the state, not on what was relit before
+ * (lucentd --cluster: every replica gives the same frames for a revision). */
+void lc_engine_reset_feedback(lc_engine *e);
+
 /* Relights for `state`. Work whose inputs did not change is skipped (e.g. moving an
  * object redoes direct light but not the sky's per-surfel rays unless the environment is
  * visible through the moved object... in practice: lights/objects/emission -> direct; env

@@ -25,7 +25,7 @@ struct lc_compute {
     const lc_lcb *bake;
     lc_compute_wake_fn wake; /* read-only after start */
     void *wake_arg;
-    int backend, threads, refine_passes, refine_delay_ms;
+    int backend, threads, refine_passes, refine_delay_ms, refine_restart;
     double refine_tolerance;
     pthread_t thread;
     pthread_mutex_t lock;
@@ -224,6 +224,7 @@ static void *compute_main(void *arg) {
             }
             refine_left = last->st.settings.progressive ? c->refine_passes : 0;
             pass = 0;
+            if (c->refine_restart) lc_engine_reset_feedback(e);
         } else {
             refine_left--;
             pass++;
@@ -302,6 +303,7 @@ lc_compute *lc_compute_start(const lc_lcb *bake, int backend, int threads, const
     c->refine_passes = refinement->max_passes;
     c->refine_delay_ms = refinement->delay_ms;
     c->refine_tolerance = refinement->tolerance;
+    c->refine_restart = refinement->restart;
     pthread_mutex_init(&c->lock, NULL);
     pthread_condattr_t ca;
     pthread_condattr_init(&ca);

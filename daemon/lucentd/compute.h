@@ -52,6 +52,8 @@ typedef struct lc_compute lc_compute;
 typedef struct lc_compute_refinement {
     int max_passes, delay_ms;
     double tolerance;
+    int restart; /* 1: every new solution starts without carried light (lc_engine_reset_feedback), so a
+                    revision's frames depend on its state alone (lucentd --cluster) */
 } lc_compute_refinement;
 
 /* Starts the thread and creates the engine on it (the EGL context belongs to that thread).

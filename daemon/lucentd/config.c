@@ -1,6 +1,8 @@
 /* config: the option table and the JSON config file (see config.h). */
 #include "config.h"
 
+#include "cluster.h"
+
 #include <cjson/cJSON.h>
 #include <ctype.h>
 #include <errno.h>
@@ -134,6 +136,15 @@ static const lc_opt config_options[] = {
      "seconds an object in mode auto must rest before its operators are built", "S", NULL},
     {"clutter-max-objects", LC_OPT_INT, OFF(clutter_max_objects), 1, 4096, "64", NULL,
      "objects that may hold clutter operators at once (a few MiB each); further ones stay dynamic", NULL, NULL},
+    {"cluster", LC_OPT_STRING, OFF(cluster), 0, 1024, NULL, NULL,
+     "run as one replica of a cluster whose change log is the Redis stream KEY: every replica applies the same "
+     "changes in the same order (PROTOCOL.md §9, deploy/OPERATING.md); the state then lives in Redis, not in "
+     "--state-dir. A password in the URL is better kept in the --config file",
+     "redis://[[USER]:PASSWORD@]HOST[:PORT]/KEY", NULL},
+    {"cluster-timeout", LC_OPT_INT, OFF(cluster_timeout), 100, 60000, "2000", NULL,
+     "milliseconds to connect to Redis or get an answer before the replica turns read-only and reconnects", "MS", NULL},
+    {"cluster-snapshot-every", LC_OPT_INT, OFF(cluster_snapshot_every), 10, 100000000, "1000", NULL,
+     "log entries between snapshots of the state in Redis (the log is trimmed behind the one before)", NULL, NULL},
     {"log-level", LC_OPT_ENUM, OFF(log_level), 0, 0, "info", "debug|info|warn|error", "log level", NULL, NULL},
     {"check-config", LC_OPT_BOOL, OFF(check_config), 0, 1, "false", NULL,
      "validate the configuration and the bake file, then exit (0 valid, 2 invalid)", NULL, NULL},
@@ -249,6 +260,9 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
     RESTART_IF(port, "port")
     RESTART_IF(state_dir, "state-dir")
     RESTART_IF(fsync_mode, "fsync")
+    RESTART_IF(cluster, "cluster")
+    RESTART_IF(cluster_timeout, "cluster-timeout")
+    RESTART_IF(cluster_snapshot_every, "cluster-snapshot-every")
     RESTART_IF(www, "www")
     RESTART_IF(tls_cert, "tls-cert")
     RESTART_IF(tls_key, "tls-key")
@@ -380,6 +394,14 @@ int lc_config_validate(const lc_config *c, char *err, size_t errlen) {
     if (c->tile > 0 && c->tile < 8) {
         lc_set_err(err, errlen, "--tile %d: give 0 (automatic) or at least 8 texels", c->tile);
         return -1;
+    }
+    if (c->cluster[0]) {
+        lc_cluster_url u;
+        char why[400];
+        if (lc_cluster_parse_url(c->cluster, strlen(c->cluster), &u, why, sizeof why) != 0) {
+            lc_set_err(err, errlen, "--%s", why);
+            return -1;
+        }
     }
     if (config_check_list("controller-tokens", c->controller_tokens, 1, err, errlen) != 0 ||
         config_check_list("viewer-tokens", c->viewer_tokens, 1, err, errlen) != 0 ||

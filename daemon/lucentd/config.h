@@ -41,16 +41,19 @@ typedef struct lc_config {
     int bounces;             /* initial feedback bounces per relight (a snapshot's settings win) */
     int tile;                /* lightmap tile size for delta frames */
     int keyframe_interval;
-    double delta_threshold;  /* relative change that marks a tile dirty */
-    int compact_bytes;       /* journal size that triggers a snapshot */
-    int mr;                  /* MR sessions accepted (PROTOCOL.md §8) */
-    int mr_max_frame;        /* bytes per upload frame */
-    int mr_max_lights;       /* area lights per MR frame */
-    int mr_max_sessions;     /* concurrent MR sessions */
-    double mr_max_rate;      /* upload frames per second per session */
-    int clutter;             /* clutter operators built for objects in mode clutter / auto (PROTOCOL.md §4.5) */
-    double clutter_rest;     /* seconds an auto object rests before its operators are built */
-    int clutter_max_objects; /* objects that may hold operators at once */
+    double delta_threshold;     /* relative change that marks a tile dirty */
+    int compact_bytes;          /* journal size that triggers a snapshot */
+    int mr;                     /* MR sessions accepted (PROTOCOL.md §8) */
+    int mr_max_frame;           /* bytes per upload frame */
+    int mr_max_lights;          /* area lights per MR frame */
+    int mr_max_sessions;        /* concurrent MR sessions */
+    double mr_max_rate;         /* upload frames per second per session */
+    int clutter;                /* clutter operators built for objects in mode clutter / auto (PROTOCOL.md §4.5) */
+    double clutter_rest;        /* seconds an auto object rests before its operators are built */
+    int clutter_max_objects;    /* objects that may hold operators at once */
+    char cluster[1024];         /* redis://… URL of the change log ("" = a single lucentd with its journal) */
+    int cluster_timeout;        /* ms for connecting to and answering from Redis */
+    int cluster_snapshot_every; /* log entries between snapshots */
     int log_level;
     int check_config;
     int recover; /* start from the snapshot + the journal's valid prefix, setting the rest aside */

@@ -319,29 +319,20 @@ static int journal_write_all(int fd, const char *p, size_t n) {
     return 0;
 }
 
-int lc_journal_append(lc_journal *j, const lc_proto_op *ops, uint32_t n_ops, uint64_t revision, char *err,
-                      size_t errlen) {
-    if (j->broken) {
-        lc_set_err(err, errlen,
-                   "the journal refuses changes since %s; they resume once a snapshot of the state "
-                   "succeeds (check the disk of '%s')",
-                   j->broken_why, j->dir);
-        return -1;
-    }
+char *lc_journal_record(const lc_proto_op *ops, uint32_t n_ops, uint64_t revision, size_t *out_len) {
     /* {"type":"batch","revision":N,"ops":[op,op]}\n */
     size_t cap = 64, len;
     char **parts = calloc(n_ops ? n_ops : 1, sizeof *parts);
     char *line = NULL;
-    int rc = -1;
-    if (!parts) goto oom;
+    if (!parts) goto done;
     for (uint32_t i = 0; i < n_ops; i++) {
-        parts[i] = lc_proto_build_op(&ops[i]);
-        if (!parts[i]) goto oom;
+        if (!(parts[i] = lc_proto_build_op(&ops[i]))) goto done;
         cap += strlen(parts[i]) + 1;
     }
-    line = malloc(cap);
-    if (!line) goto oom;
-    len = (size_t)snprintf(line, cap, "{\"type\":\"batch\",\"revision\":%llu,\"ops\":[", (unsigned long long)revision);
+    if (!(line = malloc(cap))) goto done;
+    len = revision
+        ? (size_t)snprintf(line, cap, "{\"type\":\"batch\",\"revision\":%llu,\"ops\":[", (unsigned long long)revision)
+        : (size_t)snprintf(line, cap, "{\"type\":\"batch\",\"ops\":[");
     for (uint32_t i = 0; i < n_ops; i++) {
         size_t pl = strlen(parts[i]);
         if (i) line[len++] = ',';
@@ -351,6 +342,31 @@ int lc_journal_append(lc_journal *j, const lc_proto_op *ops, uint32_t n_ops, uin
     line[len++] = ']';
     line[len++] = '}';
     line[len++] = '\n';
+    line[len] = 0;
+    *out_len = len;
+done:
+    if (parts)
+        for (uint32_t i = 0; i < n_ops; i++) free(parts[i]);
+    free(parts);
+    return line;
+}
+
+int lc_journal_append(lc_journal *j, const lc_proto_op *ops, uint32_t n_ops, uint64_t revision, char *err,
+                      size_t errlen) {
+    if (j->broken) {
+        lc_set_err(err, errlen,
+                   "the journal refuses changes since %s; they resume once a snapshot of the state "
+                   "succeeds (check the disk of '%s')",
+                   j->broken_why, j->dir);
+        return -1;
+    }
+    size_t len = 0;
+    int rc = -1;
+    char *line = lc_journal_record(ops, n_ops, revision, &len);
+    if (!line) {
+        lc_set_err(err, errlen, "out of memory writing the journal");
+        return -1;
+    }
     if (journal_write_all(j->fd, line, len) != 0) {
         int e = errno;
         j->failures++;
@@ -380,13 +396,7 @@ int lc_journal_append(lc_journal *j, const lc_proto_op *ops, uint32_t n_ops, uin
     }
     j->bytes += len; /* only now: a failed append leaves the last good length */
     rc = 0;
-    goto done;
-oom:
-    lc_set_err(err, errlen, "out of memory writing the journal");
 done:
-    if (parts)
-        for (uint32_t i = 0; i < n_ops; i++) free(parts[i]);
-    free(parts);
     free(line);
     return rc;
 }
@@ -412,14 +422,18 @@ void lc_journal_tick(lc_journal *j, const lc_state *state) {
     }
 }
 
-int lc_journal_compact(lc_journal *j, const lc_state *state, char *err, size_t errlen) {
+char *lc_journal_state_text(const lc_state *state) {
     lc_proto_state ps;
     lc_proto_material_state *mats = NULL;
-    char *text = NULL;
-    int rc = -1;
-    if (lc_state_to_proto(state, &ps, &mats) != 0) goto oom;
-    text = lc_proto_build_state(NULL, &ps);
+    if (lc_state_to_proto(state, &ps, &mats) != 0) return NULL;
+    char *text = lc_proto_build_state(NULL, &ps);
     free(mats);
+    return text;
+}
+
+int lc_journal_compact(lc_journal *j, const lc_state *state, char *err, size_t errlen) {
+    int rc = -1;
+    char *text = lc_journal_state_text(state);
     if (!text) goto oom;
     if (lc_fs_write_atomic(j->snap_path, text, strlen(text), err, errlen) != 0) goto done;
     /* The snapshot now holds everything: empty the journal. */

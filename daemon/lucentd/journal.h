@@ -44,6 +44,11 @@ lc_journal *lc_journal_open(const char *dir, lc_fsync_mode mode, lc_state *state
  * + empty journal) so the next plain start is clean. A corrupt snapshot still fails. */
 lc_journal *lc_journal_recover(const char *dir, lc_fsync_mode mode, lc_state *state, lc_journal_dropped *dropped,
                                char *err, size_t errlen);
+/* One change as a journal line (with its newline; revision 0: without "revision", the
+ * cluster log's entry): malloc'd, NUL-terminated, *len bytes; NULL when out of memory. */
+char *lc_journal_record(const lc_proto_op *ops, uint32_t n_ops, uint64_t revision, size_t *len);
+/* The state as a `state` message (what snapshot.json holds); malloc'd, NULL when out of memory. */
+char *lc_journal_state_text(const lc_state *state);
 /* Appends one accepted change with its revision. Returns 0 when durable per the mode; on
  * failure the file is back at its last good length and nothing of the change remains.
  * Refused (-1) while the journal is broken (see lc_journal_broken). */

@@ -279,6 +279,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         if (ss->authed) lc_info("server", "client '%s' disconnected", ss->client);
         for (int i = 0; i < ss->outq_n; i++) free(ss->outq[(ss->outq_head + i) % SERVER_OUTQ]);
         server_mr_end(s, ss);
+        server_cluster_session_gone(s, ss);
         lc_published_release(s->compute, ss->frame);
         free(ss->rx);
         free(ss->tx);
@@ -367,6 +368,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
     case LWS_CALLBACK_EVENT_WAIT_CANCELLED: {
         /* The compute thread published (or failed): hand every session the newest result. */
         if (!s) return 0;
+        server_cluster_collect(s); /* log entries: state changes (a relight), acks, `changed` */
         server_mr_collect(s);
         server_report_relight_failure(s);
         lc_published *p = lc_compute_take_newer(s->compute, &s->pub_seq);
@@ -408,6 +410,7 @@ static void server_tick(lws_sorted_usec_list_t *sul) {
         if (ss->authed && session_frame_due(ss, now)) session_want_write(ss);
     }
     lc_journal_tick(s->journal, &s->state);
+    server_cluster_tick(s);
     server_clutter_tick(s);
     lws_sul_schedule(s->ctx, 0, &s->tick, server_tick, 250 * LWS_US_PER_MS);
 }
@@ -522,6 +525,13 @@ static int server_open_state(lc_server *s) {
         return -1;
     }
     s->state.settings.bounces = (uint32_t)cfg->bounces; /* a restored snapshot's settings replace this */
+    if (cfg->cluster[0]) { /* the bake's state at revision 0, as on every replica; the log does the rest */
+        if (lc_state_seed(&s->state, err, sizeof err) != 0) {
+            lc_error("server", "%s", err);
+            return -1;
+        }
+        return 0;
+    }
     /* A fresh state dir starts with the bake's own lights (KHR_lights_punctual: the scene's
      * initial lights); from then on the snapshot holds what clients made of them. */
     const int fresh = server_state_dir_fresh(cfg->state_dir);
@@ -640,6 +650,7 @@ static void server_release(lc_server *s, int clean) {
     lc_compute_stop(s->compute);
     server_clutter_stop(s); /* its deliveries go to the compute object */
     server_mr_stop(s);      /* the MR worker's wake too */
+    server_cluster_stop(s); /* and the log's threads' */
     if (s->ctx) {
         lws_sul_cancel(&s->tick);
         lws_context_destroy(s->ctx);
@@ -693,13 +704,14 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
     for (uint32_t i = 0; i < s->v->n_materials; i++) s->material_names[i] = s->v->materials[i].name;
     if (server_geometry_build(s) != 0 || server_open_state(s) != 0 || server_listen(s) != 0) goto done;
     const lc_config *cfg = s->cfg;
-    lc_compute_refinement refine = {cfg->refine_passes, cfg->refine_delay, cfg->refine_tolerance};
+    lc_compute_refinement refine = {cfg->refine_passes, cfg->refine_delay, cfg->refine_tolerance, cfg->cluster[0] != 0};
     s->compute = lc_compute_start(bake, cfg->backend, cfg->threads, &refine, server_wake, s->ctx, err, sizeof err);
     if (!s->compute) {
         lc_error("server", "%s", err);
         goto done;
     }
-    if (server_mr_start(s, err, sizeof err) != 0 || server_clutter_start(s, err, sizeof err) != 0) {
+    if (server_mr_start(s, err, sizeof err) != 0 || server_clutter_start(s, err, sizeof err) != 0 ||
+        server_cluster_start(s, err, sizeof err) != 0) {
         lc_error("server", "%s", err);
         goto done;
     }

@@ -109,6 +109,35 @@ static void metric_u64(char *buf, size_t cap, int *n, const char *name, const ch
     http_append(buf, cap, n, "%s %llu\n", name, (unsigned long long)v);
 }
 
+/* Cluster mode's part of /metrics (PROTOCOL.md §9). Returns the new length. */
+static int server_cluster_metrics(lc_server *s, char *body, size_t cap, int n) {
+    lc_cluster_stats cs;
+    lc_cluster_get_stats(s->cluster, &cs);
+    metric_u64(body, cap, &n, "lucent_cluster_writable", "gauge",
+               "1 while this replica can append changes to its log (connected and caught up).",
+               (uint64_t)lc_cluster_writable(s->cluster));
+    metric_u64(body, cap, &n, "lucent_cluster_entries_applied_total", "counter", "Log entries applied to the state.",
+               s->cluster_applied);
+    metric_u64(body, cap, &n, "lucent_cluster_entries_skipped_total", "counter",
+               "Log entries that no longer applied when their turn came (skipped on every replica).",
+               s->cluster_skipped);
+    metric_u64(body, cap, &n, "lucent_cluster_appends_total", "counter", "Changes this replica appended to the log.",
+               cs.appended);
+    metric_u64(body, cap, &n, "lucent_cluster_append_failures_total", "counter",
+               "Appends that Redis did not confirm (refused to the client as read_only).", cs.append_failures);
+    metric_u64(body, cap, &n, "lucent_cluster_pending", "gauge", "Appends waiting to be read back from the log.",
+               s->n_cluster_pending);
+    metric_u64(body, cap, &n, "lucent_cluster_connects_total", "counter", "Connections the log reader made to Redis.",
+               cs.reconnects);
+    metric_u64(body, cap, &n, "lucent_cluster_snapshots_loaded_total", "counter",
+               "Snapshots of the state loaded from Redis.", cs.snapshots_loaded);
+    metric_u64(body, cap, &n, "lucent_cluster_snapshots_written_total", "counter",
+               "Snapshots of the state this replica stored in Redis.", cs.snapshots_written);
+    metric_head(body, cap, &n, "lucent_cluster_append_seconds", "gauge", "Redis round trip of the last append.");
+    http_append(body, cap, &n, "lucent_cluster_append_seconds %.6f\n", cs.last_append_ms * 1e-3);
+    return n;
+}
+
 /* /metrics: Prometheus text, base units (seconds, bytes), every metric with HELP. */
 static int server_metrics(lc_server *s, char *body, size_t cap) {
     int n = 0;
@@ -176,6 +205,7 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
                cc.failed);
     metric_u64(body, cap, &n, "lucent_clutter_builds_queued", "gauge", "Clutter operator builds waiting or running.",
                (uint64_t)cc.queued + (uint64_t)cc.building);
+    if (s->cluster) n = server_cluster_metrics(s, body, cap, n);
     metric_head(body, cap, &n, "lucent_errors_total", "counter", "Error replies sent, by code.");
     for (int i = 0; i < LC_ERR_COUNT; i++)
         http_append(body, cap, &n, "lucent_errors_total{code=\"%s\"} %llu\n",
@@ -188,6 +218,8 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
 static int server_health(lc_server *s, char *body, size_t cap, unsigned *status) {
     char why[256];
     uint64_t failed = lc_compute_failure(s->compute, NULL, why, sizeof why);
+    int n = s->cluster ? server_cluster_health(s, body, cap, status) : 0;
+    if (n) return n;
     *status = HTTP_STATUS_SERVICE_UNAVAILABLE;
     if (lc_journal_broken(s->journal))
         return snprintf(body, cap, "unavailable revision %llu: the journal refuses changes after a failed fsync\n",

@@ -6,6 +6,7 @@
 #define LC_SERVER_INTERNAL_H
 #include <libwebsockets.h>
 
+#include "cluster.h"
 #include "clutter_worker.h"
 #include "compute.h"
 #include "config.h"
@@ -160,6 +161,14 @@ struct lc_server {
     char (*clutter_announced)[LC_PROTO_ID_MAX + 1]; /* objects clients were told are clutter (§5.5) */
     uint32_t n_announced, cap_announced;
     uint64_t clutter_events; /* object.transport broadcasts */
+    /* cluster mode (server_cluster.c): NULL without --cluster; then s->journal is NULL */
+    lc_cluster *cluster;
+    int cluster_ready;                              /* caught up with the log once since the start (/healthz) */
+    char cluster_fatal[512];                        /* why this replica cannot join ("" = it can) */
+    uint64_t cluster_local;                         /* numbers this replica's appends */
+    struct server_cluster_pending *cluster_pending; /* appends waiting to be read back */
+    uint32_t n_cluster_pending, cap_cluster_pending;
+    uint64_t cluster_applied, cluster_skipped;
 };
 
 /* server.c */
@@ -208,6 +217,22 @@ void server_clutter_tick(lc_server *s);
 void server_clutter_published(lc_server *s, const lc_published *p);
 /* 1 when clients were told object_id is clutter (state replies, §5.4). */
 int server_clutter_announced(const lc_server *s, const char *object_id);
+
+/* server_cluster.c */
+/* Main thread, after the lws context exists: with --cluster, starts the log's threads. 0 or -1. */
+int server_cluster_start(lc_server *s, char *err, size_t errlen);
+/* After lws_context_destroy (no session is left). NULL-safe in cluster. */
+void server_cluster_stop(lc_server *s);
+/* A change from a session: validated, appended; `ok` comes when the entry is read back. */
+void server_cluster_change(lc_server *s, lc_session *ss, const lc_proto_request *req);
+/* On wake: applies what the log delivered, in order; acks, `changed`, one relight. */
+void server_cluster_collect(lc_server *s);
+/* Every tick: appends not read back in time are reported to their clients. */
+void server_cluster_tick(lc_server *s);
+/* A session closed: its pending appends lose their recipient. */
+void server_cluster_session_gone(lc_server *s, lc_session *ss);
+/* /healthz in cluster mode: 0 when healthy (the caller answers), else the body's length. */
+int server_cluster_health(lc_server *s, char *body, size_t cap, unsigned *status);
 
 /* server_geometry.c */
 /* Main thread, before the loop: builds the scene's and the assets' glTF. 0 or -1 (logged). */

@@ -266,7 +266,10 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
         server_mr_end(s, ss);
         session_send(ss, lc_proto_build_ok(&req.id, s->state.revision));
         break;
-    default: server_change(s, ss, &req); break;
+    default:
+        if (s->cluster) server_cluster_change(s, ss, &req);
+        else server_change(s, ss, &req);
+        break;
     }
 done:
     lc_proto_request_release(&req);

@@ -134,7 +134,7 @@ int main(void) {
     struct lws_context *ctx = lws_create_context(&info);
     CHECK(ctx != NULL, "lws context");
     char err[256];
-    lc_compute_refinement none = {0, 0, 0};
+    lc_compute_refinement none = {0, 0, 0, 0};
     lc_compute *c = lc_compute_start(f.bake, LC_BACKEND_CPU, 1, &none, test_wake, ctx, err, sizeof err);
     CHECK(c != NULL, "compute start: %s", err);
     if (!c || !ctx) CHECK_DONE();
