@@ -4,6 +4,8 @@
 # lucent-conformance, stop the daemon. Exit 77 (skip) when lucentd or lucent-bake is not
 # built; exit 1 when the Cornell bake with its asset fails.
 # Extra arguments go to lucent-conformance (e.g. -k frames, --json out.json).
+# LUCENT_CONF_CLUSTER=1: the daemon is a replica of a cluster (lucentd --cluster, PROTOCOL.md
+# §9) whose log is a redis-server started here; to a client it must be a plain lucent/1 server.
 set -u
 HERE="$(cd "$(dirname "$0")" && pwd)"
 BIN="${LUCENT_BINARY_DIR:-$HERE/../../build}"
@@ -17,7 +19,9 @@ fi
 
 TMP="$(mktemp -d)"
 PID=""
+REDIS_PID=""
 cleanup() {
+  [ -n "$REDIS_PID" ] && kill -TERM "$REDIS_PID" 2>/dev/null && wait "$REDIS_PID" 2>/dev/null
   if [ -n "$PID" ] && kill -0 "$PID" 2>/dev/null; then
     kill -TERM "$PID" 2>/dev/null
     for _ in $(seq 1 100); do kill -0 "$PID" 2>/dev/null || break; sleep 0.1; done
@@ -47,9 +51,20 @@ cat > "$TMP/lucentd.json" <<EOF
 {"controller-tokens": ["$CTL"], "viewer-tokens": ["$VIEW"]}
 EOF
 
+CLUSTER=()
+if [ "${LUCENT_CONF_CLUSTER:-0}" = 1 ]; then
+  command -v redis-server >/dev/null || { echo "FAIL: LUCENT_CONF_CLUSTER=1 needs redis-server"; exit 1; }
+  RPORT="$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')"
+  mkdir -p "$TMP/redis"
+  redis-server --port "$RPORT" --bind 127.0.0.1 --dir "$TMP/redis" --appendonly yes --appendfsync always \
+    --save "" > "$TMP/redis.log" 2>&1 &
+  REDIS_PID=$!
+  CLUSTER=(--cluster "redis://127.0.0.1:$RPORT/conformance")
+fi
+
 mkfifo "$TMP/out"
 "$LUCENTD" --config "$TMP/lucentd.json" --bake "$BAKE" --port 0 --state-dir "$TMP/state" \
-  --backend cpu --log-level warn > "$TMP/out" 2> "$TMP/lucentd.log" &
+  --backend cpu --log-level warn "${CLUSTER[@]}" > "$TMP/out" 2> "$TMP/lucentd.log" &
 PID=$!
 exec 3< "$TMP/out"
 PORT=""
@@ -60,6 +75,25 @@ fi
 cat <&3 > /dev/null &
 if [ -z "$PORT" ]; then
   echo "lucentd did not start: ${line:-no output}"
+  cat "$TMP/lucentd.log"
+  exit 1
+fi
+
+# A replica is ready once it caught up with its log (/healthz 200).
+if [ ${#CLUSTER[@]} -gt 0 ] && ! /usr/bin/python3 - "$PORT" <<'PY'
+import sys, time, urllib.request
+end = time.time() + 30
+while time.time() < end:
+    try:
+        if urllib.request.urlopen("http://127.0.0.1:%s/healthz" % sys.argv[1], timeout=2).status == 200:
+            sys.exit(0)
+    except Exception:
+        pass
+    time.sleep(0.1)
+sys.exit(1)
+PY
+then
+  echo "the cluster replica never became ready:"
   cat "$TMP/lucentd.log"
   exit 1
 fi
