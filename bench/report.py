@@ -453,6 +453,27 @@ def mr_section(r, relight, md):
     md.append(MR_PAPER + "\n")
 
 
+def kept_sections(path, md):
+    """The `## ` sections of the existing report that this run did not write (measurements made
+    by hand or by other scripts: the probes solver, replicas, ...), in their order, so that a
+    bench/run refreshes its own tables without deleting them."""
+    try:
+        with open(path) as fh:
+            old = fh.read().split("\n")
+    except OSError:
+        return []
+    written = {line.split("\n")[0] for line in md if line.startswith("## ")}
+    kept, current = [], None
+    for line in old:
+        if line.startswith("## "):
+            current = None if line in written else [line]
+            if current is not None:
+                kept.append(current)
+        elif current is not None:
+            current.append(line)
+    return [line for sec in kept for line in sec]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out-dir", required=True)
@@ -483,6 +504,7 @@ def main():
     dnrt_section(dnrt, relight, md)
     mr_section(mr, relight, md)
     fidelity_section(fid, md)
+    md += kept_sections(a.md, md)
     with open(a.md, "w") as fh:
         fh.write("\n".join(md) + "\n")
     with open(a.json, "w") as fh:
