@@ -13,6 +13,8 @@ against a redis-server this test starts on loopback (AOF, appendfsync always).
   late        a replica started after the log was trimmed behind snapshots starts from the
               snapshot and ends identical
   other_bake  a replica with another bake is refused (/healthz 503 names both bakes)
+  password    a Redis with requirepass: the URL's password lets a replica in; a wrong one keeps it
+              starting (503) with Redis's refusal in /healthz
 """
 import array
 import os
@@ -49,9 +51,10 @@ def free_port():
 
 
 class Redis:
-    def __init__(self):
+    def __init__(self, name="redis", password=None):
         self.port = free_port()
-        self.dir = os.path.join(TMP, "redis")
+        self.password = password
+        self.dir = os.path.join(TMP, name)
         os.makedirs(self.dir, exist_ok=True)
         self.p = None
 
@@ -61,11 +64,13 @@ class Redis:
             sys.exit("daemon_cluster: needs redis-server (apt install redis-server; scripts/setup-deps.sh does)")
         self.p = subprocess.Popen([exe, "--port", str(self.port), "--bind", "127.0.0.1", "--dir", self.dir,
                                    "--appendonly", "yes", "--appendfsync", "always", "--save", "",
-                                   "--protected-mode", "no"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                   "--protected-mode", "no",
+                                   *(["--requirepass", self.password] if self.password else [])], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         lt.wait_for(lambda: self.cli("PING") == "PONG", 10, "redis-server answering PING")
 
     def cli(self, *args):
-        r = subprocess.run(["redis-cli", "-p", str(self.port), *args], capture_output=True, text=True)
+        auth = ["--no-auth-warning", "-a", self.password] if self.password else []
+        r = subprocess.run(["redis-cli", "-p", str(self.port), *auth, *args], capture_output=True, text=True)
         return r.stdout.strip()
 
     def kill(self):
@@ -77,8 +82,8 @@ class Redis:
         return "redis://127.0.0.1:%d/%s" % (self.port, KEY)
 
 
-def start_replica(redis, name, bake=None):
-    args = ["--cluster", redis.url, "--cluster-snapshot-every", str(SNAPSHOT_EVERY), "--cluster-timeout", "1000"]
+def start_replica(redis, name, bake=None, url=None):
+    args = ["--cluster", url or redis.url, "--cluster-snapshot-every", str(SNAPSHOT_EVERY), "--cluster-timeout", "1000"]
     if bake:
         p, port = lt.start_lucentd(os.path.join(TMP, name), *args, bake=bake)
     else:
@@ -306,6 +311,30 @@ def case_other_bake(redis):
         stop(p)
 
 
+def case_password():
+    redis = Redis("redis-auth", password="s3cret:pw")
+    redis.start()
+    good = "redis://:s3cret%%3Apw@127.0.0.1:%d/%s" % (redis.port, KEY)
+    bad = "redis://:wrong@127.0.0.1:%d/%s" % (redis.port, KEY)
+    p1, port1 = start_replica(redis, "auth-good", url=good)
+    p2, port2 = start_replica(redis, "auth-bad", url=bad)
+    try:
+        wait_ready(port1, "password: the replica with the right password ready")
+        ws = RawWS(port1, timeout=20)
+        ws.hello()
+        ok = request(ws, {"type": "light.set", "id": 1, "light": light("auth", 0.2)})
+        ws.close()
+        check(ok.get("type") == "ok", "password: a change through an authenticated log: %s" % ok)
+        lt.wait_for(lambda: "refused us" in health(port2)[1], 20, "the wrong password named")
+        check(health(port2)[0] == 503, "password: a wrong password keeps the replica starting (503): %s" % (
+            health(port2)[1].strip()[:160]))
+    finally:
+        stop(p1)
+        stop(p2)
+        redis.p.terminate()
+        redis.p.wait()
+
+
 def main():
     redis = Redis()
     redis.start()
@@ -317,6 +346,7 @@ def main():
         case_redis_down(redis, replicas)
         case_late(redis, replicas)
         case_other_bake(redis)
+        case_password()
     finally:
         for p, _ in replicas:
             check(stop(p) == 0, "replica %s: clean stop" % p.name)
