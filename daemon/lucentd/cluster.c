@@ -487,6 +487,9 @@ static int cluster_reader_session(lc_cluster *c, redisContext *r, char *why, siz
                  key, last, c->from);
         return -2;
     }
+    pthread_mutex_lock(&c->lock);
+    snprintf(c->reader_why, sizeof c->reader_why, "catching up with the log from revision %" PRIu64, c->from);
+    pthread_mutex_unlock(&c->lock);
     int rc = cluster_load_snapshot(c, r, why, whylen);
     while (rc >= 0 && !cluster_stopping(c)) {
         rc = cluster_read_once(c, r, -1, why, whylen);
