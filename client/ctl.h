@@ -1,7 +1,7 @@
 /* lucentctl internals shared by the command files (lucentctl.c: main, global options and
  * dispatch; ctl_common.c: connection and output helpers; ctl_scene.c: ping, state, send,
  * light/object/material/env/settings; ctl_script.c: script; ctl_stream.c: watch, snapshot,
- * latency; ctl_mr.c: mr replay). Every command takes (argc, argv) with argv[0] = the command name and returns
+ * latency; ctl_mr.c: mr replay; ctl_load.c: load). Every command takes (argc, argv) with argv[0] = the command name and returns
  * an exit code. */
 #ifndef LC_CTL_H
 #define LC_CTL_H
@@ -44,6 +44,9 @@ int ctl_script_validate(FILE *f, const char *name, size_t *messages, long *error
 int ctl_cmd_watch(int argc, char **argv);
 int ctl_cmd_snapshot(int argc, char **argv);
 int ctl_cmd_latency(int argc, char **argv);
+
+/* Load test (ctl_load.c): N viewers on one libwebsockets context, one controller. */
+int ctl_cmd_load(int argc, char **argv);
 
 /* MR sessions (ctl_mr.c): mr replay DIR. */
 int ctl_cmd_mr(int argc, char **argv);

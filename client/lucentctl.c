@@ -1,6 +1,6 @@
 /* lucentctl: command-line control of a running lucentd over lucent/1. This file: global
  * options, the command table (dispatch and the global --help); the commands live in
- * ctl_scene.c, ctl_script.c, ctl_stream.c and ctl_mr.c (see ctl.h). */
+ * ctl_scene.c, ctl_script.c, ctl_stream.c, ctl_mr.c and ctl_load.c (see ctl.h). */
 #include <stdlib.h>
 #include <string.h>
 
@@ -11,22 +11,24 @@ typedef struct ctl_command {
     const char *args;    /* shown after the name in --help */
     const char *summary; /* one line */
     int (*fn)(int argc, char **argv);
+    int own_json; /* takes --json FILE itself: a --json after the command is the command's */
 } ctl_command;
 
 static const ctl_command ctl_commands[] = {
-    {"ping", "[--count N]", "round trip to the server in ms", ctl_cmd_ping},
-    {"state", "", "print the scene state (JSON)", ctl_cmd_state},
-    {"send", "JSON... | -", "send raw messages (arguments, or JSON lines on stdin)", ctl_cmd_send},
-    {"light", "set|rm ID ...", "create/replace or remove a light", ctl_cmd_light},
-    {"object", "set|rm ID ...", "place/replace or remove an object instance of an asset", ctl_cmd_object},
-    {"material", "set NAME ...", "set a material's emission", ctl_cmd_material},
-    {"env", "set ...", "set the environment light (none, constant colour, SH)", ctl_cmd_env},
-    {"settings", "set ...", "change relight settings (bounces, bands, ...)", ctl_cmd_settings},
-    {"script", "FILE|-", "replay timed JSON Lines messages (animations)", ctl_cmd_script},
-    {"watch", "...", "subscribe to streams and report frames", ctl_cmd_watch},
-    {"snapshot", "...", "save the current lightmap / SH data to files", ctl_cmd_snapshot},
-    {"latency", "...", "measure change-to-frame latency", ctl_cmd_latency},
-    {"mr", "replay DIR ...", "play a recorded RGB-D capture as an MR session", ctl_cmd_mr},
+    {"ping", "[--count N]", "round trip to the server in ms", ctl_cmd_ping, 0},
+    {"state", "", "print the scene state (JSON)", ctl_cmd_state, 0},
+    {"send", "JSON... | -", "send raw messages (arguments, or JSON lines on stdin)", ctl_cmd_send, 0},
+    {"light", "set|rm ID ...", "create/replace or remove a light", ctl_cmd_light, 0},
+    {"object", "set|rm ID ...", "place/replace or remove an object instance of an asset", ctl_cmd_object, 0},
+    {"material", "set NAME ...", "set a material's emission", ctl_cmd_material, 0},
+    {"env", "set ...", "set the environment light (none, constant colour, SH)", ctl_cmd_env, 0},
+    {"settings", "set ...", "change relight settings (bounces, bands, ...)", ctl_cmd_settings, 0},
+    {"script", "FILE|-", "replay timed JSON Lines messages (animations)", ctl_cmd_script, 0},
+    {"watch", "...", "subscribe to streams and report frames", ctl_cmd_watch, 0},
+    {"snapshot", "...", "save the current lightmap / SH data to files", ctl_cmd_snapshot, 0},
+    {"latency", "...", "measure change-to-frame latency", ctl_cmd_latency, 0},
+    {"mr", "replay DIR ...", "play a recorded RGB-D capture as an MR session", ctl_cmd_mr, 0},
+    {"load", "--clients N ...", "load test: N viewers in one process, update latency", ctl_cmd_load, 1},
 };
 #define CTL_N_COMMANDS (sizeof ctl_commands / sizeof ctl_commands[0])
 
@@ -112,11 +114,18 @@ int main(int argc, char **argv) {
     }
     /* Global options after the command too: compact them out of its argv (up to "--",
      * after which everything belongs to the command). */
-    int n = 1;
+    int n = 1, own_json = 0;
+    for (size_t k = 0; k < CTL_N_COMMANDS; k++)
+        if (strcmp(argv[i], ctl_commands[k].name) == 0) own_json = ctl_commands[k].own_json;
     for (int j = i + 1; j < argc; j++) {
         if (strcmp(argv[j], "--") == 0) {
             while (j < argc) argv[i + n++] = argv[j++];
             break;
+        }
+        if (own_json && strncmp(argv[j], "--json", 6) == 0 && (argv[j][6] == 0 || argv[j][6] == '=')) {
+            argv[i + n++] = argv[j];
+            if (argv[j][6] == 0 && j + 1 < argc) argv[i + n++] = argv[++j]; /* its FILE */
+            continue;
         }
         int r = ctl_global_option(argc, argv, &j);
         if (r < 0) return CTL_EXIT_USAGE;
