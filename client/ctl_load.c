@@ -46,7 +46,7 @@
 #include "lucent_proto.h"
 
 #define LOAD_POLL_NS_PER_CLIENT 250       /* service turns at least N x this apart (load_serve) */
-#define LOAD_POLL_MAX_US 2500             /* ... and at most this (arrival times err late by <= this) */
+#define LOAD_POLL_MAX_US 10000            /* ... and at most this (arrival times err late by <= this) */
 #define LOAD_TICK_US 1000                 /* schedule granularity (µs) */
 #define LOAD_TEXT_MAX (1u << 20)          /* largest text message reassembled (handshake, controller) */
 #define LOAD_REV_MARGIN 64                /* revisions beyond the updates' (other clients' changes) */
@@ -59,7 +59,7 @@
 #define LOAD_HIST_N (LOAD_HIST_SUB + 26 * 64)
 #define LOAD_CTL_IDX UINT32_MAX
 #define LOAD_WARMUP_SEEN_S 30.0 /* the warm-up revision must reach every viewer within this */
-#define LOAD_ACK_WAIT_S 10.0    /* oks of the last updates */
+#define LOAD_ACK_WAIT_S 10.0    /* oks of the last updates: this + --settle */
 
 static volatile sig_atomic_t load_stop = 0;
 
@@ -285,6 +285,7 @@ typedef struct load_run {
     uint32_t on_final;
     double settle_s, connect_s;
     int rc, interrupted;
+    uint64_t turns, serve_us; /* service loop turns, and the time they took */
     char fatal[300];
     unsigned long nofile;
 } load_run;
@@ -1061,12 +1062,13 @@ static void load_step_run(load_run *r, uint64_t now) {
             load_ctl_push(r, r->n_sent++);
         if (r->n_sent == r->n_updates) load_enter(r, LOAD_P_ACKWAIT, now);
     } else if (r->phase == LOAD_P_ACKWAIT) {
-        if (r->n_acked + r->n_errors < r->n_sent && since < LOAD_ACK_WAIT_S) return;
+        if (r->n_acked + r->n_errors < r->n_sent && since < LOAD_ACK_WAIT_S + r->o->settle) return;
         r->final_rev = load_max_acked(r);
         load_enter(r, LOAD_P_SETTLE, now);
     } else if (r->phase == LOAD_P_SETTLE) {
         if (now - r->last_scan < 10000) return;
         r->last_scan = now;
+        r->final_rev = load_max_acked(r); /* oks that came after the wait still move the target */
         if (r->final_rev && load_count_at(r, r->final_rev) < r->n_streaming && since < r->o->settle) return;
         r->settle_s = since;
         load_begin_cleanup(r, now);
@@ -1228,6 +1230,7 @@ static cJSON *load_report(load_run *r) {
     cJSON_AddNumberToObject(me, "sys_s", load_round(sy, 0.001));
     cJSON_AddNumberToObject(me, "max_rss_kb", (double)ru.ru_maxrss);
     cJSON_AddNumberToObject(me, "nofile_limit", (double)r->nofile);
+    cJSON_AddNumberToObject(me, "turn_us", r->turns ? load_round((double)r->serve_us / (double)r->turns, 1) : 0);
     return j;
 }
 
@@ -1390,8 +1393,9 @@ static struct lws_context *load_context(load_run *r) {
     info.timeout_secs = 20; /* handshakes: a loaded server may take a while to accept */
     info.gid = -1;
     info.uid = -1;
-    /* lws sizes its descriptor tables by this: every viewer's socket must fit */
-    info.fd_limit_per_thread = (unsigned)r->nofile;
+    /* fd_limit_per_thread stays 0: below the open-files limit lws 4.1 finds the connection of
+     * every ready descriptor by a linear scan of its table (wsi_from_fd); 0 = the limit (raised
+     * above), and a direct lookup */
     info.pt_serv_buf_size = 65536; /* the one read buffer of all viewers (raw reads land here) */
     if (r->tls) {
         info.options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT;
@@ -1401,24 +1405,31 @@ static struct lws_context *load_context(load_run *r) {
     return lws_create_context(&info);
 }
 
-/* The service loop. poll() costs O(descriptors) per call (here about 57 ns per socket: 0.6 ms
- * at 10 000 viewers) and lws calls it once per turn, so turns that found little to do are
- * spaced LOAD_POLL_NS_PER_CLIENT x N apart (at most LOAD_POLL_MAX_US): the ready sockets
- * gather and polling stays a bounded share of this process's CPU (unspaced, at 1 000
- * viewers, sock_poll/tcp_poll were 60 % of its profile). Arrival times are read after the
- * wait, so they err late by at most the spacing (0.25 ms at 1 000 viewers, 2.5 ms at 10 000). */
+/* The service loop. poll() costs O(descriptors) per call (57 ns per socket at 1 000 viewers on
+ * this VM, more at 10 000: cache misses) and lws calls it once per turn, so turns are spaced
+ * three times the last turn's cost apart (an average), at least LOAD_POLL_NS_PER_CLIENT x N
+ * and at most LOAD_POLL_MAX_US: ready sockets gather and polling stays about a quarter of
+ * this thread (unspaced, at 1 000 viewers, sock_poll/tcp_poll were 60 % of its profile).
+ * Arrival times are read after the wait, so they err late by up to one spacing; the report
+ * gives the mean spacing (load_client.turn_us). */
 static void load_serve(load_run *r) {
-    uint64_t period = (uint64_t)r->n * LOAD_POLL_NS_PER_CLIENT / 1000;
-    if (period > LOAD_POLL_MAX_US) period = LOAD_POLL_MAX_US;
+    uint64_t floor_us = (uint64_t)r->n * LOAD_POLL_NS_PER_CLIENT / 1000;
+    double cost = 0;
     while (r->phase != LOAD_P_DONE) {
         uint64_t t = load_now_us();
         if (lws_service(r->ctx, 0) < 0) break;
         uint64_t spent = load_now_us() - t;
-        if (spent < period) {
-            struct timespec ts = {0, (long)(period - spent) * 1000};
+        cost = 0.9 * cost + 0.1 * (double)spent;
+        uint64_t gap = (uint64_t)(3 * cost);
+        if (gap < floor_us) gap = floor_us;
+        if (gap > LOAD_POLL_MAX_US) gap = LOAD_POLL_MAX_US;
+        if (spent < gap) {
+            struct timespec ts = {0, (long)(gap - spent) * 1000};
             nanosleep(&ts, NULL);
         }
+        r->turns++;
     }
+    r->serve_us = load_now_us() - r->t0;
 }
 
 static int load_write_json(const char *path, const cJSON *rep) {
