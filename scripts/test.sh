@@ -15,17 +15,18 @@ cmake --build "$asan" -j"$jobs"
 echo "== ASan+UBSan: unit, fuzz replay, fast integration tests =="
 (cd "$asan" && ctest --output-on-failure -j"$jobs" -LE slow)
 
-# ThreadSanitizer over the daemon's threads (service, compute, engine workers, clutter worker): its unit
+# ThreadSanitizer over the daemon's threads (service, compute, engine workers, clutter worker, the
+# cluster log's reader and writer): its unit
 # tests and the integration tests that drive a live lucentd. daemon_basic runs alone after
 # them: beside another TSan daemon on 2 cores one run in ~11 lost an HTTP GET to a reset
 # connection (no TSan report); alone it passed every run, a CPU hog beside it included.
 tsan="$root/build-tsan"
 cmake -S "$root" -B "$tsan" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLUCENT_TSAN=ON >/dev/null
 cmake --build "$tsan" -j"$jobs" --target lucentd lucentctl lucent-bake cornell_bake client_live \
-  test_compute test_state test_journal test_frames
+  test_compute test_state test_journal test_frames test_cluster
 echo "== ThreadSanitizer: the daemon's unit and live integration tests =="
 (cd "$tsan" && ctest --output-on-failure -j"$jobs" \
-  -R '^(unit\.daemon\.|integration\.(daemon_hardening|client_live|journal_faults|lucentctl_basic|daemon_clutter)$)' &&
+  -R '^(unit\.daemon\.|integration\.(daemon_hardening|client_live|journal_faults|lucentctl_basic|daemon_clutter|daemon_cluster)$)' &&
   ctest --output-on-failure -R '^integration\.daemon_basic$')
 
 build="$root/build-release"
