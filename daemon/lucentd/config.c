@@ -402,6 +402,10 @@ int lc_config_validate(const lc_config *c, char *err, size_t errlen) {
             lc_set_err(err, errlen, "--%s", why);
             return -1;
         }
+        if (u.password[0] && config_is_placeholder(u.password, strlen(u.password))) {
+            lc_set_err(err, errlen, "--cluster: the Redis password is a placeholder; set the real one");
+            return -1;
+        }
     }
     if (config_check_list("controller-tokens", c->controller_tokens, 1, err, errlen) != 0 ||
         config_check_list("viewer-tokens", c->viewer_tokens, 1, err, errlen) != 0 ||

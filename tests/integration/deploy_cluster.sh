@@ -238,6 +238,11 @@ rc=0
 [ "$rc" = 2 ] && grep -q placeholder "$TMP/out" || fail "$EX as shipped: --check-config exited $rc, want 2 (placeholder tokens): $(head -c 400 "$TMP/out")"
 rc=0
 "$LUCENTD" --config "$EX" --bake "$BAKEFILE" "${TOKENS[@]}" --check-config >"$TMP/out" 2>&1 || rc=$?
+[ "$rc" = 2 ] && grep -q "Redis password is a placeholder" "$TMP/out" ||
+  fail "$EX with real tokens: --check-config exited $rc, want 2 (the Redis password placeholder): $(head -c 400 "$TMP/out")"
+rc=0
+"$LUCENTD" --config "$EX" --bake "$BAKEFILE" "${TOKENS[@]}" --cluster "redis://:$REDIS_PW@10.0.0.10:6379/lucent" \
+  --check-config >"$TMP/out" 2>&1 || rc=$?
 [ "$rc" = 0 ] || fail "$EX: lucentd --check-config exited $rc: $(head -c 600 "$TMP/out")"
 defaults_check example "$EX"
 grep -q '"cluster": "redis://:CHANGE-ME-' "$EX" || fail "$EX: the cluster URL's password is not a CHANGE-ME placeholder"
