@@ -17,7 +17,7 @@ command -v node >/dev/null || packages+=(nodejs)
 command -v npm >/dev/null || packages+=(npm)
 if [ "${1:-}" != "--build" ]; then
   packages+=(
-    python3-websockets python3-pytest python3-jsonschema jq
+    python3-websockets python3-pytest python3-jsonschema python3-yaml jq
     # scripts/fuzz.sh: clang + its libFuzzer/sanitizer runtimes, llvm-symbolizer for the reports
     clang libclang-rt-14-dev llvm
     # lucentd --cluster's tests start their own Redis
