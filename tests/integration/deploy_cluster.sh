@@ -31,18 +31,8 @@ REDIS_PW="pw-0123456789abcdef0123456789abcdef"
 PIDS=()
 trap 'for p in ${PIDS[@]+"${PIDS[@]}"}; do kill "$p" 2>/dev/null; wait "$p" 2>/dev/null; done; rm -rf "$TMP"' EXIT
 
-"$LUCENTD" --help >"$TMP/help" 2>&1 || fail "lucentd --help"
-help_default() { sed -n "s/^  --$1 [A-Z]* .*(default \([^)]*\)).*/\1/p" "$TMP/help"; }
-defaults_check() { # defaults_check NAME CONFIG
-  local key want got
-  for key in tile delta-threshold keyframe-interval; do
-    want="$(help_default "$key")"
-    got="$("$PY" -c 'import json, sys; j = json.load(open(sys.argv[1])); print(j.get(sys.argv[2], ""))' "$2" "$key")" ||
-      { fail "$1: not JSON"; return; }
-    [ -z "$got" ] && continue
-    "$PY" -c 'import sys; sys.exit(0 if float(sys.argv[1]) == float(sys.argv[2]) else 1)' "$got" "$want" ||
-      fail "$1: \"$key\": $got, lucentd's default is $want"
-  done
+cluster_defaults_check() { # cluster_defaults_check NAME CONFIG
+  defaults_check "$@"
   # a cluster config pins the backend (every replica must relight alike) and has a cluster URL
   json_check "$2" '"cluster" in j and j.get("backend") in ("cpu", "egl")'
 }
@@ -196,7 +186,7 @@ fi
 
 # --- the init container's merge (ConfigMap + Secret) and --check-config ------------------------
 if [ -f "$TMP/k8s/merge.sh" ]; then
-  defaults_check configmap "$TMP/k8s/lucentd.json"
+  cluster_defaults_check configmap "$TMP/k8s/lucentd.json"
   # the image's lucentd, made to check the merged file against this build's bake, tokens replaced
   cat >"$TMP/k8s/lucentd" <<EOF
 #!/bin/sh
@@ -244,7 +234,7 @@ rc=0
 "$LUCENTD" --config "$EX" --bake "$BAKEFILE" "${TOKENS[@]}" --cluster "redis://:$REDIS_PW@10.0.0.10:6379/lucent" \
   --check-config >"$TMP/out" 2>&1 || rc=$?
 [ "$rc" = 0 ] || fail "$EX: lucentd --check-config exited $rc: $(head -c 600 "$TMP/out")"
-defaults_check example "$EX"
+cluster_defaults_check example "$EX"
 grep -q '"cluster": "redis://:CHANGE-ME-' "$EX" || fail "$EX: the cluster URL's password is not a CHANGE-ME placeholder"
 grep -q '^requirepass CHANGE-ME-' "$D/redis-lucent.conf" || fail "redis-lucent.conf: requirepass is not a CHANGE-ME placeholder"
 

@@ -23,19 +23,6 @@ check() { # check NAME CONFIG [extra flags]
   [ "$rc" = 0 ] || fail "$name: lucentd --check-config exited $rc: $(head -c 600 "$TMP/out")"
 }
 
-"$LUCENTD" --help >"$TMP/help" 2>&1 || fail "lucentd --help"
-help_default() { sed -n "s/^  --$1 [A-Z]* .*(default \([^)]*\)).*/\1/p" "$TMP/help"; }
-defaults_check() { # defaults_check NAME CONFIG
-  local key want got
-  for key in tile delta-threshold keyframe-interval; do
-    want="$(help_default "$key")"
-    got="$("$PY" -c 'import json, sys; j = json.load(open(sys.argv[1])); print(j.get(sys.argv[2], ""))' "$2" "$key")" ||
-      { fail "$1: not JSON"; return; }
-    [ -z "$got" ] && continue
-    "$PY" -c 'import sys; sys.exit(0 if float(sys.argv[1]) == float(sys.argv[2]) else 1)' "$got" "$want" ||
-      fail "$1: \"$key\": $got, lucentd's default is $want"
-  done
-}
 
 # systemd example
 check example "$D/lucentd.example.json" "${TOKENS[@]}"

@@ -83,3 +83,18 @@ lucentctl_setup() {
   trap 'kill "$DPID" 2>/dev/null; wait "$DPID" 2>/dev/null; rm -rf "$TMP"' EXIT
   export LUCENT_URL="ws://127.0.0.1:$LUCENTD_PORT/"
 }
+
+# defaults_check NAME CONFIG: the delta-frame keys a shipped config sets hold lucentd's own
+# defaults (as `lucentd --help` states them); needs LUCENTD, PY and TMP.
+defaults_check() {
+  [ -s "$TMP/lucentd-help" ] || "$LUCENTD" --help >"$TMP/lucentd-help" 2>&1 || fail "lucentd --help"
+  local key want got
+  for key in tile delta-threshold keyframe-interval; do
+    want="$(sed -n "s/^  --$key [A-Z]* .*(default \([^)]*\)).*/\1/p" "$TMP/lucentd-help")"
+    got="$("$PY" -c 'import json, sys; j = json.load(open(sys.argv[1])); print(j.get(sys.argv[2], ""))' "$2" "$key")" ||
+      { fail "$1: not JSON"; return; }
+    [ -z "$got" ] && continue
+    "$PY" -c 'import sys; sys.exit(0 if float(sys.argv[1]) == float(sys.argv[2]) else 1)' "$got" "$want" ||
+      fail "$1: \"$key\": $got, lucentd's default is $want"
+  done
+}
