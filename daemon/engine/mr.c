@@ -24,6 +24,12 @@
 #else
 #define MR_CLONES __attribute__((target_clones("avx2", "default")))
 #endif
+/* clang (the fuzz build) refuses noinline on a multiversioned function. */
+#if defined(__clang__)
+#define MR_CLONES_NOINLINE MR_CLONES
+#else
+#define MR_CLONES_NOINLINE MR_CLONES __attribute__((noinline))
+#endif
 
 /* Light arrays (structure of arrays), padded with zero lights to a multiple of LC_MR_TILE. */
 enum { MR_PX, MR_PY, MR_PZ, MR_NX, MR_NY, MR_NZ, MR_R2, MR_BR, MR_BG, MR_BB, MR_EPS, MR_SOA };
@@ -293,7 +299,7 @@ static inline float mr_pow01(float c, float k) {
 
 /* gc[i] = gc[i]^k over one block of lanes (kept out of line: inlined into the gather, jump
  * threading on the clamp's constants left branches that kept the AVX2 clone scalar). */
-MR_CLONES __attribute__((noinline)) static void mr_pow_lanes(float *restrict gc, float k) {
+MR_CLONES_NOINLINE static void mr_pow_lanes(float *restrict gc, float k) {
     for (size_t i = 0; i < MR_LANES; i++) gc[i] = mr_pow01(gc[i], k);
 }
 
@@ -591,7 +597,7 @@ static inline __attribute__((always_inline)) void mr_gather_body(float *const *s
             a[A_MDZ][i] += wd * dz * dz;
             /* glossy: the mirror of d/|d| about n is 2 (n.d/|d|) n - d/|d|; cos g = mirror . v */
             float cg = nv2 * ci - (v0 * dx + v1 * dy + v2 * dz) * inv;
-            gw[i] = ok & (cg > 0.0f) ? w : 0.0f;
+            gw[i] = (ok & (cg > 0.0f)) ? w : 0.0f;
             gc[i] = cg > 1e-30f ? (cg < 1.0f ? cg : 1.0f) : 1e-30f;
         }
         if (!glossy) continue;
