@@ -182,6 +182,8 @@ static int server_metrics(lc_server *s, char *body, size_t cap) {
                "SIGHUP reloads whose configuration was applied (tests wait on it).", s->reloads);
     metric_u64(body, cap, &n, "lucent_accept_errors_total", "counter",
                "Failed accept() calls (e.g. out of file descriptors).", server_accept_errors_total());
+    metric_u64(body, cap, &n, "lucent_reserve_closed_total", "counter",
+               "Connections closed at accept: their descriptor was in lucentd's own reserve.", s->fd_ceiling_refused);
     uint64_t mr_processed = 0, mr_replaced = 0;
     if (s->mrw) lc_mrw_counts(s->mrw, &mr_processed, &mr_replaced);
     uint32_t mr_sessions = 0;
@@ -263,6 +265,20 @@ static int server_http_geometry(lc_server *s, struct lws *wsi, server_http_tx *t
 int server_http_callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len) {
     struct lws_vhost *vh = lws_get_vhost(wsi);
     lc_server *s = vh ? lws_get_vhost_user(vh) : NULL;
+    if (reason == LWS_CALLBACK_FILTER_NETWORK_CONNECTION && s && s->fd_ceiling) {
+        /* The descriptors above the ceiling are lucentd's own reserve (journal, snapshots,
+         * the engine's files): a connection that got one is closed before it is read. */
+        int fd = (int)(lws_intptr_t)in;
+        if (fd >= 0 && (unsigned)fd >= s->fd_ceiling) {
+            if (s->fd_ceiling_refused++ % 1000 == 0)
+                lc_warn("server",
+                        "closing a new connection: descriptor %d is in lucentd's reserve (%llu closed so far; "
+                        "raise the open-files limit or lower --max-clients)",
+                        fd, (unsigned long long)s->fd_ceiling_refused);
+            return 1;
+        }
+        return 0;
+    }
     if (reason == LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION) {
         /* A WebSocket upgrade that did not ask for lucent.v1 lands on the default (http)
          * protocol: refuse it (PROTOCOL.md §1.1). */

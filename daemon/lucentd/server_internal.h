@@ -132,8 +132,10 @@ struct lc_server {
     lc_proto_limits limits;
     lws_sorted_usec_list_t tick;
     int port;
-    uint32_t max_clients; /* --max-clients, lowered to what the descriptor limit allows */
-    unsigned fd_budget;   /* descriptors the sockets may use (0 = unlimited) */
+    uint32_t max_clients;        /* --max-clients, lowered to what the descriptor limit allows */
+    unsigned fd_budget;          /* descriptors the sockets may use (0 = unlimited) */
+    unsigned fd_ceiling;         /* an accepted socket numbered at or above this is closed (0 = none) */
+    uint64_t fd_ceiling_refused; /* connections closed at accept for it */
     /* metrics */
     uint64_t frames_sent, bytes_sent, messages_in;
     uint64_t errors[LC_ERR_COUNT]; /* error replies per catalogue code */
