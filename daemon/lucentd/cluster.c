@@ -34,12 +34,17 @@ typedef struct cluster_append {
 struct lc_cluster {
     lc_cluster_config cfg;
     char bake_id[64];
+    char limits[64]; /* "lights=N,objects=M": KEY:limits */
     char id[LC_CLUSTER_ID_LEN + 1];
     lc_cluster_wake_fn wake;
     void *wake_arg;
     pthread_t reader, writer;
     int reader_started, writer_started;
     uint64_t from; /* reader only: the last entry delivered */
+    /* reader only: who wrote entry `from` (its origin and local number; origin "" after a
+     * snapshot): on reconnect the entry at that position must still be the same one. */
+    char from_origin[LC_CLUSTER_ID_LEN + 1];
+    uint64_t from_local;
     /* cluster.lock guards everything below */
     pthread_mutex_t lock;
     pthread_cond_t cond; /* appends/snapshots queued, or stop */
@@ -106,6 +111,12 @@ int lc_cluster_parse_url(const char *url, size_t len, lc_cluster_url *out, char 
     const char *at = NULL;
     for (const char *q = p; q < slash; q++)
         if (*q == '@') at = q;
+    if (!at && memchr(slash, '@', (size_t)(end - slash))) { /* a key never holds '@' */
+        lc_set_err(err, errlen,
+                   "cluster: the URL has '@' after its first '/': a password holding '/' must be "
+                   "percent-encoded ('/' as %%2F, '@' as %%40, ':' as %%3A)");
+        return -1;
+    }
     if (at) {
         const char *colon = memchr(p, ':', (size_t)(at - p));
         if (!colon) {
@@ -361,6 +372,7 @@ static int cluster_load_snapshot(lc_cluster *c, redisContext *r, char *why, size
             if (cluster_deliver(c, LC_CLUSTER_SNAPSHOT, rev, st->str, st->len, NULL) == 0) {
                 lc_info("cluster", "loaded the snapshot of revision %" PRIu64 " (%zu bytes)", rev, st->len);
                 c->from = rev;
+                c->from_origin[0] = 0;
                 pthread_mutex_lock(&c->lock);
                 c->stats.snapshots_loaded++;
                 pthread_mutex_unlock(&c->lock);
@@ -415,6 +427,8 @@ static int cluster_read_entries(lc_cluster *c, const redisReply *rep, char *why,
         if (cluster_deliver(c, LC_CLUSTER_ENTRY, seq, ops ? ops->str : NULL, ops ? ops->len : 0, &proto) != 0)
             return -1;
         c->from = seq;
+        memcpy(c->from_origin, proto.origin, sizeof c->from_origin);
+        c->from_local = proto.local;
         n++;
     }
     pthread_mutex_lock(&c->lock);
@@ -460,24 +474,71 @@ static int cluster_read_once(lc_cluster *c, redisContext *r, int block_ms, char 
     return rc;
 }
 
-/* One connection's life: checks, snapshot, catch-up, then blocking reads. Returns when the
- * connection is lost (-1), on a fatal condition (-2) or when stopping (0). */
-static int cluster_reader_session(lc_cluster *c, redisContext *r, char *why, size_t whylen) {
+/* KEY:SUFFIX names what every replica of the cluster must share (the first replica sets it):
+ * 0 when this replica's `mine` is the same, -2 when not (why names both), -1 connection lost. */
+static int cluster_check_same(lc_cluster *c, redisContext *r, const char *suffix, const char *mine, const char *what,
+                              const char *needs, char *why, size_t whylen) {
     const char *key = c->cfg.url.key;
-    redisReply *rep = redisCommand(r, "SET %s:bake %s NX", key, c->bake_id);
+    redisReply *rep = redisCommand(r, "SET %s:%s %s NX", key, suffix, mine);
     if (rep) freeReplyObject(rep);
-    rep = rep ? redisCommand(r, "GET %s:bake", key) : NULL;
+    rep = rep ? redisCommand(r, "GET %s:%s", key, suffix) : NULL;
     if (!rep) {
         snprintf(why, whylen, "Redis: %s", r->errstr);
         return -1;
     }
-    int same = rep->type == REDIS_REPLY_STRING && strcmp(rep->str, c->bake_id) == 0;
+    int same = rep->type == REDIS_REPLY_STRING && strcmp(rep->str, mine) == 0;
     if (!same)
-        snprintf(why, whylen,
-                 "the cluster %s serves the bake %s and this replica has %s: every replica needs the same bake file",
-                 key, rep->type == REDIS_REPLY_STRING ? rep->str : "(not a string)", c->bake_id);
+        snprintf(why, whylen, "the cluster %s serves %s %s and this replica has %s: every replica needs %s", key, what,
+                 rep->type == REDIS_REPLY_STRING ? rep->str : "(not a string)", mine, needs);
     freeReplyObject(rep);
-    if (!same) return -2;
+    return same ? 0 : -2;
+}
+
+/* On reconnect: is the log's entry at `from` still the one this replica applied? Redis that
+ * lost entries (started without its AOF) and was refilled by other replicas past `from` holds
+ * another history there, and reading on from it would diverge silently. 0 (same, or trimmed
+ * behind a snapshot, or nothing to compare), -1 connection lost, -2 diverged (why). */
+static int cluster_check_history(lc_cluster *c, redisContext *r, char *why, size_t whylen) {
+    if (!c->from || !c->from_origin[0]) return 0;
+    char id[32];
+    snprintf(id, sizeof id, "0-%" PRIu64, c->from);
+    const char *argv[] = {"XRANGE", c->cfg.url.key, id, id};
+    redisReply *rep = redisCommandArgv(r, 4, argv, NULL);
+    if (!rep) {
+        snprintf(why, whylen, "Redis: XRANGE: %s", r->errstr);
+        return -1;
+    }
+    int rc = 0;
+    if (rep->type == REDIS_REPLY_ARRAY && rep->elements == 1 && rep->element[0]->type == REDIS_REPLY_ARRAY &&
+        rep->element[0]->elements == 2) {
+        lc_cluster_item there;
+        memset(&there, 0, sizeof there);
+        const redisReply *ops;
+        cluster_entry_fields(rep->element[0]->element[1], &there, &ops);
+        if (strcmp(there.origin, c->from_origin) != 0 || there.local != c->from_local) {
+            snprintf(why, whylen,
+                     "Redis's log %s holds another entry at revision %" PRIu64 " than the one this replica applied "
+                     "(from %s, not %s): Redis lost acknowledged entries and others appended after them; restart "
+                     "this replica to load the cluster's state",
+                     c->cfg.url.key, c->from, there.origin[0] ? there.origin : "(none)", c->from_origin);
+            rc = -2;
+        }
+    }
+    freeReplyObject(rep);
+    return rc;
+}
+
+/* One connection's life: checks, snapshot, catch-up, then blocking reads. Returns when the
+ * connection is lost (-1), on a fatal condition (-2) or when stopping (0). */
+static int cluster_reader_session(lc_cluster *c, redisContext *r, char *why, size_t whylen) {
+    const char *key = c->cfg.url.key;
+    int rc = cluster_check_same(c, r, "bake", c->bake_id, "the bake", "the same bake file", why, whylen);
+    if (rc == 0)
+        rc = cluster_check_same(c, r, "limits", c->limits, "the state limits",
+                                "the same --max-lights and --max-objects (a change that fits one replica's "
+                                "limits but not another's would be applied on one and skipped on the other)",
+                                why, whylen);
+    if (rc != 0) return rc;
     uint64_t last = 0;
     if (cluster_last_generated(c, r, &last, why, whylen) != 0) return -1;
     if (last < c->from) {
@@ -487,10 +548,11 @@ static int cluster_reader_session(lc_cluster *c, redisContext *r, char *why, siz
                  key, last, c->from);
         return -2;
     }
+    if ((rc = cluster_check_history(c, r, why, whylen)) != 0) return rc;
     pthread_mutex_lock(&c->lock);
     snprintf(c->reader_why, sizeof c->reader_why, "catching up with the log from revision %" PRIu64, c->from);
     pthread_mutex_unlock(&c->lock);
-    int rc = cluster_load_snapshot(c, r, why, whylen);
+    rc = cluster_load_snapshot(c, r, why, whylen);
     while (rc >= 0 && !cluster_stopping(c)) {
         rc = cluster_read_once(c, r, -1, why, whylen);
         if (rc == 0) break;
@@ -608,8 +670,14 @@ static int cluster_write_snapshot(lc_cluster *c, redisContext *r, uint64_t rev, 
     const char *argv[] = {"EVAL", cluster_snapshot_script, "3", k1, k2, c->cfg.url.key, revs, text};
     redisReply *rep = redisCommandArgv(r, 8, argv, NULL);
     if (!rep) return -1;
-    if (rep->type == REDIS_REPLY_ERROR) lc_warn("cluster", "snapshot of revision %s not stored: %s", revs, rep->str);
-    else if (rep->type == REDIS_REPLY_INTEGER && rep->integer == 1) {
+    if (rep->type == REDIS_REPLY_ERROR) {
+        /* e.g. an ACL without EVAL or HSET: the log still works, but it is never trimmed and
+         * new replicas replay it from the start (lucent_cluster_snapshot_failures_total). */
+        lc_warn("cluster", "snapshot of revision %s not stored: %s", revs, rep->str);
+        pthread_mutex_lock(&c->lock);
+        c->stats.snapshot_failures++;
+        pthread_mutex_unlock(&c->lock);
+    } else if (rep->type == REDIS_REPLY_INTEGER && rep->integer == 1) {
         lc_debug("cluster", "stored the snapshot of revision %s", revs);
         pthread_mutex_lock(&c->lock);
         c->stats.snapshots_written++;
@@ -725,6 +793,7 @@ lc_cluster *lc_cluster_start(const lc_cluster_config *cfg, uint64_t from_revisio
     c->cfg = *cfg;
     snprintf(c->bake_id, sizeof c->bake_id, "%s", cfg->bake_id ? cfg->bake_id : "");
     c->cfg.bake_id = c->bake_id;
+    snprintf(c->limits, sizeof c->limits, "lights=%u,objects=%u", cfg->max_lights, cfg->max_objects);
     c->from = from_revision;
     c->wake = wake;
     c->wake_arg = wake_arg;

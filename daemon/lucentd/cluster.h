@@ -4,7 +4,8 @@
  * entry's position is the state's revision (IDs 0-1, 0-2, ... : XADD KEY 0-*). Snapshots of
  * the state (KEY:snapshot, and the one before it in KEY:snapshot:previous) let a new replica
  * start without the whole log, and the stream is trimmed behind the older one. KEY:bake names
- * the bake the cluster serves; a replica with another bake refuses to join.
+ * the bake the cluster serves and KEY:limits the state's limits; a replica with another bake
+ * or other limits refuses to join.
  *
  * This module only moves text between Redis and the service thread: it knows nothing of the
  * state. Two threads, each with its own Redis connection (hiredis contexts are not shared):
@@ -41,8 +42,9 @@ int lc_cluster_parse_url(const char *url, size_t len, lc_cluster_url *out, char 
 
 typedef struct lc_cluster_config {
     lc_cluster_url url;
-    int timeout_ms;      /* connect and command timeout */
-    const char *bake_id; /* lc_lcb_bake_id of this replica's bake (copied) */
+    int timeout_ms;                   /* connect and command timeout */
+    const char *bake_id;              /* lc_lcb_bake_id of this replica's bake (copied) */
+    uint32_t max_lights, max_objects; /* the state's limits: every replica must have the same */
 } lc_cluster_config;
 
 typedef enum {
@@ -96,7 +98,8 @@ const char *lc_cluster_replica_id(const lc_cluster *c);
 
 /* For /metrics (any thread). */
 typedef struct lc_cluster_stats {
-    uint64_t appended, append_failures, entries_read, snapshots_loaded, snapshots_written, reconnects;
+    uint64_t appended, append_failures, entries_read, snapshots_loaded, snapshots_written, snapshot_failures,
+        reconnects;
     double last_append_ms; /* XADD round trip of the last append */
 } lc_cluster_stats;
 void lc_cluster_get_stats(lc_cluster *c, lc_cluster_stats *out);

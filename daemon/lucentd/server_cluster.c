@@ -34,10 +34,20 @@ int server_cluster_start(lc_server *s, char *err, size_t errlen) {
     if (lc_cluster_parse_url(cfg->cluster, strlen(cfg->cluster), &cc.url, err, errlen) != 0) return -1;
     cc.timeout_ms = cfg->cluster_timeout;
     cc.bake_id = s->bake_id;
+    cc.max_lights = (uint32_t)cfg->max_lights;
+    cc.max_objects = (uint32_t)cfg->max_objects;
     s->cluster = lc_cluster_start(&cc, s->state.revision, server_cluster_wake, s->ctx, err, errlen);
     if (!s->cluster) return -1;
     lc_info("cluster", "replica %s of redis://%s:%d/%s (the state comes from the log; --state-dir is not used)",
             lc_cluster_replica_id(s->cluster), cc.url.host, cc.url.port, cc.url.key);
+    /* The journal's options mean nothing here: say so rather than ignore them silently (the
+     * container images always pass --state-dir, so that one is only in the line above). */
+    if (cfg->fsync_mode != 0)
+        lc_warn("cluster",
+                "--fsync is ignored with --cluster: a change is durable when Redis has it (its "
+                "appendfsync, deploy/redis-lucent.conf)");
+    if (cfg->recover)
+        lc_warn("cluster", "--recover is ignored with --cluster: there is no local journal to recover from");
     return 0;
 }
 

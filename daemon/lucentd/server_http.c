@@ -133,6 +133,9 @@ static int server_cluster_metrics(lc_server *s, char *body, size_t cap, int n) {
                "Snapshots of the state loaded from Redis.", cs.snapshots_loaded);
     metric_u64(body, cap, &n, "lucent_cluster_snapshots_written_total", "counter",
                "Snapshots of the state this replica stored in Redis.", cs.snapshots_written);
+    metric_u64(body, cap, &n, "lucent_cluster_snapshot_failures_total", "counter",
+               "Snapshots Redis refused to store (the log is then not trimmed; see the log line).",
+               cs.snapshot_failures);
     metric_head(body, cap, &n, "lucent_cluster_append_seconds", "gauge", "Redis round trip of the last append.");
     http_append(body, cap, &n, "lucent_cluster_append_seconds %.6f\n", cs.last_append_ms * 1e-3);
     return n;

@@ -13,8 +13,12 @@ against a redis-server this test starts on loopback (AOF, appendfsync always).
   late        a replica started after the log was trimmed behind snapshots starts from the
               snapshot and ends identical
   other_bake  a replica with another bake is refused (/healthz 503 names both bakes)
+  other_limits  one with another --max-lights too (and its --fsync is said to be ignored)
   password    a Redis with requirepass: the URL's password lets a replica in; a wrong one keeps it
               starting (503) with Redis's refusal in /healthz
+  lost_log    Redis restarted empty (AOF lost) and refilled past a stopped replica's revision by a
+              fresh one: the stopped replica finds another entry at its revision and turns
+              unavailable (503) keeping its state; one that saw the empty log says so too
 """
 import array
 import os
@@ -82,8 +86,9 @@ class Redis:
         return "redis://127.0.0.1:%d/%s" % (self.port, KEY)
 
 
-def start_replica(redis, name, bake=None, url=None):
-    args = ["--cluster", url or redis.url, "--cluster-snapshot-every", str(SNAPSHOT_EVERY), "--cluster-timeout", "1000"]
+def start_replica(redis, name, bake=None, url=None, extra=()):
+    args = ["--cluster", url or redis.url, "--cluster-snapshot-every", str(SNAPSHOT_EVERY), "--cluster-timeout", "1000",
+            *extra]
     if bake:
         p, port = lt.start_lucentd(os.path.join(TMP, name), *args, bake=bake)
     else:
@@ -311,6 +316,19 @@ def case_other_bake(redis):
         stop(p)
 
 
+def case_other_limits(redis):
+    """A change that fits one replica's --max-lights but not another's would apply on one and be
+    skipped on the other: replicas with other limits are refused like another bake."""
+    p, port = start_replica(redis, "limits", extra=("--max-lights", "7", "--fsync", "everysec"))
+    try:
+        lt.wait_for(lambda: health(port)[0] == 503 and "limits" in health(port)[1], 20, "other limits refused")
+        check("lights=7" in health(port)[1] and "--max-lights" in health(port)[1],
+              "other_limits: /healthz 503 names both limits: %s" % health(port)[1].strip()[:200])
+    finally:
+        stop(p)
+    check("--fsync is ignored with --cluster" in p.log.text(), "other_limits: --fsync said to be ignored")
+
+
 def case_password():
     redis = Redis("redis-auth", password="s3cret:pw")
     redis.start()
@@ -335,6 +353,54 @@ def case_password():
         redis.p.wait()
 
 
+def case_lost_log():
+    """Redis restarts empty (its AOF lost) and a fresh replica refills the log past where a
+    stopped replica stood: that replica must not read the new history on as if it were its own."""
+    redis = Redis("redis-lost")
+    redis.start()
+    a, pa = start_replica(redis, "lost-a")
+    b, pb = start_replica(redis, "lost-b")
+    c = None
+    try:
+        wait_ready(pa, "lost_log: replica a ready")
+        wait_ready(pb, "lost_log: replica b ready")
+        ws = RawWS(pa, timeout=20)
+        ws.hello()
+        for i in range(3):
+            request(ws, {"type": "light.set", "id": i, "light": light("old-%d" % i, 0.1 + 0.05 * i)})
+        ws.close()
+        lt.wait_for(lambda: state_of(pb).get("revision", 0) >= 3, 20, "lost_log: b at revision 3")
+        b.send_signal(signal.SIGSTOP)  # b sees none of what follows until it runs again
+        redis.kill()
+        shutil.rmtree(redis.dir)
+        os.makedirs(redis.dir)
+        redis.start()
+        c, pc = start_replica(redis, "lost-c")  # an empty log: c starts from the bake
+        wait_ready(pc, "lost_log: the fresh replica c ready")
+        ws = RawWS(pc, timeout=20)
+        ws.hello()
+        for i in range(6):
+            request(ws, {"type": "light.set", "id": i, "light": light("new-%d" % i, 0.3 + 0.05 * i)})
+        ws.close()
+        b.send_signal(signal.SIGCONT)
+        lt.wait_for(lambda: health(pb)[0] == 503, 20, "lost_log: b unavailable")
+        check("another entry at revision 3" in health(pb)[1],
+              "lost_log: b names the other history: %s" % health(pb)[1].strip()[:200])
+        lt.wait_for(lambda: health(pa)[0] == 503, 20, "lost_log: a unavailable")
+        check("lost acknowledged entries" in health(pa)[1],
+              "lost_log: a, which saw the empty log, says so: %s" % health(pa)[1].strip()[:200])
+        ids = [li["id"] for li in state_of(pb).get("lights", [])]
+        check("old-2" in ids and "new-5" not in ids, "lost_log: b kept its own state (%s)" % ids)
+        check(health(pc)[0] == 200, "lost_log: c serves the new history")
+    finally:
+        b.send_signal(signal.SIGCONT)
+        for p in (a, b, c):
+            if p:
+                stop(p)
+        redis.p.terminate()
+        redis.p.wait()
+
+
 def main():
     redis = Redis()
     redis.start()
@@ -346,7 +412,9 @@ def main():
         case_redis_down(redis, replicas)
         case_late(redis, replicas)
         case_other_bake(redis)
+        case_other_limits(redis)
         case_password()
+        case_lost_log()
     finally:
         for p, _ in replicas:
             check(stop(p) == 0, "replica %s: clean stop" % p.name)

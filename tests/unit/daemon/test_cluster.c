@@ -49,6 +49,7 @@ int main(void) {
     check_refused("redis://[::1]x/k", "after the URL's ']'");
     check_refused("redis://user@h/k", "[USER]:PASSWORD@");
     check_refused("redis://:%zz@h/k", "percent-encoded");
+    check_refused("redis://:pa/ss@h/k", "password holding '/' must be percent-encoded");
     check_refused("redis://h/a%00b", "key is too long or badly encoded");
     check_refused("redis://h/a b", "key may hold only");
     char big[400];
