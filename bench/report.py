@@ -453,6 +453,41 @@ def mr_section(r, relight, md):
     md.append(MR_PAPER + "\n")
 
 
+def replicas_section(ack, loads, md):
+    """The Redis log's cost per change (ack.json) and one lucentd under many viewers (load/load-N.json)."""
+    md.append("## Replicas: the log's cost per change and viewers per lucentd (`tests/bench/ack_bench.py`, "
+              "`bench/load.sh`)\n")
+    if not ack and not loads:
+        md.append("not run\n")
+        return
+    if ack:
+        md.append("`light.set` → `ok`, one change at a time (%d per row; Redis on loopback, AOF, appendfsync "
+                  "always):\n" % ack["count"])
+        md.append("| configuration | p50 ms | p90 ms | p99 ms | max ms |")
+        md.append("|---|---|---|---|---|")
+        labels = {"journal": "one lucentd, local journal (`--fsync always`)", "cluster-1": "one replica (`--cluster`)",
+                  "cluster-3": "three replicas, changes sent to one"}
+        for key, x in ack["results"].items():
+            md.append("| %s | %.2f | %.2f | %.2f | %.2f |" % (labels.get(key, key), x["p50_ms"], x["p90_ms"],
+                                                             x["p99_ms"], x["max_ms"]))
+        md.append("")
+    if loads:
+        md.append("One lucentd (Cornell bake, CPU backend) under N viewers of `lucentctl load` in one process on the "
+                  "same cores, %s updates/s for %s s:\n" % (loads[0]["rate"], loads[0]["duration"]))
+        md.append("| viewers | connected | update→frame p50 ms | p99 ms | missing pairs | frames/client/s | "
+                  "on final revision | lucentd peak RSS MB | lucentd CPU s | load client CPU s |")
+        md.append("|---|---|---|---|---|---|---|---|---|---|")
+        for x in loads:
+            c, lat, d = x["clients"], x["latency_ms"], x.get("daemon") or {}
+            md.append("| %d | %d | %.1f | %.1f | %d | %.2f | %.1f%% | %.0f | %.1f | %.1f |" % (
+                c["requested"], c["connected"], lat["p50"] or 0, lat["p99"] or 0, lat["missing"],
+                x["frames"]["per_client_per_s"], 100 * x["final"]["fraction"], d.get("vmhwm_kb", 0) / 1024.0,
+                d.get("cpu_s", 0), x["load_client"]["cpu_s"]))
+        md.append("")
+    md.append("What these numbers mean for sizing (the capacity model) and the design's limits: the dated "
+              "\"Replicas\" section below and `deploy/OPERATING.md`.\n")
+
+
 def kept_sections(path, md):
     """The `## ` sections of the existing report that this run did not write (measurements made
     by hand or by other scripts: the probes solver, replicas, ...), in their order, so that a
@@ -487,6 +522,9 @@ def main():
     fid = load(os.path.join(a.out_dir, "fidelity.json"))
     dnrt = load(os.path.join(a.out_dir, "dnrt", "dnrt.json"))
     mr = load(os.path.join(a.out_dir, "mr", "mr.json"))
+    ack = load(os.path.join(a.out_dir, "ack.json"))
+    loads = sorted((j for j in (load(p) for p in glob.glob(os.path.join(a.out_dir, "load", "load-*.json"))) if j),
+                   key=lambda j: j["clients"]["requested"])
     m = machine(relight)
     m["cpu_during_run"] = cpu_shares(a.out_dir)
     md = ["# lucent benchmark results", "",
@@ -503,13 +541,14 @@ def main():
     latency_section(lat, md)
     dnrt_section(dnrt, relight, md)
     mr_section(mr, relight, md)
+    replicas_section(ack, loads, md)
     fidelity_section(fid, md)
     md += kept_sections(a.md, md)
     with open(a.md, "w") as fh:
         fh.write("\n".join(md) + "\n")
     with open(a.json, "w") as fh:
         json.dump({"machine": m, "paper": PAPER, "targets": TARGETS, "bake": bake, "relight": relight,
-                   "latency": lat, "dnrt": dnrt, "mr": mr, "fidelity": fid}, fh, indent=1)
+                   "latency": lat, "dnrt": dnrt, "mr": mr, "ack": ack, "load": loads, "fidelity": fid}, fh, indent=1)
 
 
 if __name__ == "__main__":
