@@ -29,9 +29,10 @@ j = json.load(open(sys.argv[1]))
 lm, b = j["lightmap"], j["bound"]
 assert j["texel_at"] == "surface" and j["reference_texel_at"] == "surface", (j["texel_at"], j["reference_texel_at"])
 assert b["rays"] == 4096 and b["compared"] == lm["compared"] > 1000, (b, lm)
-# Cornell moderate: the links cost about 3 points, the surfels about 3 (bench/fidelity.md);
-# the 256-spp reference adds ~5% noise to both
-assert 0 < b["mean"] < lm["mean"] < 0.15, (b["mean"], lm["mean"])
+# Cornell moderate with 8192 probe rays: the engine is within noise of its bound (the links
+# cost ~0 points at 8192 rays, the surfels ~3; bench/fidelity.md); the 256-spp reference adds
+# ~5% noise to both, the bound's 4096 rays their own
+assert 0 < b["mean"] < 0.15 and 0 < lm["mean"] < 0.15 and b["mean"] < lm["mean"] + 0.01, (b["mean"], lm["mean"])
 assert abs(b["bias"]) < 0.06, b["bias"]
 # Moved texels: the bake moved 53 floor caches out of the blocks. Their centres lie under the
 # blocks, black in the reference (so none is above the threshold), and the engine lights 47 of

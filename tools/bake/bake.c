@@ -451,7 +451,8 @@ typedef struct bake_job {
     lc_lightmap lm;       /* 4. texel caches ... */
     lc_lcb_cache *caches; /* ... then the grid caches after them (5) */
     uint32_t n_caches, n_texel_caches;
-    lc_grid grid; /* 5. grid caches */
+    uint32_t probe_rays; /* per cache, as used (lc_bake_probe_rays) */
+    lc_grid grid;        /* 5. grid caches */
     uint32_t *cell_cache;
     lc_relocate_stats rs;   /* 6. relocation */
     lc_lcb_surfel *surfels; /* 7. surfels (8 reorders them) */
@@ -641,12 +642,13 @@ static int bake_links(bake_job *b, char *err, size_t errlen) {
         b->link_sh = calloc(b->n_links * (uint64_t)s->bands * s->bands, sizeof *b->link_sh);
         if (!b->link_sh) return bake_oom(err, errlen);
     }
+    b->probe_rays = lc_bake_probe_rays(s, b->n_caches);
     lc_link_params lp = {.links_per_cache = (uint32_t)s->links,
                          .node_samples = (uint32_t)s->node_samples,
                          .final_samples = (uint32_t)s->final_samples,
                          .sh_bands = s->link_sh ? (uint32_t)s->bands : 0,
                          .seed = (uint64_t)s->seed,
-                         .probe_rays = (uint32_t)s->probe_rays,
+                         .probe_rays = b->probe_rays,
                          .threads = s->threads};
     if (s->exposure) {
         b->seen = calloc(b->n_surfels ? b->n_surfels : 1, sizeof *b->seen);
@@ -833,6 +835,7 @@ static int bake_meta(bake_job *b, char *err, size_t errlen) {
     cJSON_AddNumberToObject(jk, "mean_used", b->ls.mean_links_used);
     cJSON_AddNumberToObject(jk, "mean_solid_angle", b->ls.mean_solid_angle);
     cJSON_AddNumberToObject(jk, "rays", (double)b->ls.rays);
+    cJSON_AddNumberToObject(jk, "probe_rays", b->probe_rays);
     cJSON *jsv = cJSON_AddArrayToObject(meta, "solvers");
     if (s->solver != LC_BAKE_SOLVER_PROBES) cJSON_AddItemToArray(jsv, cJSON_CreateString("pic"));
     if (s->solver != LC_BAKE_SOLVER_PIC) {

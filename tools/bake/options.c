@@ -76,7 +76,7 @@ static const lc_opt bake_options[] = {
     {"drop-buried", LC_OPT_BOOL, OFF(drop_buried), 0, 1, "false", NULL,
      "drop surfels inside geometry (fewer than --surfels remain)", NULL, NULL},
     {"exposure", LC_OPT_BOOL, OFF(exposure), 0, 1, "false", NULL,
-     "weigh surfels by how many caches see them (see bake/exposure.h)", NULL, NULL},
+     "weigh surfels by how many caches see them (see bake/exposure.h; on in moderate, high and ultra)", NULL, NULL},
     {"hierarchy", LC_OPT_ENUM, OFF(hierarchy), 0, 0, "aac", "aac|kdtree",
      "surfel hierarchy: agglomerative clustering (PIC metric) or kd-tree", NULL, NULL},
     {"links", LC_OPT_INT, OFF(links), 1, 1024, "128", NULL, "links per cache (n_L)", NULL, NULL},
@@ -85,7 +85,11 @@ static const lc_opt bake_options[] = {
     {"final-samples", LC_OPT_INT, OFF(final_samples), 1, 1024, "32", NULL,
      "visibility rays per linked node for its final factor", NULL, NULL},
     {"probe-rays", LC_OPT_INT, OFF(probe_rays), 0, 65536, "1024", NULL,
-     "near-field probe rays per cache for link solid angles (0 = surfel sampling only)", NULL, NULL},
+     "near-field probe rays per cache for link solid angles, at least (0 = surfel sampling only)", NULL, NULL},
+    {"probe-ray-budget", LC_OPT_INT, OFF(probe_ray_budget), 0, 1 << 30, "33554432", NULL,
+     "probe rays over all caches: a scene with few caches gets more per cache, up to 8192 (0 = --probe-rays "
+     "exactly; the draft preset's)",
+     NULL, NULL},
     {"bands", LC_OPT_INT, OFF(bands), 1, 8, "3", NULL, "SH bands of the output caches", NULL, NULL},
     {"link-sh", LC_OPT_BOOL, OFF(link_sh), 0, 1, "false", NULL,
      "also store each link's transport projected into --bands SH (LKSH)", NULL, NULL},
@@ -158,15 +162,15 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
      * (docs/ARCHITECTURE.md, Decisions: "Quality presets"). */
     typedef struct {
         int atlas, surfels, links, bands, node_samples, final_samples, probe_rays, grid_max_dim, grid_max_samples,
-            relax, reloc_rays, exposure;
+            relax, reloc_rays, exposure, probe_ray_budget;
     } bake_preset;
     /* Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
      * so a cube-shaped room does not get 24^3 grid caches (more than its texel caches). */
     static const bake_preset presets[] = {
-        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0},
-        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 0},
-        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 0},
-        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1},
+        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0, 0}, /* draft: previews, bake time first */
+        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 1, 1 << 25},
+        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25},
+        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25},
     };
     const bake_preset *p = &presets[q];
     s->quality = (int)q;
@@ -182,6 +186,15 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     s->relax = p->relax;
     s->reloc_rays = p->reloc_rays;
     s->exposure = p->exposure;
+    s->probe_ray_budget = p->probe_ray_budget;
+}
+
+uint32_t lc_bake_probe_rays(const lc_bake_settings *s, uint32_t n_caches) {
+    uint32_t rays = (uint32_t)s->probe_rays;
+    if (!rays || !s->probe_ray_budget || !n_caches) return rays;
+    while (rays * 2 <= LC_BAKE_PROBE_RAYS_MAX && (uint64_t)n_caches * rays * 2 <= (uint64_t)s->probe_ray_budget)
+        rays *= 2;
+    return rays;
 }
 
 int lc_bake_parse_args(lc_bake_settings *s, int argc, char **argv, int start, char **positional, int max_pos, char *err,

@@ -832,7 +832,7 @@ static int pb_check_params(const lc_probebake_params *p, char *err, size_t errle
     if (p->count > PB_MAX_PROBES || (!p->count && !(p->density > 0)))
         lc_set_err(err, errlen, "probes: --probes must be 0..%d (0 with a positive --probe-density)", PB_MAX_PROBES);
     else if (p->relight_rays < 1 || p->relight_rays > 65536)
-        lc_set_err(err, errlen, "probes: --probe-rays must be 1..65536");
+        lc_set_err(err, errlen, "probes: --probe-relight-rays must be 1..65536");
     else if (p->sh_bands < 1 || p->sh_bands > LC_LCB_PROBE_MAX_BANDS)
         lc_set_err(err, errlen, "probes: --probe-bands must be 1..%d", LC_LCB_PROBE_MAX_BANDS);
     else if (p->overlaps < 1 || p->overlaps > 64) lc_set_err(err, errlen, "probes: --probe-overlaps must be 1..64");

@@ -29,6 +29,10 @@ typedef struct {
     double stage_ms[LC_STAGE_COUNT], total_ms, peak_mib;
     double gather_links; /* links evaluated per relight (all passes) */
     double gather_bytes, gather_flops, pull_bytes;
+    float *lightmap;  /* W*H*3 of the last run (owned; the same state on every backend) */
+    size_t lm_floats;
+    double vs_cpu;    /* sum|E - E_cpu| / sum E_cpu over the lightmap, the CPU row of the same
+                         bake and solver; -1 where there is none (CPU rows, no CPU run) */
 } bench_row;
 
 /* Memory bandwidth of this machine for a large copy (GB/s, read + write counted), the
@@ -136,6 +140,10 @@ static int bench_one(const char *path, lc_backend_kind kind, uint32_t solver, in
     row->links = v->links_per_cache;
     row->bands = settings.bands;
     row->nodes = v->n_nodes;
+    row->vs_cpu = -1;
+    row->lm_floats = (size_t)fr->lightmap_width * fr->lightmap_height * 3;
+    row->lightmap = malloc(row->lm_floats * sizeof *row->lightmap);
+    if (row->lightmap) memcpy(row->lightmap, fr->lightmap, row->lm_floats * sizeof *row->lightmap);
     /* Work model of the gather (runtime projection): per used link 12 B link + 12 B node flux
      * read; ~20 flops decode + bands^2 * (basis ~3 + weight 1 + 3 FMAs = 10). Earlier
      * feedback passes gather only the caches surfels read. */
@@ -171,6 +179,25 @@ done:
     lc_lcb_close(bake);
     free(samples);
     return rc;
+}
+
+/* Each EGL row's lightmap against the CPU row of the same bake and solver: on a new driver the
+ * timings mean nothing unless the light is the same. */
+static void bench_compare_backends(bench_row *rows, int n) {
+    for (int i = 0; i < n; i++) {
+        if (strcmp(rows[i].backend, "egl") || !rows[i].lightmap) continue;
+        for (int j = 0; j < n; j++) {
+            if (strcmp(rows[j].backend, "cpu") || strcmp(rows[j].file, rows[i].file) ||
+                strcmp(rows[j].solver, rows[i].solver) || !rows[j].lightmap || rows[j].lm_floats != rows[i].lm_floats)
+                continue;
+            double num = 0, den = 0;
+            for (size_t k = 0; k < rows[i].lm_floats; k++) {
+                num += fabs((double)rows[i].lightmap[k] - rows[j].lightmap[k]);
+                den += fabs((double)rows[j].lightmap[k]);
+            }
+            rows[i].vs_cpu = den > 0 ? num / den : (num > 0 ? 1 : 0);
+        }
+    }
 }
 
 /* --- DNRT: what placed objects cost (engine/dnrt.h) ---------------------------------------- */
@@ -469,16 +496,19 @@ int main(int argc, char **argv) {
             }
         }
     }
+    bench_compare_backends(rows, nrows);
     printf("\nrelight after one light change, median of %d runs, %d feedback bounce(s), ms\n", runs, bounces);
     printf("%-28s %-4s %-6s %7s %7s %5s", "bake", "bk", "solver", "surfels", "caches", "links");
     for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8s", stage_names[s]);
-    printf(" %8s %8s\n", "total", "peakMiB");
+    printf(" %8s %8s %8s\n", "total", "peakMiB", "vs cpu");
     for (int i = 0; i < nrows; i++) {
         const char *base = strrchr(rows[i].file, '/');
         printf("%-28.28s %-4s %-6s %7u %7u %5u", base ? base + 1 : rows[i].file, rows[i].backend, rows[i].solver,
                rows[i].surfels, rows[i].caches, rows[i].links);
         for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8.2f", rows[i].stage_ms[s]);
-        printf(" %8.2f %8.0f\n", rows[i].total_ms, rows[i].peak_mib);
+        printf(" %8.2f %8.0f", rows[i].total_ms, rows[i].peak_mib);
+        if (rows[i].vs_cpu >= 0) printf(" %7.1e\n", rows[i].vs_cpu);
+        else printf(" %8s\n", "-");
     }
     bench_dnrt_print(drows, ndrows);
     bench_drt_print(crows, ncrows);
@@ -501,6 +531,7 @@ int main(int argc, char **argv) {
         FILE *out = fopen(json, "w");
         if (!out) {
             fprintf(stderr, "lucent-bench: cannot write %s\n", json);
+            for (int i = 0; i < nrows; i++) free(rows[i].lightmap);
             return 1;
         }
         fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"memcpy_gbps\": %.2f, \"results\": [", runs, bounces, bw);
@@ -514,9 +545,11 @@ int main(int argc, char **argv) {
                 fprintf(out, "%s\"%s\": %.4f", s ? ", " : "", stage_names[s], rows[i].stage_ms[s]);
             fprintf(out,
                     "}, \"total_ms\": %.4f, \"peak_rss_mib\": %.1f, \"gather_links\": %.0f, "
-                    "\"gather_bytes\": %.0f, \"gather_flops\": %.0f, \"pull_bytes\": %.0f}",
+                    "\"gather_bytes\": %.0f, \"gather_flops\": %.0f, \"pull_bytes\": %.0f",
                     rows[i].total_ms, rows[i].peak_mib, rows[i].gather_links, rows[i].gather_bytes,
                     rows[i].gather_flops, rows[i].pull_bytes);
+            if (rows[i].vs_cpu >= 0) fprintf(out, ", \"lightmap_vs_cpu\": %.3e", rows[i].vs_cpu);
+            fprintf(out, "}");
         }
         fprintf(out, "\n], \"dnrt\": [");
         for (int i = 0; i < ndrows; i++)
@@ -540,5 +573,6 @@ int main(int argc, char **argv) {
         fprintf(out, "\n]}\n");
         fclose(out);
     }
+    for (int i = 0; i < nrows; i++) free(rows[i].lightmap);
     return failed;
 }

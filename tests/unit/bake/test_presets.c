@@ -18,12 +18,29 @@ int main(void) {
     static lc_bake_settings s;
     const char *moderate[] = {"scene.obj"};
     CHECK(parse(&s, moderate, 1) == 1, "default parse");
-    CHECK(s.quality == LC_QUALITY_MODERATE && s.surfels == 32768 && s.links == 128 && s.bands == 3 && !s.exposure,
-          "default = moderate (32768 surfels, 128 links, 3 bands, no exposure): %d %d %d %d", s.surfels, s.links,
-          s.bands, s.exposure);
+    CHECK(s.quality == LC_QUALITY_MODERATE && s.surfels == 32768 && s.links == 128 && s.bands == 3 && s.exposure &&
+              s.probe_rays == 1024 && s.probe_ray_budget == 1 << 25,
+          "default = moderate (32768 surfels, 128 links, 3 bands, exposure, 1024+ probe rays): %d %d %d %d %d %d",
+          s.surfels, s.links, s.bands, s.exposure, s.probe_rays, s.probe_ray_budget);
+    /* probe rays per cache: the floor, doubled while the bake's total stays within the budget */
+    CHECK(lc_bake_probe_rays(&s, 35000) == 1024, "Sponza's 35 000 caches keep 1024 rays: %u",
+          lc_bake_probe_rays(&s, 35000));
+    CHECK(lc_bake_probe_rays(&s, 16384) == 2048, "16 384 caches: 2048 rays (exactly the budget): %u",
+          lc_bake_probe_rays(&s, 16384));
+    CHECK(lc_bake_probe_rays(&s, 3181) == 8192, "the Cornell box's 3 181 caches: the 8192 cap: %u",
+          lc_bake_probe_rays(&s, 3181));
+    CHECK(lc_bake_probe_rays(&s, 1) == LC_BAKE_PROBE_RAYS_MAX, "never above the cap");
+    s.probe_ray_budget = 0;
+    CHECK(lc_bake_probe_rays(&s, 100) == 1024, "budget 0: --probe-rays exactly");
+    s.probe_ray_budget = 1 << 25;
+    s.probe_rays = 0;
+    CHECK(lc_bake_probe_rays(&s, 100) == 0, "--probe-rays 0 (surfel sampling only) stays 0");
+    const char *draft[] = {"scene.obj", "--quality", "draft"};
+    CHECK(parse(&s, draft, 3) == 1 && s.probe_rays == 256 && s.probe_ray_budget == 0 && !s.exposure,
+          "draft: 256 probe rays exactly, no exposure (previews: bake time first)");
     const char *high[] = {"scene.obj", "--quality", "high"};
     CHECK(parse(&s, high, 3) == 1, "high");
-    CHECK(s.surfels == 131072 && s.links == 254 && s.bands == 4 && !s.exposure, "high preset");
+    CHECK(s.surfels == 131072 && s.links == 254 && s.bands == 4 && s.exposure, "high preset");
     const char *ultra[] = {"scene.obj", "--quality", "ultra"};
     CHECK(parse(&s, ultra, 3) == 1, "ultra");
     CHECK(s.quality == LC_QUALITY_ULTRA && s.surfels == 131072 && s.links == 512 && s.bands == 3 && s.exposure &&
