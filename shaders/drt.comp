@@ -84,10 +84,6 @@ layout(location = 10) uniform int u_last;
 
 // Not this window's cache, or not gathered this pass: left alone.
 bool skip(uint c) { return c < u_cbase || c - u_cbase >= u_ccount || (u_last == 0 && caches[c].fresh == 0u); }
-void add(uint c, int j, int k, float v) {
-    cache_sh[(c - u_cbase) * u_nc * 3u + uint(3 * j + k)] += v;
-    if (j < 9) sh9[27u * c + uint(3 * j + k)] += v;
-}
 
 #if DRT_STAGE == 2
 layout(std430, binding = 4) readonly buffer Receivers { uvec4 receivers[]; }; // cache, first, count, -
@@ -102,6 +98,17 @@ void main() {
     bool texel = c < u_n_texel;
     int lo = texel ? u_texel_lo : 0, hi = texel ? min(u_texel_nc, 4) : min(u_grid_nc, 9);
     uint stride = texel ? 5u : 10u;
+    // The cache's coefficients are loaded once, summed in registers in entry order and stored
+    // once: the same roundings as adding every entry into memory (the CPU's order), without a
+    // read-modify-write of global memory per entry (7 ms per object on an H200 that way).
+    // The full SH and its L2 copy hold the same values but are summed apart, as the CPU does.
+    uint base = (c - u_cbase) * u_nc * 3u;
+    precise float acc[27], acc9[27];
+    for (int j = lo; j < hi; j++)
+        for (int k = 0; k < 3; k++) {
+            acc[3 * j + k] = cache_sh[base + uint(3 * j + k)];
+            acc9[3 * j + k] = sh9[27u * c + uint(3 * j + k)];
+        }
     for (uint i = 0u; i < rc.z; i++) {
         uint e = rc.y + i * stride;
         uint src = floatBitsToUint(entries[e]);
@@ -115,9 +122,15 @@ void main() {
         for (int j = lo; j < hi; j++)
             for (int k = 0; k < 3; k++) {
                 precise float v = entries[e + 1u + uint(j)] * f[k];
-                add(c, j, k, v);
+                acc[3 * j + k] += v;
+                acc9[3 * j + k] += v;
             }
     }
+    for (int j = lo; j < hi; j++)
+        for (int k = 0; k < 3; k++) {
+            cache_sh[base + uint(3 * j + k)] = acc[3 * j + k];
+            sh9[27u * c + uint(3 * j + k)] = acc9[3 * j + k];
+        }
 }
 
 #else

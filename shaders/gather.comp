@@ -10,7 +10,9 @@ layout(local_size_x = 64) in;
 
 struct Link { uint node; float factor; uint dir_cone; };
 struct Cache { float nx, ny, nz; uint flags; uint link_count; uint pad0, pad1, pad2; };
-// links and cache_sh are bound as windows starting at cache u_base (<= 128 MiB each).
+// links and cache_sh are bound as windows starting at cache u_base (<= 128 MiB each); the links
+// are link-major within their window (link k of window cache i at k * u_window + i: the
+// invocations of a subgroup read consecutive links).
 layout(std430, binding = 0) readonly buffer Links { Link links[]; };
 layout(std430, binding = 1) readonly buffer Caches { Cache caches[]; };
 layout(std430, binding = 2) readonly buffer Flux { float flux[]; };
@@ -21,10 +23,10 @@ layout(std430, binding = 6) readonly buffer List { uint list[]; };
 layout(std430, binding = 7) readonly buffer ShK { double shk[]; }; // K_l0, sqrt(2) K_lm (m > 0)
 layout(location = 0) uniform uint u_count;
 layout(location = 1) uniform uint u_base;
-layout(location = 2) uniform uint u_links_per_cache;
 layout(location = 3) uniform uint u_use_list; // 1: caches are list[idx] (single window)
 layout(location = 4) uniform int u_texel_nc;   // coefficients gathered at texel caches (lc_transport_texel_bands^2)
 layout(location = 5) uniform int u_texel_band1; // 1: texel caches carry band 1 only (lc_transport_texel_band1)
+layout(location = 6) uniform uint u_window;     // caches in the bound links window
 
 const int BAND_OF[64] = int[64](0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5,
                                 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7);
@@ -117,9 +119,8 @@ void main() {
     }
     uint used = caches[c].link_count;
     int nc_here = (caches[c].flags & 1u) != 0u ? min(u_texel_nc, NC) : NC; // 1 = LC_CACHE_TEXEL
-    uint lb = local * u_links_per_cache;
     for (uint k = 0u; k < used; k++) {
-        Link lk = links[lb + k];
+        Link lk = links[k * u_window + local];
         vec3 d = oct_decode(lk.dir_cone);
         float y[NC];
         sh_eval(d.x, d.y, d.z, y);

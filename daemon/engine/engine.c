@@ -777,7 +777,9 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     e->reset_next = 0;
     fr.lightmap_width = v->lightmap_width;
     fr.lightmap_height = v->lightmap_height;
-    lc_lmfilter_apply(e->lmfilter, fr.lightmap, e->lightmap);
+    double tf = lc_clock_ms();
+    lc_lmfilter_apply(e->lmfilter, fr.lightmap, e->lightmap, e->threads);
+    fr.stage_ms[LC_STAGE_LIGHTMAP] += lc_clock_ms() - tf; /* the filter is part of the lightmap */
     fr.lightmap = e->lightmap;
     fr.sh_bands = st->settings.bands;
     fr.sh_stride = LC_SH_MAX_COEFFS; /* both backends keep full-size records */

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "util/log.h"
+#include "util/parallel.h"
 
 typedef struct lmf_tap {
     uint32_t texel;
@@ -123,9 +124,20 @@ oom:
 /* Luminance (Rec. 709). */
 static float lmf_luma(const float *c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2]; }
 
-void lc_lmfilter_apply(const lc_lmfilter *f, const float *in, float *out) {
+typedef struct {
+    const lc_lmfilter *f;
+    const float *in;
+    float *out;
+} lmf_job;
+
+static void lmf_range(void *ctx, size_t begin, size_t end, int thread) {
+    (void)thread;
+    const lmf_job *job = ctx;
+    const lc_lmfilter *f = job->f;
+    const float *in = job->in;
+    float *out = job->out;
     const float inv_sigma2 = 1.0f / (LC_LMFILTER_RANGE * LC_LMFILTER_RANGE);
-    for (uint32_t t = 0; t < f->texels; t++) {
+    for (size_t t = begin; t < end; t++) {
         uint32_t first = f->start[t], end = f->start[t + 1];
         float *o = out + 3 * (size_t)t;
         if (first == end) {
@@ -151,6 +163,11 @@ void lc_lmfilter_apply(const lc_lmfilter *f, const float *in, float *out) {
         o[1] = g / wsum;
         o[2] = b / wsum;
     }
+}
+
+void lc_lmfilter_apply(const lc_lmfilter *f, const float *in, float *out, int threads) {
+    lmf_job job = {f, in, out};
+    lc_parallel_for(threads, f->texels, 2048, lmf_range, &job);
 }
 
 uint32_t lc_lmfilter_filtered_texels(const lc_lmfilter *f) { return f ? f->filtered : 0; }

@@ -35,8 +35,9 @@ typedef struct lc_lmfilter lc_lmfilter;
 
 /* NULL with err on out of memory. */
 lc_lmfilter *lc_lmfilter_create(const lc_lcb_view *v, char *err, size_t errlen);
-/* out = filtered in (both W*H*3; must not alias). */
-void lc_lmfilter_apply(const lc_lmfilter *f, const float *in, float *out);
+/* out = filtered in (both W*H*3; must not alias), on `threads` threads (0 = all cores;
+ * lc_parallel_for). */
+void lc_lmfilter_apply(const lc_lmfilter *f, const float *in, float *out, int threads);
 /* Texels that have neighbours (for tests and logs). */
 uint32_t lc_lmfilter_filtered_texels(const lc_lmfilter *f);
 void lc_lmfilter_release(lc_lmfilter *f);

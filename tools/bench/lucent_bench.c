@@ -31,6 +31,8 @@ typedef struct {
     double gather_bytes, gather_flops, pull_bytes;
     float *lightmap;  /* W*H*3 of the last run (owned; the same state on every backend) */
     size_t lm_floats;
+    float *radiosity, *cache_sh; /* the last run's surfel B and cache SH (owned), for --check */
+    size_t n_radiosity, n_cache_sh;
     double vs_cpu;    /* sum|E - E_cpu| / sum E_cpu over the lightmap, the CPU row of the same
                          bake and solver; -1 where there is none (CPU rows, no CPU run) */
 } bench_row;
@@ -144,6 +146,13 @@ static int bench_one(const char *path, lc_backend_kind kind, uint32_t solver, in
     row->lm_floats = (size_t)fr->lightmap_width * fr->lightmap_height * 3;
     row->lightmap = malloc(row->lm_floats * sizeof *row->lightmap);
     if (row->lightmap) memcpy(row->lightmap, fr->lightmap, row->lm_floats * sizeof *row->lightmap);
+    row->n_radiosity = (size_t)v->n_surfels * 3;
+    row->n_cache_sh = (size_t)fr->n_caches * fr->sh_stride * 3;
+    row->radiosity = malloc(row->n_radiosity * sizeof(float));
+    row->cache_sh = malloc(row->n_cache_sh * sizeof(float));
+    if (row->radiosity && fr->surfel_radiosity)
+        memcpy(row->radiosity, fr->surfel_radiosity, row->n_radiosity * sizeof(float));
+    if (row->cache_sh && fr->cache_sh) memcpy(row->cache_sh, fr->cache_sh, row->n_cache_sh * sizeof(float));
     /* Work model of the gather (runtime projection): per used link 12 B link + 12 B node flux
      * read; ~20 flops decode + bands^2 * (basis ~3 + weight 1 + 3 FMAs = 10). Earlier
      * feedback passes gather only the caches surfels read. */
@@ -181,6 +190,17 @@ done:
     return rc;
 }
 
+/* sum |a - b| / sum |b| (-1 when either is missing). */
+static double bench_rel_diff(const float *a, const float *b, size_t n) {
+    if (!a || !b) return -1;
+    double num = 0, den = 0;
+    for (size_t k = 0; k < n; k++) {
+        num += fabs((double)a[k] - b[k]);
+        den += fabs((double)b[k]);
+    }
+    return den > 0 ? num / den : (num > 0 ? 1 : 0);
+}
+
 /* Each EGL row's lightmap against the CPU row of the same bake and solver: on a new driver the
  * timings mean nothing unless the light is the same. */
 static void bench_compare_backends(bench_row *rows, int n) {
@@ -190,12 +210,12 @@ static void bench_compare_backends(bench_row *rows, int n) {
             if (strcmp(rows[j].backend, "cpu") || strcmp(rows[j].file, rows[i].file) ||
                 strcmp(rows[j].solver, rows[i].solver) || !rows[j].lightmap || rows[j].lm_floats != rows[i].lm_floats)
                 continue;
-            double num = 0, den = 0;
-            for (size_t k = 0; k < rows[i].lm_floats; k++) {
-                num += fabs((double)rows[i].lightmap[k] - rows[j].lightmap[k]);
-                den += fabs((double)rows[j].lightmap[k]);
-            }
-            rows[i].vs_cpu = den > 0 ? num / den : (num > 0 ? 1 : 0);
+            rows[i].vs_cpu = bench_rel_diff(rows[i].lightmap, rows[j].lightmap, rows[i].lm_floats);
+            if (rows[i].vs_cpu > 1e-3)
+                fprintf(stderr, "lucent-bench: %s %s: EGL differs from CPU: lightmap %.3g, surfel B %.3g, cache SH %.3g\n",
+                        rows[i].file, rows[i].solver, rows[i].vs_cpu,
+                        bench_rel_diff(rows[i].radiosity, rows[j].radiosity, rows[i].n_radiosity),
+                        bench_rel_diff(rows[i].cache_sh, rows[j].cache_sh, rows[i].n_cache_sh));
         }
     }
 }
@@ -531,7 +551,7 @@ int main(int argc, char **argv) {
         FILE *out = fopen(json, "w");
         if (!out) {
             fprintf(stderr, "lucent-bench: cannot write %s\n", json);
-            for (int i = 0; i < nrows; i++) free(rows[i].lightmap);
+            for (int i = 0; i < nrows; i++) free(rows[i].lightmap), free(rows[i].radiosity), free(rows[i].cache_sh);
             return 1;
         }
         fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"memcpy_gbps\": %.2f, \"results\": [", runs, bounces, bw);
@@ -573,6 +593,6 @@ int main(int argc, char **argv) {
         fprintf(out, "\n]}\n");
         fclose(out);
     }
-    for (int i = 0; i < nrows; i++) free(rows[i].lightmap);
+    for (int i = 0; i < nrows; i++) free(rows[i].lightmap), free(rows[i].radiosity), free(rows[i].cache_sh);
     return failed;
 }

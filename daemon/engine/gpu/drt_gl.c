@@ -36,7 +36,8 @@ struct lc_drt_gl {
     uint32_t n_ops, cap_ops;
     uint32_t *patch_first, *recv_first, *recv_count, *inpaint_first, *inpaint_count; /* per object */
     uint32_t n_patches;
-    float *e_direct; /* host staging of the patches' direct light */
+    float *e_direct;       /* host staging of the patches' direct light */
+    lc_gl_staging staging; /* the patches' B and flux read back (gl_util.h) */
 };
 
 lc_drt_gl *lc_drt_gl_create(char *err, size_t errlen) {
@@ -77,6 +78,7 @@ void lc_drt_gl_release(lc_drt_gl *g) {
     for (int s = 0; s < 4; s++)
         if (g->prog[s]) glDeleteProgram(g->prog[s]);
     glDeleteBuffers(DRT_GL_NBUF, g->buf); /* 0 names are ignored */
+    lc_gl_staging_release(&g->staging);
     drt_gl_free_layout(g);
     free(g);
 }
@@ -303,8 +305,8 @@ void lc_drt_gl_read_back(lc_drt_gl *g, lc_drt_ops *const *ops, uint32_t n) {
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     for (uint32_t i = 0; i < n; i++) {
         lc_drt_arrays a = lc_drt_arrays_get(ops[i]);
-        GLintptr off = (GLintptr)((size_t)g->patch_first[i] * 12);
-        glGetNamedBufferSubData(g->buf[DRT_GL_PB], off, (GLsizeiptr)((size_t)a.n_patches * 12), a.patch_b);
-        glGetNamedBufferSubData(g->buf[DRT_GL_PFLUX], off, (GLsizeiptr)((size_t)a.n_patches * 12), a.patch_flux);
+        size_t off = (size_t)g->patch_first[i] * 12;
+        lc_gl_read(&g->staging, g->buf[DRT_GL_PB], off, (size_t)a.n_patches * 12, a.patch_b);
+        lc_gl_read(&g->staging, g->buf[DRT_GL_PFLUX], off, (size_t)a.n_patches * 12, a.patch_flux);
     }
 }

@@ -93,6 +93,8 @@ GLuint lc_gl_compile_program(const char *name, const char *src, char *err, size_
     return lc_gl_compile_program_defs(name, src, NULL, err, errlen);
 }
 
+size_t lc_gl_test_window_limit = 0;
+
 GLuint lc_gl_buffer(size_t bytes, const void *data, const char *what, char *err, size_t errlen) {
     GLuint b = 0;
     size_t alloc = bytes < 16 ? 16 : bytes; /* a zero-size range cannot be bound */
@@ -106,10 +108,43 @@ GLuint lc_gl_buffer(size_t bytes, const void *data, const char *what, char *err,
         if (b) glDeleteBuffers(1, &b);
         return 0;
     }
-    /* Zeroed unless fully uploaded: stages may read a buffer before its first write. */
-    if (!data || bytes < alloc) glClearNamedBufferData(b, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
+    /* Zeroed unless fully uploaded: stages may read a buffer before its first write. The
+     * finish orders the clear before the caller's uploads: on an H200 (NVIDIA 580.159) a
+     * glNamedBufferSubData of the whole buffer issued right after the clear was lost (the
+     * links read back as zeros). Buffers are made at create and when they grow, so the wait
+     * is rare. */
+    if (!data || bytes < alloc) {
+        glClearNamedBufferData(b, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
+        glFinish();
+    }
     if (data && bytes) glNamedBufferSubData(b, 0, (GLsizeiptr)bytes, data);
     return b;
+}
+
+void lc_gl_read(lc_gl_staging *s, GLuint src, size_t offset, size_t bytes, void *dst) {
+    if (!bytes) return;
+    if (s->cap < bytes) {
+        lc_gl_staging_release(s);
+        size_t cap = (bytes + ((size_t)1 << 20) - 1) & ~(((size_t)1 << 20) - 1);
+        while (glGetError() != GL_NO_ERROR) {
+        }
+        glCreateBuffers(1, &s->buf);
+        glNamedBufferStorage(s->buf, (GLsizeiptr)cap, NULL, GL_MAP_READ_BIT | GL_CLIENT_STORAGE_BIT);
+        if (!s->buf || glGetError() != GL_NO_ERROR) {
+            lc_gl_staging_release(s); /* no staging memory: read the source directly */
+            glGetNamedBufferSubData(src, (GLintptr)offset, (GLsizeiptr)bytes, dst);
+            return;
+        }
+        s->cap = cap;
+    }
+    glCopyNamedBufferSubData(src, s->buf, (GLintptr)offset, 0, (GLsizeiptr)bytes);
+    glGetNamedBufferSubData(s->buf, 0, (GLsizeiptr)bytes, dst);
+}
+
+void lc_gl_staging_release(lc_gl_staging *s) {
+    if (s->buf) glDeleteBuffers(1, &s->buf);
+    s->buf = 0;
+    s->cap = 0;
 }
 
 void lc_gl_bind(GLuint index, GLuint buf, size_t offset, size_t size) {

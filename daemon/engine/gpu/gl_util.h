@@ -12,6 +12,9 @@
 /* Largest SSBO range bound at once: llvmpipe's MAX_SHADER_STORAGE_BLOCK_SIZE and GL's
  * guaranteed minimum-ish; larger buffers are bound as windows. */
 #define LC_GL_MAX_BINDING ((size_t)128 << 20)
+/* Tests only: caps the bytes of one window of the per-cache arrays (links, full cache SH) an
+ * engine created afterwards uses, so a small bake runs the many-window paths. 0: the device's. */
+extern size_t lc_gl_test_window_limit;
 
 /* The embedded source of shaders/<name>.comp, or NULL. */
 const char *lc_gl_shader_source(const char *name);
@@ -35,6 +38,20 @@ void lc_gl_bind(GLuint index, GLuint buf, size_t offset, size_t size);
  * over x and y so no axis exceeds 65535. Shaders rebuild the index as
  * gid.y * num_groups.x * local + gid.x and must bounds-check it. */
 void lc_gl_dispatch_1d(size_t n, unsigned local);
+
+/* Read-back through a staging buffer. Reading a shader-written buffer straight back with
+ * glGetBufferSubData every relight makes NVIDIA's driver move that buffer from video to host
+ * memory ("Buffer performance warning ... copied/moved from VIDEO memory to HOST memory",
+ * measured on an H200: every shader access then crosses PCIe). The copy into a
+ * client-storage buffer keeps the source in video memory; on llvmpipe it is one memcpy more.
+ * One staging buffer per module (reads are sequential); it grows to the largest read. */
+typedef struct lc_gl_staging {
+    GLuint buf;
+    size_t cap;
+} lc_gl_staging;
+/* Copies [offset, offset + bytes) of src into dst through s. */
+void lc_gl_read(lc_gl_staging *s, GLuint src, size_t offset, size_t bytes, void *dst);
+void lc_gl_staging_release(lc_gl_staging *s);
 
 /* Drains glGetError; 0 when clean, -1 with err = "<stage>: GL error 0x..", or -2 when the
  * context was lost (GL_CONTEXT_LOST or a graphics reset status). */

@@ -16,6 +16,7 @@ struct lc_mr_gl {
     lc_egl_context *ctx;
     GLuint prog, occ_prog, lights_buf, points_buf, sums_buf, opts_buf, targets_buf, occ_buf;
     size_t lights_cap, points_cap, sums_cap, opts_cap, targets_cap, occ_cap; /* bytes */
+    lc_gl_staging staging; /* sums and occlusion read back (gl_util.h) */
     uint32_t n_lights;
     int fail_next;
     char desc[512];
@@ -75,6 +76,7 @@ void lc_mr_gl_release(lc_mr_gl *g) {
         GLuint bufs[6] = {g->lights_buf, g->points_buf, g->sums_buf, g->opts_buf, g->targets_buf, g->occ_buf};
         for (int i = 0; i < 6; i++)
             if (bufs[i]) glDeleteBuffers(1, &bufs[i]);
+        lc_gl_staging_release(&g->staging);
     }
     if (g->ctx) lc_egl_release(g->ctx);
     free(g);
@@ -158,9 +160,7 @@ int lc_mr_gl_gather(lc_mr_gl *g, const float *points, uint32_t n, float k, int g
         base += count;
     } while (base < g->n_lights);
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    glBindBuffer(GL_SHADER_STORAGE_BUFFER, g->sums_buf);
-    glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)sbytes, sums);
-    glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    lc_gl_read(&g->staging, g->sums_buf, 0, sbytes, sums);
     glUseProgram(0);
     return lc_gl_check("mr_gl/gather", err, errlen);
 }
@@ -198,7 +198,7 @@ int lc_mr_gl_occlusion(lc_mr_gl *g, const float *points, const float *targets, u
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
     }
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    glGetNamedBufferSubData(g->occ_buf, 0, (GLsizeiptr)obytes, occ);
+    lc_gl_read(&g->staging, g->occ_buf, 0, obytes, occ);
     glUseProgram(0);
     for (uint32_t i = 0; i < 2 * n; i++) occ[i] = occ[i] < 1.0f ? occ[i] : 1.0f;
     return lc_gl_check("mr_gl/occlusion", err, errlen);

@@ -100,6 +100,7 @@ typedef struct tgl {
     GLuint b_b0, b_radiosity, b_e_ind, b_flux, b_cache_sh, b_sh9, b_lightmap, b_grid_sh, b_obj_pos, b_obj_sh;
     uint32_t gpu_object_cap;
     GLuint queries[TGL_MAX_STAMPS];
+    lc_gl_staging staging; /* every output's read-back (gl_util.h: keeps them in video memory) */
     /* DNRT (engine/dnrt.h), uploaded when the frame changes: */
     uint8_t *feedback_cache; /* per cache: some surfel reads it */
     GLuint b_dn_obj, b_dn_inc, b_dn_rec, b_dn_list;
@@ -135,6 +136,7 @@ static void tgl_release(void *impl) {
                          t->b_obj_sh,  t->b_dn_obj,   t->b_dn_inc, t->b_dn_rec,   t->b_dn_list};
         glDeleteBuffers((GLsizei)(sizeof bufs / sizeof bufs[0]), bufs); /* 0 names are ignored */
         if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
+        lc_gl_staging_release(&t->staging);
     }
     lc_egl_release(t->egl);
     lc_transport_outputs_release(&t->out);
@@ -199,7 +201,8 @@ static int tgl_fit_limits(tgl *t, char *err, size_t errlen) {
         }
     size_t per_cache = (size_t)v->links_per_cache * sizeof(lc_lcb_link);
     if (per_cache < TGL_CAP * 12) per_cache = TGL_CAP * 12;
-    size_t chunk = limit / per_cache;
+    size_t window = lc_gl_test_window_limit && lc_gl_test_window_limit < limit ? lc_gl_test_window_limit : limit;
+    size_t chunk = window / per_cache;
     /* Whole multiples of 256 caches keep every window offset aligned (256 * 12 * k bytes). */
     chunk -= chunk % 256;
     if (align > 3072) {
@@ -299,12 +302,37 @@ err:
     return rc;
 }
 
-/* The links as mapped, the lightmap and grid indices and the cone table. */
+/* The links link-major within each gather window: link k of the window's cache i at
+ * k * (caches in the window) + i, so the invocations of a subgroup (consecutive caches) read
+ * consecutive links; in the bake's cache-major order they read 1.5 KiB apart (128 links) and
+ * the gather ran at PCIe-like rates on an H200. A window keeps its byte range, so the
+ * bindings do not change. One window of host memory at a time. */
+static int tgl_upload_links(tgl *t, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
+    const size_t per = v->links_per_cache;
+    if (!(t->b_links = lc_gl_buffer((size_t)v->n_caches * per * sizeof(lc_lcb_link), NULL, "links", err, errlen)))
+        return -1;
+    uint32_t win = t->chunk < v->n_caches ? t->chunk : v->n_caches;
+    lc_lcb_link *tmp = malloc((size_t)(win ? win : 1) * per * sizeof *tmp);
+    if (!tmp) {
+        lc_set_err(err, errlen, "out of memory");
+        return -1;
+    }
+    for (uint32_t c0 = 0; c0 < v->n_caches; c0 += t->chunk) {
+        uint32_t cnt = v->n_caches - c0 < t->chunk ? v->n_caches - c0 : t->chunk;
+        for (uint32_t i = 0; i < cnt; i++)
+            for (size_t k = 0; k < per; k++) tmp[k * cnt + i] = v->links[((size_t)c0 + i) * per + k];
+        glNamedBufferSubData(t->b_links, (GLintptr)((size_t)c0 * per * sizeof *tmp),
+                             (GLsizeiptr)((size_t)cnt * per * sizeof *tmp), tmp);
+    }
+    free(tmp);
+    return 0;
+}
+
+/* The links (tgl_upload_links), the lightmap and grid indices and the cone table. */
 static int tgl_upload_tables(tgl *t, char *err, size_t errlen) {
     const lc_lcb_view *v = t->v;
-    if (!(t->b_links = lc_gl_buffer((size_t)v->n_caches * v->links_per_cache * sizeof(lc_lcb_link), v->links, "links",
-                                    err, errlen)))
-        return -1;
+    if (tgl_upload_links(t, err, errlen) != 0) return -1;
     if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) return -1;
     if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) return -1;
     float cone[256][8];
@@ -403,9 +431,9 @@ static void tgl_stamp(tgl *t, tgl_stamps *s, int stage) {
 static void tgl_uniform_count(GLuint prog, size_t n) { glProgramUniform1ui(prog, 0, (GLuint)n); }
 
 /* Reads bytes of buf into dst, timing it into ms. */
-static void tgl_read(GLuint buf, size_t bytes, void *dst, double *ms) {
+static void tgl_read(tgl *t, GLuint buf, size_t bytes, void *dst, double *ms) {
     double t0 = lc_clock_ms();
-    if (bytes) glGetNamedBufferSubData(buf, 0, (GLsizeiptr)bytes, dst);
+    lc_gl_read(&t->staging, buf, 0, bytes, dst);
     *ms += lc_clock_ms() - t0;
 }
 
@@ -487,7 +515,6 @@ static void tgl_gather_setup(tgl *t, GLuint gather, const lc_engine_settings *st
     lc_gl_bind(5, t->b_sh9, 0, (size_t)v->n_caches * 108);
     lc_gl_bind(6, t->b_list, 0, (size_t)t->n_feedback * 4);
     lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
-    glProgramUniform1ui(gather, 2, v->links_per_cache);
     glProgramUniform1i(gather, 4, lc_transport_texel_bands(st) * lc_transport_texel_bands(st));
     glProgramUniform1i(gather, 5, lc_transport_texel_band1(st));
 }
@@ -500,6 +527,7 @@ static void tgl_gather_list(tgl *t, GLuint gather, const lc_engine_settings *st,
     lc_gl_bind(6, list, 0, (size_t)n * 4);
     glProgramUniform1ui(gather, 1, 0);
     glProgramUniform1ui(gather, 3, 1);
+    glProgramUniform1ui(gather, 6, v->n_caches); /* the one window holds every cache */
     tgl_uniform_count(gather, n);
     lc_gl_dispatch_1d(n, TGL_LOCAL);
 }
@@ -520,6 +548,7 @@ static void tgl_gather(tgl *t, GLuint gather, const lc_engine_settings *st, int 
             lc_gl_bind(0, t->b_links, c0 * link_bytes, cnt * link_bytes);
             lc_gl_bind(4, t->b_cache_sh, c0 * sh_bytes, cnt * sh_bytes);
             glProgramUniform1ui(gather, 1, c0);
+            glProgramUniform1ui(gather, 6, cnt);
             tgl_uniform_count(gather, cnt);
             lc_gl_dispatch_1d(cnt, TGL_LOCAL);
         }
@@ -794,19 +823,19 @@ static int tgl_read_back(tgl *t, const lc_transport_input *in, double rb[LC_STAG
     const lc_lcb_view *v = t->v;
     const size_t nc = (size_t)in->settings.bands * in->settings.bands;
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT); /* shader writes must be visible to buffer reads */
-    tgl_read(t->b_radiosity, (size_t)v->n_surfels * 12, t->out.radiosity, &rb[LC_STAGE_BOUNCE]);
-    tgl_read(t->b_flux, (size_t)v->n_nodes * 12, t->out.flux, &rb[LC_STAGE_PULL]);
-    tgl_read(t->b_cache_sh, (size_t)v->n_caches * nc * 12, t->cache_tmp, &rb[LC_STAGE_GATHER]);
+    tgl_read(t, t->b_radiosity, (size_t)v->n_surfels * 12, t->out.radiosity, &rb[LC_STAGE_BOUNCE]);
+    tgl_read(t, t->b_flux, (size_t)v->n_nodes * 12, t->out.flux, &rb[LC_STAGE_PULL]);
+    tgl_read(t, t->b_cache_sh, (size_t)v->n_caches * nc * 12, t->cache_tmp, &rb[LC_STAGE_GATHER]);
     double t0 = lc_clock_ms();
     for (uint32_t c = 0; c < v->n_caches; c++)
         memcpy(t->out.cache_sh + (size_t)c * TGL_CAP * 3, t->cache_tmp + (size_t)c * nc * 3, nc * 3 * sizeof(float));
     rb[LC_STAGE_GATHER] += lc_clock_ms() - t0;
-    tgl_read(t->b_lightmap, t->texels * 12, t->out.lightmap, &rb[LC_STAGE_LIGHTMAP]);
+    tgl_read(t, t->b_lightmap, t->texels * 12, t->out.lightmap, &rb[LC_STAGE_LIGHTMAP]);
     t0 = lc_clock_ms();
     if (in->settings.sh_lightmap && lc_transport_fill_lightmap_sh(&t->out, v, "egl", err, errlen) != 0) return -1;
     rb[LC_STAGE_LIGHTMAP] += lc_clock_ms() - t0;
-    tgl_read(t->b_grid_sh, (size_t)t->cells * 108, t->out.grid_sh, &rb[LC_STAGE_GRID]);
-    tgl_read(t->b_obj_sh, (size_t)in->n_objects * 108, t->out.object_sh, &rb[LC_STAGE_OBJECTS]);
+    tgl_read(t, t->b_grid_sh, (size_t)t->cells * 108, t->out.grid_sh, &rb[LC_STAGE_GRID]);
+    tgl_read(t, t->b_obj_sh, (size_t)in->n_objects * 108, t->out.object_sh, &rb[LC_STAGE_OBJECTS]);
     return 0;
 }
 

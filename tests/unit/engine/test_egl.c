@@ -427,6 +427,25 @@ static void test_cornell(const char *quality, int runs) {
         test_cornell_drt(gpu, &f, quality);
         test_cornell_probes(gpu, &f, quality);
         lc_engine_release(gpu);
+        /* Many windows, as a bake larger than one SSBO binding gets them: the links (laid out
+         * link-major per window), the cache SH, DNRT and DRT windows give the same light. */
+        lc_gl_test_window_limit = (size_t)256 << 10;
+        lc_engine *win = lc_engine_create(f.bake, LC_BACKEND_EGL, 0, err, sizeof err);
+        lc_gl_test_window_limit = 0;
+        CHECK(win != NULL, "egl engine in small windows: %s", err);
+        if (win) {
+            double w = 0;
+            st.settings.progressive = 0; /* the CPU engine's feedback is from the tests above */
+            for (int i = 0; i < 2; i++) {
+                st.revision = (uint64_t)(100 + i);
+                snprintf(label, sizeof label, "cornell %s in windows, relight %d", quality, i);
+                w = fmax(w, relight_both(win, f.engine, f.v, &st, label, 1));
+            }
+            fprintf(stderr, "cornell %s in 256 KiB windows: worst EGL/CPU difference %.3g\n", quality, w);
+            test_cornell_dnrt(win, &f, quality);
+            test_cornell_drt(win, &f, quality);
+            lc_engine_release(win);
+        }
     }
     fixture_release(&f);
 }

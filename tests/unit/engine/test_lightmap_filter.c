@@ -74,7 +74,7 @@ int main(void) {
     float in[3 * N], out[3 * N];
 
     fill(in, constant);
-    lc_lmfilter_apply(f, in, out);
+    lc_lmfilter_apply(f, in, out, 1);
     float worst = 0;
     for (int t = 0; t < N; t++)
         if (lightmap[t] != LC_NONE) worst = fmaxf(worst, fabsf(out[3 * t] - 2.0f));
@@ -82,7 +82,7 @@ int main(void) {
     CHECK(out[3 * 63] == 0 && out[3 * 63 + 1] == 0, "the empty texel stays 0");
 
     fill(in, checker);
-    lc_lmfilter_apply(f, in, out);
+    lc_lmfilter_apply(f, in, out, 1);
     double dev = 0;
     int n = 0;
     for (uint32_t y = 1; y < H - 1; y++)
@@ -98,12 +98,12 @@ int main(void) {
     CHECK(out[3 * (7 * W + 6)] == out[3 * (6 * W + 6)], "the dilated texel shows its owner's filtered value");
 
     fill(in, step);
-    lc_lmfilter_apply(f, in, out);
+    lc_lmfilter_apply(f, in, out, 1);
     CHECK(out[3 * (3 * W + 2)] < 1.01f && out[3 * (4 * W + 2)] > 1.98f, "a 2x step stays a step (%g | %g)",
           out[3 * (3 * W + 2)], out[3 * (4 * W + 2)]);
 
     fill(in, ramp_wall);
-    lc_lmfilter_apply(f, in, out);
+    lc_lmfilter_apply(f, in, out, 1);
     CHECK(fabsf(out[3 * (4 * W + 3)] - 1.0f) < 1e-6f && fabsf(out[3 * (4 * W + 4)] - 10.0f) < 1e-6f,
           "floor and wall do not mix across the crease (%g | %g)", out[3 * (4 * W + 3)], out[3 * (4 * W + 4)]);
     CHECK(lc_lmfilter_filtered_texels(f) > 40, "%u texels filtered", lc_lmfilter_filtered_texels(f));
