@@ -29,11 +29,11 @@ typedef struct {
     double stage_ms[LC_STAGE_COUNT], total_ms, peak_mib;
     double gather_links; /* links evaluated per relight (all passes) */
     double gather_bytes, gather_flops, pull_bytes;
-    float *lightmap;  /* W*H*3 of the last run (owned; the same state on every backend) */
+    float *lightmap; /* W*H*3 of the last run (owned; the same state on every backend) */
     size_t lm_floats;
     float *radiosity, *cache_sh; /* the last run's surfel B and cache SH (owned), for --check */
     size_t n_radiosity, n_cache_sh;
-    double vs_cpu;    /* sum|E - E_cpu| / sum E_cpu over the lightmap, the CPU row of the same
+    double vs_cpu; /* sum|E - E_cpu| / sum E_cpu over the lightmap, the CPU row of the same
                          bake and solver; -1 where there is none (CPU rows, no CPU run) */
 } bench_row;
 
@@ -212,7 +212,8 @@ static void bench_compare_backends(bench_row *rows, int n) {
                 continue;
             rows[i].vs_cpu = bench_rel_diff(rows[i].lightmap, rows[j].lightmap, rows[i].lm_floats);
             if (rows[i].vs_cpu > 1e-3)
-                fprintf(stderr, "lucent-bench: %s %s: EGL differs from CPU: lightmap %.3g, surfel B %.3g, cache SH %.3g\n",
+                fprintf(stderr,
+                        "lucent-bench: %s %s: EGL differs from CPU: lightmap %.3g, surfel B %.3g, cache SH %.3g\n",
                         rows[i].file, rows[i].solver, rows[i].vs_cpu,
                         bench_rel_diff(rows[i].radiosity, rows[j].radiosity, rows[i].n_radiosity),
                         bench_rel_diff(rows[i].cache_sh, rows[j].cache_sh, rows[i].n_cache_sh));
@@ -443,6 +444,55 @@ static void bench_drt_print(const bench_drt_row *rows, int n) {
            "target here: <= 5 s per 1 m object on 2 cores\n");
 }
 
+/* The JSON document of every row (--json). -1 when it cannot be written. */
+static int bench_write_json(const char *json, int runs, int bounces, double bw, const bench_row *rows, int nrows,
+                            const bench_dnrt_row *drows, int ndrows, const bench_drt_row *crows, int ncrows) {
+    FILE *out = fopen(json, "w");
+    if (!out) {
+        fprintf(stderr, "lucent-bench: cannot write %s\n", json);
+        return -1;
+    }
+    fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"memcpy_gbps\": %.2f, \"results\": [", runs, bounces, bw);
+    for (int i = 0; i < nrows; i++) {
+        fprintf(out,
+                "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"solver\": \"%s\", \"surfels\": %u, "
+                "\"caches\": %u, \"links\": %u, \"bands\": %u, \"stages_ms\": {",
+                i ? "," : "", rows[i].file, rows[i].backend, rows[i].solver, rows[i].surfels, rows[i].caches,
+                rows[i].links, rows[i].bands);
+        for (int s = 0; s < LC_STAGE_COUNT; s++)
+            fprintf(out, "%s\"%s\": %.4f", s ? ", " : "", stage_names[s], rows[i].stage_ms[s]);
+        fprintf(out,
+                "}, \"total_ms\": %.4f, \"peak_rss_mib\": %.1f, \"gather_links\": %.0f, "
+                "\"gather_bytes\": %.0f, \"gather_flops\": %.0f, \"pull_bytes\": %.0f",
+                rows[i].total_ms, rows[i].peak_mib, rows[i].gather_links, rows[i].gather_bytes, rows[i].gather_flops,
+                rows[i].pull_bytes);
+        if (rows[i].vs_cpu >= 0) fprintf(out, ", \"lightmap_vs_cpu\": %.3e", rows[i].vs_cpu);
+        fprintf(out, "}");
+    }
+    fprintf(out, "\n], \"dnrt\": [");
+    for (int i = 0; i < ndrows; i++)
+        fprintf(out,
+                "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
+                "\"blockers\": %s, \"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, "
+                "\"per_object_ms\": %.5f, \"move_ms\": %.4f, \"relight_ms\": %.4f, \"grid_kib\": %.1f}",
+                i ? "," : "", drows[i].file, drows[i].backend, drows[i].objects, drows[i].size_m,
+                drows[i].blockers ? "true" : "false", drows[i].receivers, drows[i].light_ms,
+                drows[i].light_ms / drows[i].objects, drows[i].move_ms, drows[i].relight_ms, drows[i].grid_kib);
+    fprintf(out, "\n], \"drt\": [");
+    for (int i = 0; i < ncrows; i++)
+        fprintf(out,
+                "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
+                "\"build_ms\": %.1f, \"build_max_ms\": %.1f, \"mib_per_object\": %.2f, "
+                "\"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, \"per_object_ms\": %.5f, "
+                "\"relight_ms\": %.4f}",
+                i ? "," : "", crows[i].file, crows[i].backend, crows[i].objects, crows[i].size_m, crows[i].build_ms,
+                crows[i].build_max_ms, crows[i].mib, crows[i].receivers, crows[i].light_ms,
+                crows[i].light_ms / crows[i].objects, crows[i].relight_ms);
+    fprintf(out, "\n]}\n");
+    fclose(out);
+    return 0;
+}
+
 int main(int argc, char **argv) {
     int runs = 15, bounces = 1, dnrt = 1;
     double object_size = 0; /* auto */
@@ -547,52 +597,7 @@ int main(int argc, char **argv) {
            "  moderate (3 bands, 128 links, 32k surfels): CPU i7-4510U 2 cores 33.8, i7-4790S 21.1; GTX 980 3.65\n"
            "  high     (4 bands, 254 links, 128k surfels): CPU i7-4510U 198, i7-4790S 131; GTX 980 7.17\n"
            "targets here (2 cores): sponza moderate <= 15 ms, high <= 60 ms (CPU backend)\n");
-    if (json) {
-        FILE *out = fopen(json, "w");
-        if (!out) {
-            fprintf(stderr, "lucent-bench: cannot write %s\n", json);
-            for (int i = 0; i < nrows; i++) free(rows[i].lightmap), free(rows[i].radiosity), free(rows[i].cache_sh);
-            return 1;
-        }
-        fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"memcpy_gbps\": %.2f, \"results\": [", runs, bounces, bw);
-        for (int i = 0; i < nrows; i++) {
-            fprintf(out,
-                    "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"solver\": \"%s\", \"surfels\": %u, "
-                    "\"caches\": %u, \"links\": %u, \"bands\": %u, \"stages_ms\": {",
-                    i ? "," : "", rows[i].file, rows[i].backend, rows[i].solver, rows[i].surfels, rows[i].caches,
-                    rows[i].links, rows[i].bands);
-            for (int s = 0; s < LC_STAGE_COUNT; s++)
-                fprintf(out, "%s\"%s\": %.4f", s ? ", " : "", stage_names[s], rows[i].stage_ms[s]);
-            fprintf(out,
-                    "}, \"total_ms\": %.4f, \"peak_rss_mib\": %.1f, \"gather_links\": %.0f, "
-                    "\"gather_bytes\": %.0f, \"gather_flops\": %.0f, \"pull_bytes\": %.0f",
-                    rows[i].total_ms, rows[i].peak_mib, rows[i].gather_links, rows[i].gather_bytes,
-                    rows[i].gather_flops, rows[i].pull_bytes);
-            if (rows[i].vs_cpu >= 0) fprintf(out, ", \"lightmap_vs_cpu\": %.3e", rows[i].vs_cpu);
-            fprintf(out, "}");
-        }
-        fprintf(out, "\n], \"dnrt\": [");
-        for (int i = 0; i < ndrows; i++)
-            fprintf(out,
-                    "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
-                    "\"blockers\": %s, \"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, "
-                    "\"per_object_ms\": %.5f, \"move_ms\": %.4f, \"relight_ms\": %.4f, \"grid_kib\": %.1f}",
-                    i ? "," : "", drows[i].file, drows[i].backend, drows[i].objects, drows[i].size_m,
-                    drows[i].blockers ? "true" : "false", drows[i].receivers, drows[i].light_ms,
-                    drows[i].light_ms / drows[i].objects, drows[i].move_ms, drows[i].relight_ms, drows[i].grid_kib);
-        fprintf(out, "\n], \"drt\": [");
-        for (int i = 0; i < ncrows; i++)
-            fprintf(out,
-                    "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
-                    "\"build_ms\": %.1f, \"build_max_ms\": %.1f, \"mib_per_object\": %.2f, "
-                    "\"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, \"per_object_ms\": %.5f, "
-                    "\"relight_ms\": %.4f}",
-                    i ? "," : "", crows[i].file, crows[i].backend, crows[i].objects, crows[i].size_m, crows[i].build_ms,
-                    crows[i].build_max_ms, crows[i].mib, crows[i].receivers, crows[i].light_ms,
-                    crows[i].light_ms / crows[i].objects, crows[i].relight_ms);
-        fprintf(out, "\n]}\n");
-        fclose(out);
-    }
+    if (json && bench_write_json(json, runs, bounces, bw, rows, nrows, drows, ndrows, crows, ncrows) != 0) failed = 1;
     for (int i = 0; i < nrows; i++) free(rows[i].lightmap), free(rows[i].radiosity), free(rows[i].cache_sh);
     return failed;
 }
