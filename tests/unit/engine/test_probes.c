@@ -171,6 +171,68 @@ static void test_leak(void) {
           100 * ratio[0]);
 }
 
+/* Every row's transport rebuilt from bake v's clusters (U S V^T), dense over (probe, coeff):
+ * out[(cache * 9 + coeff) * (n_probes * nc) + probe * nc + c]. */
+static float *transport_rows(const lc_lcb_view *v) {
+    const lc_lcb_probe_header *h = v->probe_header;
+    const uint32_t nc = h->sh_bands * h->sh_bands;
+    const size_t width = (size_t)h->n_probes * nc;
+    float *out = calloc((size_t)v->n_caches * 9 * width, sizeof *out);
+    for (uint32_t ci = 0; out && ci < h->n_clusters; ci++) {
+        const lc_lcb_probe_cluster *cl = &v->probe_clusters[ci];
+        const uint32_t cols = cl->n_probes * nc;
+        for (uint32_t i = 0; i < cl->n_rows; i++) {
+            const lc_lcb_probe_row *row = &v->probe_rows[cl->first_row + i];
+            float *dst = out + ((size_t)row->cache * 9 + row->coeff) * width;
+            const float *u = v->probe_u + cl->u_offset + (size_t)i * cl->rank;
+            for (uint32_t r = 0; r < cl->rank; r++) {
+                const float *b = v->probe_basis + cl->basis_offset + (size_t)r * cols;
+                for (uint32_t q = 0; q < cl->n_probes; q++)
+                    for (uint32_t c = 0; c < nc; c++)
+                        dst[(size_t)v->probe_cluster_probes[cl->first_probe + q] * nc + c] += u[r] * b[q * nc + c];
+            }
+        }
+    }
+    return out;
+}
+
+/* Each cluster of the lossy bake against the same rows of the exact one: its relative
+ * Frobenius error must be within the bake's --probe-svd-error (plus float rounding). */
+static void check_cluster_errors(const lc_lcb_view *exact, const lc_lcb_view *lossy, double limit) {
+    const lc_lcb_probe_header *h = lossy->probe_header;
+    const uint32_t nc = h->sh_bands * h->sh_bands;
+    const size_t width = (size_t)h->n_probes * nc;
+    CHECK(exact->probe_header->n_probes == h->n_probes && exact->n_caches == lossy->n_caches &&
+              !memcmp(exact->probes, lossy->probes, h->n_probes * sizeof *lossy->probes),
+          "cluster errors: the two bakes place the same probes");
+    float *a = transport_rows(exact), *b = transport_rows(lossy);
+    CHECK(a && b, "cluster errors: out of memory");
+    double worst = 0;
+    uint32_t compressed = 0;
+    for (uint32_t ci = 0; a && b && ci < h->n_clusters; ci++) {
+        const lc_lcb_probe_cluster *cl = &lossy->probe_clusters[ci];
+        double num = 0, den = 0;
+        for (uint32_t i = 0; i < cl->n_rows; i++) {
+            const lc_lcb_probe_row *row = &lossy->probe_rows[cl->first_row + i];
+            const float *x = a + ((size_t)row->cache * 9 + row->coeff) * width;
+            const float *y = b + ((size_t)row->cache * 9 + row->coeff) * width;
+            for (size_t k = 0; k < width; k++) {
+                num += ((double)y[k] - x[k]) * ((double)y[k] - x[k]);
+                den += (double)x[k] * x[k];
+            }
+        }
+        if (den <= 0) continue;
+        compressed += cl->rank < cl->n_rows;
+        worst = fmax(worst, sqrt(num / den));
+    }
+    fprintf(stderr, "cluster errors: %u clusters (%u truncated), worst relative Frobenius %.4f (limit %.2f)\n",
+            h->n_clusters, compressed, worst, limit);
+    CHECK(compressed > 0, "cluster errors: no cluster was truncated (the test cannot see an error)");
+    CHECK(worst <= limit * 1.01 + 1e-4, "cluster errors: a cluster is off by %.4f, over its %.2f", worst, limit);
+    free(a);
+    free(b);
+}
+
 /* The compressed transport against the exact one (clusters no larger than their rank), and
  * the same bake bytes for 1 and 2 threads. */
 static void test_compression_and_determinism(void) {
@@ -217,6 +279,7 @@ static void test_compression_and_determinism(void) {
         !memcmp(a->probe_u, b->probe_u, a->n_probe_u * sizeof(float)) &&
         !memcmp(a->probe_rows, b->probe_rows, a->probe_header->n_rows * sizeof *a->probe_rows);
     CHECK(same, "probes bake: 1 and 2 threads give the same probe sections");
+    check_cluster_errors(fe.v, fl.v, 0.05);
     const lc_engine_frame *fr;
     size_t texels = (size_t)fe.v->lightmap_width * fe.v->lightmap_height;
     float *ref = malloc(texels * 3 * sizeof *ref);
