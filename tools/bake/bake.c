@@ -534,8 +534,10 @@ static int bake_lightmap_uv(bake_job *b, char *err, size_t errlen) {
         return 1;
     }
     if (!s->quiet)
-        lc_info("bake", "lightmap %ux%u, %u charts, %.1f texels/m, atlas usage %.1f%%", b->uvs.width, b->uvs.height,
-                b->uvs.n_charts, b->uvs.texels_per_metre, b->uvs.usage * 100);
+        lc_info("bake",
+                "lightmap %ux%u, %u charts, %.1f texels/m, atlas usage %.1f%%, texels %.4f m apart (p95 %.4f m)",
+                b->uvs.width, b->uvs.height, b->uvs.n_charts, b->uvs.texels_per_metre, b->uvs.usage * 100,
+                b->uvs.spacing_mean, b->uvs.spacing_p95);
     return 0;
 }
 
@@ -803,6 +805,9 @@ static int bake_meta(bake_job *b, char *err, size_t errlen) {
     cJSON_AddNumberToObject(jl, "texels_per_metre", b->uvs.texels_per_metre);
     cJSON_AddNumberToObject(jl, "usage", b->uvs.usage);
     cJSON_AddNumberToObject(jl, "charts", b->uvs.n_charts);
+    cJSON_AddNumberToObject(jl, "texel_spacing_mean", b->uvs.spacing_mean);
+    cJSON_AddNumberToObject(jl, "texel_spacing_p95", b->uvs.spacing_p95);
+    cJSON_AddNumberToObject(jl, "texel_spacing_max", b->uvs.spacing_max);
     cJSON_AddNumberToObject(jl, "covered", b->lm.n_covered);
     cJSON_AddNumberToObject(jl, "dilated", b->lm.n_dilated);
     cJSON_AddStringToObject(jl, "uv_source", scene->has_lightmap_uv ? "asset" : "generated");

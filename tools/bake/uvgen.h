@@ -26,6 +26,10 @@ typedef struct lc_uv_stats {
     uint32_t width, height;  /* atlas in texels */
     double texels_per_metre; /* the density used */
     double usage;            /* texels covered by charts' footprints / atlas texels, in (0, 1] */
+    /* World distance between neighbouring texel centres, sqrt(world area / texel area) of each
+     * triangle, weighted by its texel area (what a texel-by-texel measure sees): mean, p95 and
+     * max in metres (lc_uv_texel_spacing; both functions below fill them). */
+    double spacing_mean, spacing_p95, spacing_max;
 } lc_uv_stats;
 
 /* Generates lightmap UVs (replacing any existing uv1). Returns 0 or -1 with err set (e.g.
@@ -35,5 +39,8 @@ int lc_uvgen(lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char
 /* For meshes that already have uv1 from the asset: chooses the atlas size for the density or
  * takes atlas_size, and fills stats (usage from rasterized coverage). */
 int lc_uvgen_measure(const lc_mesh *mesh, const lc_uv_params *params, lc_uv_stats *stats, char *err, size_t errlen);
+
+/* Fills stats' spacing_* from mesh.uv1 in a W x H atlas. -1 out of memory. */
+int lc_uv_texel_spacing(const lc_mesh *mesh, uint32_t W, uint32_t H, lc_uv_stats *stats);
 
 #endif

@@ -527,8 +527,31 @@ static void test_min_density(void) {
     lc_mesh_release(&hall);
 }
 
+/* One chart that mixes tilts (density mode, 2 texels/m, chart angle 45): a 4 x 4 m floor and a
+ * 4 x 1 m strip rising at 35 degrees from its edge. Scaled by the chart's average stretch the
+ * strip's texels were 8% farther apart than 0.5 m; scaled by the 90% quantile no texel is. */
+static void test_mixed_tilt(void) {
+    builder b = {0};
+    const double c = cos(35 * M_PI / 180), sn = sin(35 * M_PI / 180);
+    double o[3] = {0, 0, 0}, zf[3] = {0, 0, 4}, x4[3] = {4, 0, 0}, top[3] = {0, 0, 4}, up[3] = {0, sn, c};
+    add_quad(&b, o, zf, x4);
+    add_quad(&b, top, up, x4);
+    lc_uv_params p = {.texels_per_metre = 2, .padding = 2, .chart_angle_deg = 45};
+    lc_uv_stats s;
+    char err[256];
+    CHECK(lc_uvgen(&b.m, &p, &s, err, sizeof err) == 0, "uvgen: %s", err);
+    fprintf(stderr, "mixed tilt: %u chart(s), texel spacing mean %.4f p95 %.4f max %.4f m\n", s.n_charts,
+            s.spacing_mean, s.spacing_p95, s.spacing_max);
+    CHECK(s.n_charts == 1, "floor and strip in one chart (%u)", s.n_charts);
+    CHECK(s.spacing_max <= 0.5 * 1.001 && s.spacing_p95 <= 0.5 * 1.001,
+          "no texel more than 0.5 m apart: p95 %.4f, max %.4f", s.spacing_p95, s.spacing_max);
+    CHECK(s.spacing_mean > 0.4, "the chart is not scaled more than it needs (mean %.4f m)", s.spacing_mean);
+    lc_mesh_release(&b.m);
+}
+
 int main(void) {
     test_errors();
+    test_mixed_tilt();
     test_measure();
     test_min_density();
 
