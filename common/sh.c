@@ -1,8 +1,23 @@
 #include "util/sh.h"
 
 #include <math.h>
+#include <pthread.h>
+
+/* K_lm = sqrt((2l+1)/(4pi) * (l-m)!/(l+m)!) at l*l + l + m (m >= 0), computed once. */
+static double sh_k[LC_SH_MAX_COEFFS];
+static pthread_once_t sh_k_once = PTHREAD_ONCE_INIT;
+
+static void sh_k_init(void) {
+    for (int l = 0; l < LC_SH_MAX_BANDS; l++)
+        for (int m = 0; m <= l; m++) {
+            double ratio = 1.0;
+            for (int k = l - m + 1; k <= l + m; k++) ratio /= (double)k;
+            sh_k[l * l + l + m] = sqrt((2 * l + 1) / (4.0 * M_PI) * ratio);
+        }
+}
 
 void lc_sh_eval(int bands, const float d[3], float *out) {
+    pthread_once(&sh_k_once, sh_k_init);
     const double x = d[0], y = d[1], z = d[2];
     /* Q[l][m]: associated Legendre P_l^m(z) with the sin^m(theta) factor removed. */
     double q[LC_SH_MAX_BANDS][LC_SH_MAX_BANDS];
@@ -26,10 +41,7 @@ void lc_sh_eval(int bands, const float d[3], float *out) {
     }
     for (int l = 0; l < bands; l++) {
         for (int m = 0; m <= l; m++) {
-            /* K = sqrt((2l+1)/(4pi) * (l-m)!/(l+m)!) */
-            double ratio = 1.0;
-            for (int k = l - m + 1; k <= l + m; k++) ratio /= (double)k;
-            double k_lm = sqrt((2 * l + 1) / (4.0 * M_PI) * ratio);
+            double k_lm = sh_k[l * l + l + m];
             if (m == 0) {
                 out[l * l + l] = (float)(k_lm * q[l][0]);
             } else {

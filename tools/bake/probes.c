@@ -24,53 +24,11 @@
 #define PB_GRID_ROWS 9               /* a grid cache's rows: its L2 irradiance SH */
 #define PB_MAX_CANDIDATES 64         /* probes a receiver's support is chosen from (2 x overlaps, at most) */
 
-/* --- SH with a precomputed normalisation --------------------------------------------------- */
-
-typedef struct {
-    int bands;
-    double k[LC_SH_MAX_COEFFS]; /* K_lm at l*l + l + m, m >= 0 */
-} pb_sh;
-
-static void pb_sh_init(pb_sh *s, int bands) {
-    s->bands = bands;
-    for (int l = 0; l < bands; l++)
-        for (int m = 0; m <= l; m++) {
-            double ratio = 1.0;
-            for (int k = l - m + 1; k <= l + m; k++) ratio /= (double)k;
-            s->k[l * l + l + m] = sqrt((2 * l + 1) / (4.0 * M_PI) * ratio);
-        }
-}
-
-/* lc_sh_eval's values (the same recurrences) without its per-call square roots. */
-static void pb_sh_eval(const pb_sh *s, const float d[3], float *out) {
-    const int bands = s->bands;
-    if (bands <= 4) {
-        lc_sh_eval_fast(bands, d[0], d[1], d[2], out);
-        return;
-    }
-    const double x = d[0], y = d[1], z = d[2];
-    double q[LC_SH_MAX_BANDS][LC_SH_MAX_BANDS], re[LC_SH_MAX_BANDS], im[LC_SH_MAX_BANDS];
-    re[0] = 1.0, im[0] = 0.0;
-    for (int m = 1; m < bands; m++) {
-        re[m] = re[m - 1] * x - im[m - 1] * y;
-        im[m] = re[m - 1] * y + im[m - 1] * x;
-    }
-    double pmm = 1.0;
-    for (int m = 0; m < bands; m++) {
-        if (m > 0) pmm *= (double)(2 * m - 1);
-        q[m][m] = pmm;
-        if (m + 1 < bands) q[m + 1][m] = z * (2 * m + 1) * pmm;
-        for (int l = m + 2; l < bands; l++)
-            q[l][m] = ((2 * l - 1) * z * q[l - 1][m] - (l + m - 1) * q[l - 2][m]) / (double)(l - m);
-    }
-    for (int l = 0; l < bands; l++) {
-        out[l * l + l] = (float)(s->k[l * l + l] * q[l][0]);
-        for (int m = 1; m <= l; m++) {
-            double a = M_SQRT2 * s->k[l * l + l + m] * q[l][m];
-            out[l * l + l + m] = (float)(a * re[m]);
-            out[l * l + l - m] = (float)(a * im[m]);
-        }
-    }
+/* The SH basis of a relight or receiver direction: the closed forms up to 4 bands (faster, and
+ * what the runtime's GL shaders use), lc_sh_eval's recurrences above. */
+static void pb_sh_eval(int bands, const float d[3], float *out) {
+    if (bands <= 4) lc_sh_eval_fast(bands, d[0], d[1], d[2], out);
+    else lc_sh_eval(bands, d, out);
 }
 
 /* --- the job ------------------------------------------------------------------------------- */
@@ -98,7 +56,6 @@ typedef struct {
     uint32_t n_caches, n_texel; /* n_texel: the texel caches among them */
     const lc_probebake_params *prm;
     lc_surfel_hash hash;
-    pb_sh sh;
     uint32_t coeffs;
     double band_w2[LC_SH_MAX_COEFFS]; /* per coefficient: the SVD's column weight squared */
     lc_vec3 bmin, bmax;
@@ -468,7 +425,7 @@ static void pb_transport_one(pb_job *j, uint32_t ri, pb_hit *hits) {
             float psi[3] = {hits[h].y[0] - pp[0], hits[h].y[1] - pp[1], hits[h].y[2] - pp[2]}; /* probe -> y */
             float len = sqrtf(psi[0] * psi[0] + psi[1] * psi[1] + psi[2] * psi[2]);
             for (int k = 0; k < 3; k++) psi[k] /= len;
-            pb_sh_eval(&j->sh, psi, ysh);
+            pb_sh_eval((int)j->prm->sh_bands, psi, ysh);
             float share = w[i] / wsum;
             for (uint32_t o = 0; o < r->n_rows; o++) {
                 float f = share * hits[h].out_w[o];
@@ -920,7 +877,6 @@ int lc_probebake_run(const lc_rt *rt, const float bmin[3], const float bmax[3], 
                 .coeffs = prm->sh_bands * prm->sh_bands,
                 .bmin = lc_v3_load(bmin),
                 .bmax = lc_v3_load(bmax)};
-    pb_sh_init(&j.sh, (int)prm->sh_bands);
     for (uint32_t c = 0; c < n_caches; c++) j.n_texel += (caches[c].flags & LC_CACHE_TEXEL) != 0;
     for (uint32_t l = 0; l < prm->sh_bands; l++) /* (l + 1)^-p: the error counted where radiance has its energy */
         for (uint32_t m = 0; m <= 2 * l; m++) j.band_w2[l * l + m] = pow(l + 1.0, -2.0 * prm->band_weight);

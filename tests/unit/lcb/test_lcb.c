@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "check.h"
+#include "lcb_test_util.h"
 #include "lcb/lcb.h"
 #include "util/crc32.h"
 #include "util/fsutil.h"
@@ -265,39 +266,9 @@ static int section_index(uint8_t *buf, const char *id) {
     return -1;
 }
 
-/* Recomputes all CRCs so only the semantic check under test can fire. */
-static void fix_crcs(uint8_t *buf, size_t len) {
-    lc_lcb_header *h = hdr_of(buf);
-    uint32_t n = h->section_count <= LC_LCB_MAX_SECTIONS ? h->section_count : 0;
-    for (uint32_t i = 0; i < n; i++) {
-        lc_lcb_section *s = &table_of(buf)[i];
-        if (s->offset <= len && s->size <= len - s->offset) s->crc = lc_crc32(0, buf + s->offset, s->size);
-    }
-    h->table_crc = lc_crc32(0, buf + 64, (size_t)n * sizeof(lc_lcb_section));
-    h->header_crc = lc_crc32(0, buf, 60);
-}
-
-/* Opens an exact-size copy (so sanitizers see any over-read); returns 0 when it opened. */
-static int try_open(const void *buf, size_t len, char *err, size_t errlen) {
-    void *copy = malloc(len ? len : 1);
-    if (len) memcpy(copy, buf, len);
-    lc_lcb *f = NULL;
-    err[0] = 0;
-    int rc = lc_lcb_open_memory(copy, len, &f, err, errlen);
-    if (rc == 0) {
-        FILE *null = fopen("/dev/null", "w");
-        lc_lcb_print_info(f, "mem", 0, null);
-        lc_lcb_print_info(f, "mem", 1, null);
-        fclose(null);
-    }
-    lc_lcb_close(f);
-    free(copy);
-    return rc;
-}
-
 static void expect_fail(const char *label, const void *buf, size_t len, const char *s1, const char *s2) {
     char err[512];
-    int rc = try_open(buf, len, err, sizeof err);
+    int rc = lcb_test_try_open(buf, len, err, sizeof err);
     CHECK(rc != 0, "%s: opened but should have failed", label);
     CHECK(err[0] && strstr(err, s1) && (!s2 || strstr(err, s2)), "%s: message '%s' lacks '%s'%s%s", label, err, s1,
           s2 ? " / " : "", s2 ? s2 : "");
@@ -315,16 +286,8 @@ static void expect_bake_ok(const char *label, const bake *b) {
     size_t len = 0;
     char err[512] = "";
     uint8_t *buf = bake_bytes(b, &len);
-    CHECK(buf && try_open(buf, len, err, sizeof err) == 0, "%s: failed: %s", label, err);
+    CHECK(buf && lcb_test_try_open(buf, len, err, sizeof err) == 0, "%s: failed: %s", label, err);
     free(buf);
-}
-
-static uint64_t rng_state = 0x9E3779B97F4A7C15ull;
-static uint64_t rnd(void) {
-    rng_state ^= rng_state << 13;
-    rng_state ^= rng_state >> 7;
-    rng_state ^= rng_state << 17;
-    return rng_state;
 }
 
 /* --- round trip ------------------------------------------------------------------------ */
@@ -533,7 +496,7 @@ static void test_real_bake(void) {
     CHECK(buf && len > 4096 && fread(buf, 1, len, fh) == len, "read %s (%zu bytes)", path, len);
     fclose(fh);
     char err[512];
-    if (!buf || len <= 4096 || try_open(buf, len, err, sizeof err) != 0) {
+    if (!buf || len <= 4096 || lcb_test_try_open(buf, len, err, sizeof err) != 0) {
         CHECK(0, "%s does not open: %s", path, buf ? err : "");
         free(buf);
         return;
@@ -572,7 +535,7 @@ static void test_real_bake(void) {
     uint8_t *copy = malloc(len);
     int flips = 0;
     for (int it = 0; copy && it < 300; it++) {
-        uint32_t pick = (uint32_t)(rnd() % (n + 1));
+        uint32_t pick = (uint32_t)(lcb_test_rnd() % (n + 1));
         size_t lo = 0, hi = table_end;
         char id[5] = "";
         if (pick < n) {
@@ -582,8 +545,8 @@ static void test_real_bake(void) {
             memcpy(id, s->id, 4);
         }
         if (hi <= lo) continue;
-        size_t off = lo + (size_t)(rnd() % (hi - lo));
-        uint8_t x = (uint8_t)(1u << (rnd() % 8));
+        size_t off = lo + (size_t)(lcb_test_rnd() % (hi - lo));
+        uint8_t x = (uint8_t)(1u << (lcb_test_rnd() % 8));
         memcpy(copy, buf, len);
         copy[off] ^= x;
         char label[80];
@@ -607,8 +570,8 @@ static void test_flips(void) {
     size_t table_end = 64 + 48 * (size_t)n;
     int covered = 0, padding = 0;
     for (int it = 0; it < 2000; it++) {
-        size_t off = (size_t)(rnd() % len);
-        uint8_t x = (uint8_t)(1 + rnd() % 255);
+        size_t off = (size_t)(lcb_test_rnd() % len);
+        uint8_t x = (uint8_t)(1 + lcb_test_rnd() % 255);
         memcpy(copy, buf, len);
         copy[off] ^= x;
         const char *want = off < 64 ? "header" : off < table_end ? "section table" : NULL;
@@ -627,7 +590,7 @@ static void test_flips(void) {
             expect_fail(label, copy, len, want, off >= table_end ? "CRC" : NULL);
         } else {
             padding++;
-            CHECK(try_open(copy, len, err, sizeof err) == 0, "%s (padding) rejected: %s", label, err);
+            CHECK(lcb_test_try_open(copy, len, err, sizeof err) == 0, "%s (padding) rejected: %s", label, err);
         }
     }
     CHECK(covered > 1500 && padding > 0, "flips: %d covered, %d in padding", covered, padding);
@@ -651,26 +614,26 @@ static void test_structure(void) {
     expect_fail("magic", c, len, "header", "magic");
     RESET();
     hdr_of(c)->version_major = 2;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("version 2", c, len, "version 2.0 is newer", "upgrade lucent");
     RESET();
     hdr_of(c)->version_major = 0;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("version 0", c, len, "header", "older");
     RESET();
     hdr_of(c)->version_minor = 7;
-    fix_crcs(c, len);
-    CHECK(try_open(c, len, err, sizeof err) == 0, "minor version 7 rejected: %s", err);
+    lcb_test_fix_crcs(c, len);
+    CHECK(lcb_test_try_open(c, len, err, sizeof err) == 0, "minor version 7 rejected: %s", err);
     RESET();
     hdr_of(c)->header_crc ^= 1;
     expect_fail("header crc", c, len, "header", "CRC");
     RESET();
     hdr_of(c)->table_offset = 128;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("table offset", c, len, "header", "table_offset");
     RESET();
     hdr_of(c)->section_count = 65;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("section count", c, len, "header", "section_count");
     RESET();
     hdr_of(c)->section_count = 200000; /* table would be far outside: count check first */
@@ -684,58 +647,58 @@ static void test_structure(void) {
     expect_fail("trailing data", c, len + 64, "header", "trailing");
     RESET();
     hdr_of(c)->file_size += 64;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("file_size too big", c, len, "truncated", NULL);
 
     int surf = section_index(c, "SURF"), node = section_index(c, "NODE"), last = (int)hdr_of(c)->section_count - 1;
     RESET();
     table_of(c)[node].offset = table_of(c)[surf].offset;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("overlap", c, len, "NODE", "overlaps section SURF");
     RESET();
     table_of(c)[surf].offset = 128; /* inside the table */
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("overlap table", c, len, "SURF", "header/section table");
     RESET();
     table_of(c)[surf].offset += 4;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("misaligned", c, len, "SURF", "not a multiple of 64");
     RESET();
     table_of(c)[last].offset = len;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("outside", c, len, "AIDX", "outside the file");
     RESET();
     table_of(c)[last].size = UINT64_MAX - 8; /* offset + size would wrap */
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("wrapping size", c, len, "AIDX", "outside the file");
     RESET();
     table_of(c)[surf].count += 1;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("size vs count", c, len, "SURF", "records");
     RESET();
     table_of(c)[surf].record_size = 0;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("record size 0", c, len, "SURF", "record size");
     RESET();
     memcpy(table_of(c)[node].id, "SURF", 4);
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("duplicate", c, len, "SURF", "duplicate");
     RESET();
     c[table_of(c)[node].offset + 5] ^= 0x40;
     expect_fail("section crc", c, len, "NODE", "CRC mismatch");
     RESET();
     memcpy(table_of(c)[node].id, "NODX", 4); /* unknown id: ignored, so NODE is missing */
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("renamed", c, len, "NODE", "missing");
     RESET();
     table_of(c)[section_index(c, "LEVL")].record_size = 8;
     table_of(c)[section_index(c, "LEVL")].count = 2;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("record size", c, len, "LEVL", "record size 8");
     RESET();
     uint64_t meta_off = table_of(c)[0].offset;
     c[meta_off + 3] = 0;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     expect_fail("meta NUL", c, len, "META", "NUL");
 #undef RESET
     free(c);
@@ -938,11 +901,11 @@ static void write_corpus(const char *dir) {
     put(dir, "flip_surf_crc.lcb", c, len);
     memcpy(c, buf, len);
     hdr_of(c)->version_major = 2;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     put(dir, "version2.lcb", c, len);
     memcpy(c, buf, len);
     table_of(c)[section_index(c, "NODE")].offset = table_of(c)[section_index(c, "SURF")].offset;
-    fix_crcs(c, len);
+    lcb_test_fix_crcs(c, len);
     put(dir, "overlap.lcb", c, len);
     free(c);
     free(buf);

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "check.h"
+#include "lcb_test_util.h"
 #include "lcb/lcb.h"
 #include "util/crc32.h"
 #include "util/fsutil.h"
@@ -267,32 +268,13 @@ static uint8_t *bake_bytes(const bake *b, size_t *len) {
     return buf;
 }
 
-/* Opens an exact-size copy (so sanitizers see any over-read) and prints info both ways;
- * returns 0 when it opened. */
-static int try_open(const void *buf, size_t len, char *err, size_t errlen) {
-    void *copy = malloc(len ? len : 1);
-    if (len) memcpy(copy, buf, len);
-    lc_lcb *f = NULL;
-    err[0] = 0;
-    int rc = lc_lcb_open_memory(copy, len, &f, err, errlen);
-    if (rc == 0) {
-        FILE *null = fopen("/dev/null", "w");
-        lc_lcb_print_info(f, "mem", 0, null);
-        lc_lcb_print_info(f, "mem", 1, null);
-        fclose(null);
-    }
-    lc_lcb_close(f);
-    free(copy);
-    return rc;
-}
-
 static void expect_bake_fail(const char *label, const bake *b, const char *s1, const char *s2) {
     size_t len = 0;
     char err[512];
     uint8_t *buf = bake_bytes(b, &len);
     CHECK(buf != NULL, "%s: could not write", label);
     if (!buf) return;
-    int rc = try_open(buf, len, err, sizeof err);
+    int rc = lcb_test_try_open(buf, len, err, sizeof err);
     CHECK(rc != 0, "%s: opened but should have failed", label);
     CHECK(rc != 0 && strstr(err, s1) && (!s2 || strstr(err, s2)) && strstr(err, "re-run lucent-bake"),
           "%s: message '%s' lacks '%s'%s%s", label, err, s1, s2 ? " / " : "", s2 ? s2 : "");
@@ -507,25 +489,6 @@ static void test_clusters(void) {
 
 /* --- robustness: truncations and mutations of the probe sections ----------------------------- */
 
-/* Recomputes all CRCs so only the semantic checks can fire. */
-static void fix_crcs(uint8_t *buf, size_t len) {
-    lc_lcb_header *h = (lc_lcb_header *)buf;
-    lc_lcb_section *t = (lc_lcb_section *)(buf + 64);
-    for (uint32_t i = 0; i < h->section_count; i++)
-        if (t[i].offset <= len && t[i].size <= len - t[i].offset)
-            t[i].crc = lc_crc32(0, buf + t[i].offset, (size_t)t[i].size);
-    h->table_crc = lc_crc32(0, buf + 64, (size_t)h->section_count * sizeof(lc_lcb_section));
-    h->header_crc = lc_crc32(0, buf, 60);
-}
-
-static uint64_t rng_state = 0x9E3779B97F4A7C15ull;
-static uint64_t rnd(void) {
-    rng_state ^= rng_state << 13;
-    rng_state ^= rng_state >> 7;
-    rng_state ^= rng_state << 17;
-    return rng_state;
-}
-
 static void test_robustness(void) {
     bake b;
     bake_init(&b);
@@ -539,7 +502,7 @@ static void test_robustness(void) {
     }
     int failed_ok = 1;
     for (size_t cut = 0; cut < len; cut++)
-        if (try_open(buf, cut, err, sizeof err) == 0 || !err[0]) failed_ok = 0;
+        if (lcb_test_try_open(buf, cut, err, sizeof err) == 0 || !err[0]) failed_ok = 0;
     CHECK(failed_ok, "a truncation opened or failed without a message");
     /* Random values in the probe sections' records (the table's other sections untouched):
      * either it opens or it says why; ASan/UBSan catch any bad read. */
@@ -549,18 +512,18 @@ static void test_robustness(void) {
     int opened = 0, rejected = 0;
     for (int it = 0; copy && it < 3000; it++) {
         memcpy(copy, buf, len);
-        for (int m = 0; m < 1 + (int)(rnd() % 3); m++) {
-            const lc_lcb_section *s = &t[first + rnd() % N_PROBE_SECS];
+        for (int m = 0; m < 1 + (int)(lcb_test_rnd() % 3); m++) {
+            const lc_lcb_section *s = &t[first + lcb_test_rnd() % N_PROBE_SECS];
             if (!s->size) continue;
-            size_t off = (size_t)(s->offset + rnd() % s->size);
-            uint64_t r = rnd();
+            size_t off = (size_t)(s->offset + lcb_test_rnd() % s->size);
+            uint64_t r = lcb_test_rnd();
             if (r % 4 == 0) copy[off] ^= (uint8_t)(1u << ((r >> 8) % 8));
             else if (r % 4 == 1) copy[off] = 0xFF;
             else if (r % 4 == 2) copy[off] = 0;
             else copy[off] = (uint8_t)(r >> 16);
         }
-        fix_crcs(copy, len);
-        if (try_open(copy, len, err, sizeof err) == 0) opened++;
+        lcb_test_fix_crcs(copy, len);
+        if (lcb_test_try_open(copy, len, err, sizeof err) == 0) opened++;
         else if (err[0] && strstr(err, "PR")) rejected++;
         else CHECK(0, "mutation %d: message '%s' names no probe section", it, err);
     }
