@@ -221,6 +221,14 @@ static void bench_compare_backends(bench_row *rows, int n) {
     }
 }
 
+/* A copy of the frame's lightmap (NULL when out of memory) and vs_cpu = -1 until compared. */
+static void bench_keep_lightmap(const lc_engine_frame *fr, float **lm, size_t *n, double *vs_cpu) {
+    *n = (size_t)fr->lightmap_width * fr->lightmap_height * 3;
+    *lm = malloc(*n * sizeof **lm);
+    if (*lm) memcpy(*lm, fr->lightmap, *n * sizeof **lm);
+    *vs_cpu = -1;
+}
+
 /* --- DNRT: what placed objects cost (engine/dnrt.h) ---------------------------------------- */
 
 typedef struct {
@@ -232,6 +240,9 @@ typedef struct {
     double relight_ms; /* whole relight after a light change with the objects */
     double receivers;  /* per object */
     double grid_kib;   /* transfer grid of the asset */
+    float *lightmap;   /* the last relight's (owned), for the EGL rows' vs_cpu */
+    size_t lm_floats;
+    double vs_cpu; /* as bench_row's; -1 where there is none */
 } bench_dnrt_row;
 
 /* n objects of the first asset with a transfer grid, scaled to size_m (largest extent), on
@@ -312,6 +323,7 @@ static int bench_dnrt(const char *path, lc_backend_kind kind, int runs, int n_ob
     row->relight_ms = ms[runs + runs / 2];
     row->move_ms = ms[2 * runs + runs / 2];
     row->grid_kib = (double)lc_lcb_transfer_bytes(&v->transfers[0]) / 1024.0;
+    bench_keep_lightmap(fr, &row->lightmap, &row->lm_floats, &row->vs_cpu);
     rc = 0;
 done:
     if (rc == 1) fprintf(stderr, "lucent-bench: %s: %s\n", path, err);
@@ -325,14 +337,16 @@ static void bench_dnrt_print(const bench_dnrt_row *rows, int n) {
     if (!n) return;
     printf("\nDNRT: placed objects in the indirect light (objects resting: a light change; move: one object moved), "
            "median ms\n");
-    printf("%-28s %-4s %7s %6s %8s %9s %10s %10s %9s %10s %8s\n", "bake", "bk", "objects", "size", "blockers",
-           "recv/obj", "light", "per obj", "move", "relight", "grid KiB");
+    printf("%-28s %-4s %7s %6s %8s %9s %10s %10s %9s %10s %8s %8s\n", "bake", "bk", "objects", "size", "blockers",
+           "recv/obj", "light", "per obj", "move", "relight", "grid KiB", "vs cpu");
     for (int i = 0; i < n; i++) {
         const char *base = strrchr(rows[i].file, '/');
-        printf("%-28.28s %-4s %7d %5.2fm %8s %9.0f %10.3f %10.4f %9.3f %10.2f %8.0f\n", base ? base + 1 : rows[i].file,
+        printf("%-28.28s %-4s %7d %5.2fm %8s %9.0f %10.3f %10.4f %9.3f %10.2f %8.0f", base ? base + 1 : rows[i].file,
                rows[i].backend, rows[i].objects, rows[i].size_m, rows[i].blockers ? "rays" : "off", rows[i].receivers,
                rows[i].light_ms, rows[i].light_ms / rows[i].objects, rows[i].move_ms, rows[i].relight_ms,
                rows[i].grid_kib);
+        if (rows[i].vs_cpu >= 0) printf(" %8.1e\n", rows[i].vs_cpu);
+        else printf(" %8s\n", "-");
     }
     printf("paper (DNRT, 32^3 x 4 SH, screen space, per object): GTX 970 0.077 ms (1 object), 0.800 ms (10); "
            "HD 4600 2.708 / 29.712 ms\n"
@@ -354,6 +368,9 @@ typedef struct {
     double receivers;              /* per object */
     double light_ms;               /* DRT stage of a relight after a light change (median) */
     double relight_ms;             /* whole relight after a light change with the clutter */
+    float *lightmap;               /* the last relight's (owned), for the EGL rows' vs_cpu */
+    size_t lm_floats;
+    double vs_cpu; /* as bench_row's; -1 where there is none */
 } bench_drt_row;
 
 /* n clutter objects (placed like the DNRT rows), their operators built one by one, then the
@@ -418,6 +435,7 @@ static int bench_drt(const char *path, lc_backend_kind backend, int runs, int n_
     row->size_m = size_m;
     row->light_ms = ms[runs / 2];
     row->relight_ms = ms[runs + runs / 2];
+    bench_keep_lightmap(fr, &row->lightmap, &row->lm_floats, &row->vs_cpu);
     rc = 0;
 done:
     if (rc == 1) fprintf(stderr, "\nlucent-bench: %s: %s\n", path, err);
@@ -431,17 +449,33 @@ done:
 static void bench_drt_print(const bench_drt_row *rows, int n) {
     if (!n) return;
     printf("\nDRT: clutter objects (operators built once per placement, applied at every relight)\n");
-    printf("%-28s %-4s %7s %6s %9s %9s %8s %9s %10s %10s %10s\n", "bake", "bk", "objects", "size", "build ms", "max ms",
-           "MiB/obj", "recv/obj", "light", "per obj", "relight");
+    printf("%-28s %-4s %7s %6s %9s %9s %8s %9s %10s %10s %10s %8s\n", "bake", "bk", "objects", "size", "build ms",
+           "max ms", "MiB/obj", "recv/obj", "light", "per obj", "relight", "vs cpu");
     for (int i = 0; i < n; i++) {
         const char *base = strrchr(rows[i].file, '/');
-        printf("%-28.28s %-4s %7d %5.2fm %9.0f %9.0f %8.1f %9.0f %10.3f %10.4f %10.2f\n",
-               base ? base + 1 : rows[i].file, rows[i].backend, rows[i].objects, rows[i].size_m, rows[i].build_ms,
-               rows[i].build_max_ms, rows[i].mib, rows[i].receivers, rows[i].light_ms,
-               rows[i].light_ms / rows[i].objects, rows[i].relight_ms);
+        printf("%-28.28s %-4s %7d %5.2fm %9.0f %9.0f %8.1f %9.0f %10.3f %10.4f %10.2f", base ? base + 1 : rows[i].file,
+               rows[i].backend, rows[i].objects, rows[i].size_m, rows[i].build_ms, rows[i].build_max_ms, rows[i].mib,
+               rows[i].receivers, rows[i].light_ms, rows[i].light_ms / rows[i].objects, rows[i].relight_ms);
+        if (rows[i].vs_cpu >= 0) printf(" %8.1e\n", rows[i].vs_cpu);
+        else printf(" %8s\n", "-");
     }
     printf("paper (DRT, 12 cores, GTX 580): about 5 s to build per object, a few ms per update; "
            "target here: <= 5 s per 1 m object on 2 cores\n");
+}
+
+/* The DNRT and DRT rows' EGL lightmaps against the CPU row with the same objects (the same
+ * sequence of states ran on both, so their last frames are comparable). */
+static void bench_compare_object_rows(bench_dnrt_row *d, int nd, bench_drt_row *c, int nc) {
+    for (int i = 0; i < nd; i++)
+        for (int j = 0; j < nd && !strcmp(d[i].backend, "egl"); j++)
+            if (!strcmp(d[j].backend, "cpu") && !strcmp(d[j].file, d[i].file) && d[j].objects == d[i].objects &&
+                d[j].blockers == d[i].blockers && d[j].lm_floats == d[i].lm_floats)
+                d[i].vs_cpu = bench_rel_diff(d[i].lightmap, d[j].lightmap, d[i].lm_floats);
+    for (int i = 0; i < nc; i++)
+        for (int j = 0; j < nc && !strcmp(c[i].backend, "egl"); j++)
+            if (!strcmp(c[j].backend, "cpu") && !strcmp(c[j].file, c[i].file) && c[j].objects == c[i].objects &&
+                c[j].lm_floats == c[i].lm_floats)
+                c[i].vs_cpu = bench_rel_diff(c[i].lightmap, c[j].lightmap, c[i].lm_floats);
 }
 
 /* The JSON document of every row (--json). -1 when it cannot be written. */
@@ -474,20 +508,22 @@ static int bench_write_json(const char *json, int runs, int bounces, double bw, 
         fprintf(out,
                 "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
                 "\"blockers\": %s, \"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, "
-                "\"per_object_ms\": %.5f, \"move_ms\": %.4f, \"relight_ms\": %.4f, \"grid_kib\": %.1f}",
+                "\"per_object_ms\": %.5f, \"move_ms\": %.4f, \"relight_ms\": %.4f, \"grid_kib\": %.1f, "
+                "\"lightmap_vs_cpu\": %.3e}",
                 i ? "," : "", drows[i].file, drows[i].backend, drows[i].objects, drows[i].size_m,
                 drows[i].blockers ? "true" : "false", drows[i].receivers, drows[i].light_ms,
-                drows[i].light_ms / drows[i].objects, drows[i].move_ms, drows[i].relight_ms, drows[i].grid_kib);
+                drows[i].light_ms / drows[i].objects, drows[i].move_ms, drows[i].relight_ms, drows[i].grid_kib,
+                drows[i].vs_cpu);
     fprintf(out, "\n], \"drt\": [");
     for (int i = 0; i < ncrows; i++)
         fprintf(out,
                 "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
                 "\"build_ms\": %.1f, \"build_max_ms\": %.1f, \"mib_per_object\": %.2f, "
                 "\"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, \"per_object_ms\": %.5f, "
-                "\"relight_ms\": %.4f}",
+                "\"relight_ms\": %.4f, \"lightmap_vs_cpu\": %.3e}",
                 i ? "," : "", crows[i].file, crows[i].backend, crows[i].objects, crows[i].size_m, crows[i].build_ms,
                 crows[i].build_max_ms, crows[i].mib, crows[i].receivers, crows[i].light_ms,
-                crows[i].light_ms / crows[i].objects, crows[i].relight_ms);
+                crows[i].light_ms / crows[i].objects, crows[i].relight_ms, crows[i].vs_cpu);
     fprintf(out, "\n]}\n");
     fclose(out);
     return 0;
@@ -567,6 +603,7 @@ int main(int argc, char **argv) {
         }
     }
     bench_compare_backends(rows, nrows);
+    bench_compare_object_rows(drows, ndrows, crows, ncrows);
     printf("\nrelight after one light change, median of %d runs, %d feedback bounce(s), ms\n", runs, bounces);
     printf("%-28s %-4s %-6s %7s %7s %5s", "bake", "bk", "solver", "surfels", "caches", "links");
     for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8s", stage_names[s]);
@@ -599,5 +636,7 @@ int main(int argc, char **argv) {
            "targets here (2 cores): sponza moderate <= 15 ms, high <= 60 ms (CPU backend)\n");
     if (json && bench_write_json(json, runs, bounces, bw, rows, nrows, drows, ndrows, crows, ncrows) != 0) failed = 1;
     for (int i = 0; i < nrows; i++) free(rows[i].lightmap), free(rows[i].radiosity), free(rows[i].cache_sh);
+    for (int i = 0; i < ndrows; i++) free(drows[i].lightmap);
+    for (int i = 0; i < ncrows; i++) free(crows[i].lightmap);
     return failed;
 }
