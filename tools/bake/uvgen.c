@@ -1198,6 +1198,30 @@ static int uvgen_spacing_cmp(const void *a, const void *b) {
     return (x > y) - (x < y);
 }
 
+/* The value below which fraction q of the weight (texels) lies; sorts v. n >= 1. */
+static double uvgen_weighted_quantile(uvgen_spacing *v, uint32_t n, double total, double q) {
+    qsort(v, n, sizeof *v, uvgen_spacing_cmp);
+    double acc = 0;
+    uint32_t k = 0;
+    for (; k + 1 < n && (acc += v[k].texels) < q * total; k++) {
+    }
+    return v[k].spacing;
+}
+
+/* Areas of a triangle in space and in a plane. */
+static double uvgen_area3(const double p[3][3]) {
+    double e1[3], e2[3], c[3];
+    for (int a = 0; a < 3; a++) {
+        e1[a] = p[1][a] - p[0][a];
+        e2[a] = p[2][a] - p[0][a];
+    }
+    uvgen_cross(e1, e2, c);
+    return 0.5 * sqrt(uvgen_dot(c, c));
+}
+static double uvgen_area2(const double x[3], const double y[3]) {
+    return 0.5 * fabs((x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]));
+}
+
 /* ---- stretch compensation ---------------------------------------------------------------- */
 
 /* A chart projected onto its plane loses area where its triangles tilt away from the plane
@@ -1219,17 +1243,9 @@ static int uvgen_compensate_stretch(const uvgen_ctx *cx, uvgen_chart *fin, uint3
         double proj = 0;
         uint32_t m = 0;
         for (uint32_t q = c->start; q < c->start + c->count; q++) {
-            const double *u = cx->cu + 3 * (size_t)q, *v = cx->cv + 3 * (size_t)q;
-            double pa = 0.5 * fabs((u[1] - u[0]) * (v[2] - v[0]) - (v[1] - v[0]) * (u[2] - u[0]));
-            double p[3][3];
+            double pa = uvgen_area2(cx->cu + 3 * (size_t)q, cx->cv + 3 * (size_t)q), p[3][3];
             for (int k = 0; k < 3; k++) uvgen_load(cx->m, cx->weld[cx->m->index[3 * (size_t)cx->order[q] + k]], p[k]);
-            double e1[3], e2[3], x[3];
-            for (int k = 0; k < 3; k++) {
-                e1[k] = p[1][k] - p[0][k];
-                e2[k] = p[2][k] - p[0][k];
-            }
-            uvgen_cross(e1, e2, x);
-            double wa = 0.5 * sqrt(uvgen_dot(x, x));
+            double wa = uvgen_area3(p);
             if (!(pa > 0) || !(wa > 0)) continue;
             tri[m].spacing = wa / pa;
             tri[m].texels = pa;
@@ -1237,13 +1253,9 @@ static int uvgen_compensate_stretch(const uvgen_ctx *cx, uvgen_chart *fin, uint3
             m++;
         }
         if (!m || !(proj > 0)) continue;
-        qsort(tri, m, sizeof *tri, uvgen_spacing_cmp);
-        double acc = 0;
-        uint32_t k = 0;
-        for (; k + 1 < m && (acc += tri[k].texels) < UVGEN_STRETCH_QUANTILE * proj; k++) {
-        }
-        if (!(tri[k].spacing > 1)) continue;
-        double sc = fmin(sqrt(tri[k].spacing), UVGEN_STRETCH_MAX);
+        double ratio = uvgen_weighted_quantile(tri, m, proj, UVGEN_STRETCH_QUANTILE);
+        if (!(ratio > 1)) continue;
+        double sc = fmin(sqrt(ratio), UVGEN_STRETCH_MAX);
         for (int a = 0; a < 3; a++) {
             c->U[a] *= sc;
             c->V[a] *= sc;
@@ -1847,14 +1859,7 @@ int lc_uv_texel_spacing(const lc_mesh *mesh, uint32_t W, uint32_t H, lc_uv_stats
             x[k] = (double)mesh->uv1[2 * (size_t)ix[k]] * W;
             y[k] = (double)mesh->uv1[2 * (size_t)ix[k] + 1] * H;
         }
-        double e1[3], e2[3], c[3];
-        for (int a = 0; a < 3; a++) {
-            e1[a] = p[1][a] - p[0][a];
-            e2[a] = p[2][a] - p[0][a];
-        }
-        uvgen_cross(e1, e2, c);
-        double world = 0.5 * sqrt(uvgen_dot(c, c));
-        double texels = 0.5 * fabs((x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]));
+        double world = uvgen_area3(p), texels = uvgen_area2(x, y);
         if (!(texels > 0) || !(world > 0)) continue;
         sp[n].spacing = sqrt(world / texels);
         sp[n].texels = texels;
@@ -1864,14 +1869,9 @@ int lc_uv_texel_spacing(const lc_mesh *mesh, uint32_t W, uint32_t H, lc_uv_stats
     }
     stats->spacing_mean = stats->spacing_p95 = stats->spacing_max = 0;
     if (n && total > 0) {
-        qsort(sp, n, sizeof *sp, uvgen_spacing_cmp);
-        double acc = 0;
-        uint32_t i = 0;
-        for (; i + 1 < n && (acc += sp[i].texels) < 0.95 * total; i++) {
-        }
         stats->spacing_mean = sum / total;
-        stats->spacing_p95 = sp[i].spacing;
-        stats->spacing_max = sp[n - 1].spacing;
+        stats->spacing_p95 = uvgen_weighted_quantile(sp, n, total, 0.95);
+        stats->spacing_max = sp[n - 1].spacing; /* sorted by the quantile */
     }
     free(sp);
     return 0;
