@@ -478,6 +478,13 @@ static void bench_compare_object_rows(bench_dnrt_row *d, int nd, bench_drt_row *
                 c[i].vs_cpu = bench_rel_diff(c[i].lightmap, c[j].lightmap, c[i].lm_floats);
 }
 
+/* x as a JSON number, or null when negative (no comparison was made). */
+static const char *bench_json_number(double x, char *buf, size_t len) {
+    if (x < 0) return "null";
+    snprintf(buf, len, "%.3e", x);
+    return buf;
+}
+
 /* The JSON document of every row (--json). -1 when it cannot be written. */
 static int bench_write_json(const char *json, int runs, int bounces, double bw, const bench_row *rows, int nrows,
                             const bench_dnrt_row *drows, int ndrows, const bench_drt_row *crows, int ncrows) {
@@ -503,27 +510,29 @@ static int bench_write_json(const char *json, int runs, int bounces, double bw, 
         if (rows[i].vs_cpu >= 0) fprintf(out, ", \"lightmap_vs_cpu\": %.3e", rows[i].vs_cpu);
         fprintf(out, "}");
     }
+    char num[32];
     fprintf(out, "\n], \"dnrt\": [");
     for (int i = 0; i < ndrows; i++)
         fprintf(out,
                 "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
                 "\"blockers\": %s, \"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, "
                 "\"per_object_ms\": %.5f, \"move_ms\": %.4f, \"relight_ms\": %.4f, \"grid_kib\": %.1f, "
-                "\"lightmap_vs_cpu\": %.3e}",
+                "\"lightmap_vs_cpu\": %s}",
                 i ? "," : "", drows[i].file, drows[i].backend, drows[i].objects, drows[i].size_m,
                 drows[i].blockers ? "true" : "false", drows[i].receivers, drows[i].light_ms,
                 drows[i].light_ms / drows[i].objects, drows[i].move_ms, drows[i].relight_ms, drows[i].grid_kib,
-                drows[i].vs_cpu);
+                bench_json_number(drows[i].vs_cpu, num, sizeof num));
     fprintf(out, "\n], \"drt\": [");
     for (int i = 0; i < ncrows; i++)
         fprintf(out,
                 "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"objects\": %d, \"object_size_m\": %.3f, "
                 "\"build_ms\": %.1f, \"build_max_ms\": %.1f, \"mib_per_object\": %.2f, "
                 "\"receivers_per_object\": %.0f, \"light_change_ms\": %.4f, \"per_object_ms\": %.5f, "
-                "\"relight_ms\": %.4f, \"lightmap_vs_cpu\": %.3e}",
+                "\"relight_ms\": %.4f, \"lightmap_vs_cpu\": %s}",
                 i ? "," : "", crows[i].file, crows[i].backend, crows[i].objects, crows[i].size_m, crows[i].build_ms,
                 crows[i].build_max_ms, crows[i].mib, crows[i].receivers, crows[i].light_ms,
-                crows[i].light_ms / crows[i].objects, crows[i].relight_ms, crows[i].vs_cpu);
+                crows[i].light_ms / crows[i].objects, crows[i].relight_ms,
+                bench_json_number(crows[i].vs_cpu, num, sizeof num));
     fprintf(out, "\n]}\n");
     fclose(out);
     return 0;
