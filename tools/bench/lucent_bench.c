@@ -88,6 +88,14 @@ static void bench_state(const lc_lcb_view *v, int run, lc_engine_light *light, l
 
 /* One bake, backend and solver: 0, 1 (failed), 3 (no such backend here), 4 (the solver does
  * not run on this bake or backend: skipped). */
+/* A copy of the frame's lightmap (NULL when out of memory) and vs_cpu = -1 until compared. */
+static void bench_keep_lightmap(const lc_engine_frame *fr, float **lm, size_t *n, double *vs_cpu) {
+    *n = (size_t)fr->lightmap_width * fr->lightmap_height * 3;
+    *lm = malloc(*n * sizeof **lm);
+    if (*lm) memcpy(*lm, fr->lightmap, *n * sizeof **lm);
+    *vs_cpu = -1;
+}
+
 static int bench_one(const char *path, lc_backend_kind kind, uint32_t solver, int runs, int bounces, bench_row *row) {
     char err[512];
     lc_lcb *bake = NULL;
@@ -142,10 +150,7 @@ static int bench_one(const char *path, lc_backend_kind kind, uint32_t solver, in
     row->links = v->links_per_cache;
     row->bands = settings.bands;
     row->nodes = v->n_nodes;
-    row->vs_cpu = -1;
-    row->lm_floats = (size_t)fr->lightmap_width * fr->lightmap_height * 3;
-    row->lightmap = malloc(row->lm_floats * sizeof *row->lightmap);
-    if (row->lightmap) memcpy(row->lightmap, fr->lightmap, row->lm_floats * sizeof *row->lightmap);
+    bench_keep_lightmap(fr, &row->lightmap, &row->lm_floats, &row->vs_cpu);
     row->n_radiosity = (size_t)v->n_surfels * 3;
     row->n_cache_sh = (size_t)fr->n_caches * fr->sh_stride * 3;
     row->radiosity = malloc(row->n_radiosity * sizeof(float));
@@ -219,14 +224,6 @@ static void bench_compare_backends(bench_row *rows, int n) {
                         bench_rel_diff(rows[i].cache_sh, rows[j].cache_sh, rows[i].n_cache_sh));
         }
     }
-}
-
-/* A copy of the frame's lightmap (NULL when out of memory) and vs_cpu = -1 until compared. */
-static void bench_keep_lightmap(const lc_engine_frame *fr, float **lm, size_t *n, double *vs_cpu) {
-    *n = (size_t)fr->lightmap_width * fr->lightmap_height * 3;
-    *lm = malloc(*n * sizeof **lm);
-    if (*lm) memcpy(*lm, fr->lightmap, *n * sizeof **lm);
-    *vs_cpu = -1;
 }
 
 /* --- DNRT: what placed objects cost (engine/dnrt.h) ---------------------------------------- */
