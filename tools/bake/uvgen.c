@@ -1208,7 +1208,8 @@ static double uvgen_weighted_quantile(uvgen_spacing *v, uint32_t n, double total
     return v[k].spacing;
 }
 
-/* Areas of a triangle in space and in a plane. */
+/* Areas of a triangle in space (given its corners: the stretch scaling reads the welded
+ * positions, uvgen_tri_cross the mesh's) and in a plane. */
 static double uvgen_area3(const double p[3][3]) {
     double e1[3], e2[3], c[3];
     for (int a = 0; a < 3; a++) {
@@ -1853,13 +1854,13 @@ int lc_uv_texel_spacing(const lc_mesh *mesh, uint32_t W, uint32_t H, lc_uv_stats
     double total = 0, sum = 0;
     for (uint32_t t = 0; t < mesh->n_triangles; t++) {
         const uint32_t *ix = mesh->index + 3 * (size_t)t;
-        double p[3][3], x[3], y[3];
+        double c[3], x[3], y[3];
         for (int k = 0; k < 3; k++) {
-            for (int a = 0; a < 3; a++) p[k][a] = mesh->position[3 * (size_t)ix[k] + a];
             x[k] = (double)mesh->uv1[2 * (size_t)ix[k]] * W;
             y[k] = (double)mesh->uv1[2 * (size_t)ix[k] + 1] * H;
         }
-        double world = uvgen_area3(p), texels = uvgen_area2(x, y);
+        uvgen_tri_cross(mesh, t, c, NULL);
+        double world = 0.5 * sqrt(uvgen_dot(c, c)), texels = uvgen_area2(x, y);
         if (!(texels > 0) || !(world > 0)) continue;
         sp[n].spacing = sqrt(world / texels);
         sp[n].texels = texels;
