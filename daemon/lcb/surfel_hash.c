@@ -111,8 +111,12 @@ uint32_t lc_surfel_hash_nearest(const lc_surfel_hash *h, const lc_lcb_surfel *su
                                 float along = s->normal[0] * ng[0] + s->normal[1] * ng[1] + s->normal[2] * ng[2];
                                 if (facing <= 0 || along < 0.5f) continue;
                             }
-                            float d2 = 0;
-                            for (int a = 0; a < 3; a++) d2 += (s->position[a] - p[a]) * (s->position[a] - p[a]);
+                            float d2 = 0, plane = 0;
+                            for (int a = 0; a < 3; a++) {
+                                d2 += (s->position[a] - p[a]) * (s->position[a] - p[a]);
+                                plane += (p[a] - s->position[a]) * s->normal[a];
+                            }
+                            d2 += LC_SURFEL_HASH_PLANE_WEIGHT * plane * plane;
                             if (d2 < best_d2 || (d2 == best_d2 && si < best)) {
                                 best_d2 = d2;
                                 best = si;

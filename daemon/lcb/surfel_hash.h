@@ -24,10 +24,16 @@ typedef struct lc_surfel_hash {
 int lc_surfel_hash_build(lc_surfel_hash *h, const lc_lcb_surfel *surfels, uint32_t n);
 void lc_surfel_hash_free(lc_surfel_hash *h);
 
+/* Distance to a surfel counts its plane offset this many times more than its tangential
+ * distance: a hit on a floor beside a ledge goes to a floor surfel, not to the nearer surfel
+ * on the ledge's top. */
+#define LC_SURFEL_HASH_PLANE_WEIGHT 10.0f
+
 /* The nearest surfel to hit point p that faces the ray (direction dir) and lies on a surface
  * oriented like the hit (geometric normal ng within 60 degrees, so the two sides of a thin
  * wall stay apart), searching 3x3x3 then 7x7x7 cells; failing that the nearest at all;
- * LC_NONE if none nearby. Ties go to the lower index (deterministic). */
+ * LC_NONE if none nearby. Nearest: squared distance plus LC_SURFEL_HASH_PLANE_WEIGHT times
+ * the squared offset from the surfel's plane. Ties go to the lower index (deterministic). */
 uint32_t lc_surfel_hash_nearest(const lc_surfel_hash *h, const lc_lcb_surfel *surfels, const float p[3],
                                 const float ng[3], const float dir[3]);
 
