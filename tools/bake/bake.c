@@ -19,6 +19,7 @@
 #include "bake/relocate.h"
 #include "bake/rt.h"
 #include "bake/scene.h"
+#include "bake/surfel_refine.h"
 #include "bake/surfels.h"
 #include "bake/texels.h"
 #include "bake/sparse.h"
@@ -457,7 +458,8 @@ typedef struct bake_job {
     lc_relocate_stats rs;   /* 6. relocation */
     lc_lcb_surfel *surfels; /* 7. surfels (8 reorders them) */
     uint32_t *surfel_tri, n_surfels;
-    lc_hierarchy hier; /* 8. hierarchy */
+    uint32_t surfels_refined; /* of them placed by --surfel-refine */
+    lc_hierarchy hier;        /* 8. hierarchy */
     uint32_t *perm, *tri_sorted;
     lc_lcb_link *links; /* 9. links */
     uint16_t *link_sh;
@@ -583,11 +585,30 @@ static int bake_relocate(bake_job *b, char *err, size_t errlen) {
 
 static int bake_surfels(bake_job *b, char *err, size_t errlen) {
     const lc_bake_settings *s = b->s;
-    lc_surfel_params sp = {.target_count = (uint32_t)s->surfels,
+    const uint32_t extra = (uint32_t)floor(s->surfel_refine * s->surfels);
+    lc_surfel_params sp = {.target_count = (uint32_t)s->surfels - extra,
                            .relax_iterations = (uint32_t)s->relax,
                            .seed = (uint64_t)s->seed,
                            .threads = s->threads};
     if (lc_surfels_generate(&b->scene, &sp, &b->surfels, &b->surfel_tri, &b->n_surfels, err, errlen) != 0) return 1;
+    if (extra > 0) {
+        lc_surfel_refine_params rp = {.extra = extra,
+                                      .rounds = 2,
+                                      .pilot_rays = 32,
+                                      .area_samples = 64,
+                                      .seed = (uint64_t)s->seed,
+                                      .threads = s->threads};
+        lc_surfel_refine_stats rs;
+        if (lc_surfels_refine(b->rt, &b->scene, b->caches, b->n_caches, &rp, &b->surfels, &b->surfel_tri, &b->n_surfels,
+                              &rs, err, errlen) != 0)
+            return 1;
+        b->surfels_refined = rs.added;
+        if (!s->quiet)
+            lc_info("bake",
+                    "surfel refinement: %u surfels where caches see a surface without its own, %u more by area; "
+                    "pilot hits on such surfaces %.1f%% -> %.1f%%; areas %.2f-%.2f x the mean",
+                    rs.added, rs.filled, 100 * rs.misplaced_before, 100 * rs.misplaced_after, rs.area_min, rs.area_max);
+    }
     int64_t n_buried =
         s->drop_buried ? bake_drop_buried(b->rt, b->surfels, b->surfel_tri, &b->n_surfels, s->threads) : 0;
     if (n_buried < 0) return bake_oom(err, errlen);
@@ -823,6 +844,7 @@ static int bake_meta(bake_job *b, char *err, size_t errlen) {
     cJSON_AddNumberToObject(jsu, "area", b->n_surfels ? surfel_area / b->n_surfels : 0); /* mean: the nominal area */
     cJSON_AddBoolToObject(jsu, "exposure", b->seen != NULL);
     cJSON_AddNumberToObject(jsu, "unseen", b->es.unseen);
+    cJSON_AddNumberToObject(jsu, "refined", b->surfels_refined); /* placed by --surfel-refine */
     cJSON *jh = cJSON_AddObjectToObject(meta, "hierarchy");
     cJSON_AddStringToObject(jh, "method", s->hierarchy == LC_HIERARCHY_AAC ? "aac" : "kdtree");
     cJSON_AddNumberToObject(jh, "nodes", b->hier.n_nodes);

@@ -27,10 +27,13 @@ int lc_exposure_apply(const uint32_t *seen, lc_lcb_surfel *surfels, uint32_t n_s
         free(ratio);
         return -1;
     }
-    /* a_i * u_i / mean(u), u floored; then renormalised so the total area is kept */
-    double mean = seen_sum / area_sum, weighted = 0;
+    /* a_i * u_i / mean(u), u floored; then renormalised so the total area is kept. u_i grows
+     * with the surfel's own area (a larger surfel catches more caches' rays), so with unequal
+     * areas (--surfel-refine) u_i is compared with the mean scaled to that area: the weight is
+     * how widely the caches see the surface, not its size twice. */
+    double mean = seen_sum / area_sum, mean_area = area_sum / n_surfels, weighted = 0;
     for (uint32_t i = 0; i < n_surfels; i++) {
-        double u = seen[i] / mean;
+        double u = seen[i] / (mean * (surfels[i].area / mean_area));
         if (u < LC_EXPOSURE_FLOOR) u = LC_EXPOSURE_FLOOR;
         surfels[i].area = (float)(surfels[i].area * u);
         weighted += surfels[i].area;

@@ -5,7 +5,9 @@
  * see (buried under a column base, in crevices) still pull a node's mean toward their own,
  * usually darker, radiosity, which biases the first bounce low. With exposure the stored surfel area becomes the effective
  * area a_i * u_i / mean(u), u_i the number of caches whose probe rays hit surfel i (floored
- * at LC_EXPOSURE_FLOOR of the mean so every weight stays positive); the total is kept. Node
+ * at LC_EXPOSURE_FLOOR of the mean so every weight stays positive); the total is kept. With
+ * unequal surfel areas (--surfel-refine) the mean is scaled to each surfel's area, since a
+ * larger surfel catches more caches' rays: the weight is how widely the surface is seen. Node
  * areas are recomputed and every link factor (visible solid angle / (pi * node area)) and
  * LKSH record rescaled, so a link's solid angle is unchanged and its node mean becomes
  * exposure-weighted. Runtimes need no change: they use the area only through

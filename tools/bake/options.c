@@ -75,6 +75,10 @@ static const lc_opt bake_options[] = {
     {"relax", LC_OPT_INT, OFF(relax), 0, 64, "4", NULL, "surfel relaxation iterations", NULL, NULL},
     {"drop-buried", LC_OPT_BOOL, OFF(drop_buried), 0, 1, "false", NULL,
      "drop surfels inside geometry (fewer than --surfels remain)", NULL, NULL},
+    {"surfel-refine", LC_OPT_FLOAT, OFF(surfel_refine), 0, 0.75, "0", NULL,
+     "share of --surfels placed where caches see surfaces without a surfel of their own; surfel areas then follow "
+     "the surface each covers (see bake/surfel_refine.h)",
+     NULL, NULL},
     {"exposure", LC_OPT_BOOL, OFF(exposure), 0, 1, "false", NULL,
      "weigh surfels by how many caches see them (see bake/exposure.h; on in moderate, high and ultra)", NULL, NULL},
     {"hierarchy", LC_OPT_ENUM, OFF(hierarchy), 0, 0, "aac", "aac|kdtree",

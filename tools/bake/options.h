@@ -37,8 +37,9 @@ typedef struct lc_bake_settings {
     int dilate;
     int surfels;
     int relax;
-    int drop_buried; /* drop surfels inside geometry (changes the surfel count) */
-    int exposure;    /* surfel areas weighted by how many caches see them (bake/exposure.h) */
+    int drop_buried;      /* drop surfels inside geometry (changes the surfel count) */
+    double surfel_refine; /* share of the surfels placed by bake/surfel_refine.h (0 = equal-area only) */
+    int exposure;         /* surfel areas weighted by how many caches see them (bake/exposure.h) */
     int hierarchy;
     int links;
     int node_samples;

@@ -44,7 +44,27 @@ typedef struct {
 
 static uint32_t surfels_material(const lc_mesh *m, uint32_t tri) { return m->material ? m->material[tri] : 0; }
 
-/* Fills position, normal, albedo from (tri, b1, b2). */
+void lc_surfel_init(const lc_scene *scene, uint32_t tri, float b1, float b2, float area, lc_lcb_surfel *out) {
+    memset(out, 0, sizeof *out);
+    lc_mesh_interpolate(&scene->mesh, tri, b1, b2, out->position, out->normal);
+    lc_scene_albedo(scene, tri, b1, b2, out->albedo);
+    lc_scene_emission(scene, tri, out->emission);
+    out->area = area;
+    out->material = surfels_material(&scene->mesh, tri);
+    out->cache = LC_NONE;
+}
+
+void lc_surfel_halton_bary(uint64_t i, const float rot[2], float *b1, float *b2) {
+    double u = lc_halton(i, 2) + rot[0], v = lc_halton(i, 3) + rot[1];
+    u -= floor(u);
+    v -= floor(v);
+    /* uniform on the triangle: b0 = 1 - sqrt(u), b1 = sqrt(u)(1 - v), b2 = sqrt(u) v */
+    double su = sqrt(u);
+    *b1 = (float)(su * (1 - v));
+    *b2 = (float)(su * v);
+}
+
+/* Moves surfel i to its current barycentrics (position, normal, albedo). */
 static void surfels_place(const surfels_ctx *c, uint32_t i) {
     lc_lcb_surfel *x = &c->s[i];
     float b1 = c->bary[2 * (size_t)i], b2 = c->bary[2 * (size_t)i + 1];
@@ -56,22 +76,8 @@ static void surfels_init_range(void *ctx, size_t begin, size_t end, int thread) 
     (void)thread;
     surfels_ctx *c = ctx;
     for (size_t i = begin; i < end; i++) {
-        double u = lc_halton(i + c->halton_offset, 2) + c->rot[0];
-        double v = lc_halton(i + c->halton_offset, 3) + c->rot[1];
-        u -= floor(u);
-        v -= floor(v);
-        /* uniform on the triangle: b0 = 1 - sqrt(u), b1 = sqrt(u)(1 - v), b2 = sqrt(u) v */
-        double su = sqrt(u);
-        c->bary[2 * i] = (float)(su * (1 - v));
-        c->bary[2 * i + 1] = (float)(su * v);
-        lc_lcb_surfel *x = &c->s[i];
-        uint32_t t = c->tri[i];
-        lc_scene_emission(c->scene, t, x->emission);
-        x->area = c->area;
-        x->material = surfels_material(&c->scene->mesh, t);
-        x->cache = LC_NONE;
-        x->reserved = 0;
-        surfels_place(c, (uint32_t)i);
+        lc_surfel_halton_bary(i + c->halton_offset, c->rot, &c->bary[2 * i], &c->bary[2 * i + 1]);
+        lc_surfel_init(c->scene, c->tri[i], c->bary[2 * i], c->bary[2 * i + 1], c->area, &c->s[i]);
     }
 }
 

@@ -24,4 +24,12 @@ typedef struct lc_surfel_params {
 int lc_surfels_generate(const lc_scene *scene, const lc_surfel_params *params, lc_lcb_surfel **out,
                         uint32_t **triangle_out, uint32_t *n_out, char *err, size_t errlen);
 
+/* One surfel on triangle tri at barycentrics (b1, b2): position, normal, albedo, emission
+ * and material from the scene; cache = LC_NONE. */
+void lc_surfel_init(const lc_scene *scene, uint32_t tri, float b1, float b2, float area, lc_lcb_surfel *out);
+
+/* Point i of the 2D Halton sequence (bases 2, 3), rotated by rot (Cranley-Patterson), warped
+ * to uniform barycentrics (b1, b2) on a triangle. */
+void lc_surfel_halton_bary(uint64_t i, const float rot[2], float *b1, float *b2);
+
 #endif

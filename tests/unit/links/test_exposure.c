@@ -1,5 +1,5 @@
 /* exposure: surfel areas become a_i * max(u_i / mean u, floor), renormalised to the same
- * total; node areas are the sums of their surfels; every link keeps its solid angle
+ * total (mean u scaled to each surfel's area when areas differ); node areas are the sums of their surfels; every link keeps its solid angle
  * (factor * node area) and its LKSH record scales with it; nothing seen is an error. */
 #include <math.h>
 #include <stdint.h>
@@ -65,6 +65,16 @@ int main(void) {
     CHECK(near(lc_half_to_float(sh[4]), ratio1, 2e-3), "LKSH scaled by the area ratio (%g vs %g)",
           lc_half_to_float(sh[4]), ratio1);
     CHECK(lc_half_to_float(sh[12]) == 1.0f, "padding LKSH untouched");
+
+    /* Unequal areas (--surfel-refine): a surfel three times larger that three times as many
+     * caches see is seen as widely per area, so the areas stay (a_i * u_i would give 1 : 9). */
+    tree(s, nd, &h, levels);
+    const uint32_t by_area[4] = {1, 3, 1, 3};
+    for (int i = 0; i < 4; i++) s[i].area = (float)by_area[i];
+    CHECK(lc_exposure_apply(by_area, s, 4, &h, links, 4, NULL, 0, &st) == 0, "apply");
+    for (int i = 0; i < 4; i++)
+        CHECK(near(s[i].area, by_area[i], 1e-6), "surfel %d of area %u seen by %u caches keeps its area (%g)", i,
+              by_area[i], by_area[i], s[i].area);
 
     tree(s, nd, &h, levels);
     const uint32_t none[4] = {0, 0, 0, 0};
