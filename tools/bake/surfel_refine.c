@@ -142,9 +142,9 @@ static int64_t refine_add(const lc_scene *scene, const double *weights, uint32_t
         cum += weights[t];
         double k = floor(cum / per) - before, at = lc_mesh_triangle_area(m, t);
         if (!(isfinite(at) && at > 0)) continue;
-        double cap = 1.0 + floor(REFINE_MAX_DENSITY * at / mean_area);
-        if (k > cap) k = cap;
-        for (double j = 0; j < k && added < want; j++, added++) {
+        const double cap = 1.0 + floor(REFINE_MAX_DENSITY * at / mean_area);
+        const uint32_t count = (uint32_t)fmin(fmin(k, cap), (double)(want - added));
+        for (uint32_t j = 0; j < count; j++, added++) {
             float b1, b2;
             lc_surfel_halton_bary((*next_halton)++, rot, &b1, &b2);
             lc_surfel_init(scene, t, b1, b2, (float)mean_area, &ns[*n + added]);
