@@ -118,15 +118,12 @@ static double refine_pilot(refine_pilot_ctx *c, const lc_lcb_surfel *surfels, ui
  * walk of surfels.c over these weights), each triangle capped at REFINE_MAX_DENSITY times its
  * share of the current mean area, plus one. *next_halton: the Halton index of the next surfel.
  * Returns the number added, -1 out of memory. */
-static int64_t refine_add(const lc_scene *scene, const double *weights, uint32_t want, lc_lcb_surfel **surfels,
-                          uint32_t **tri, uint32_t *n, const float rot[2], uint64_t *next_halton) {
+static int64_t refine_add(const lc_scene *scene, double area, const double *weights, uint32_t want,
+                          lc_lcb_surfel **surfels, uint32_t **tri, uint32_t *n, const float rot[2],
+                          uint64_t *next_halton) {
     const lc_mesh *m = &scene->mesh;
-    double weight = 0, area = 0;
-    for (uint32_t t = 0; t < m->n_triangles; t++) {
-        weight += weights[t];
-        double at = lc_mesh_triangle_area(m, t);
-        if (isfinite(at) && at > 0) area += at;
-    }
+    double weight = 0;
+    for (uint32_t t = 0; t < m->n_triangles; t++) weight += weights[t];
     if (weight <= 0 || want == 0) return 0;
     const double per = weight / want, mean_area = area / *n;
     lc_lcb_surfel *ns = realloc(*surfels, ((size_t)*n + want) * sizeof *ns);
@@ -195,8 +192,8 @@ static void refine_area_range(void *ctx, size_t begin, size_t end, int thread) {
  * samples, each carrying an equal part of the triangle's area, so small triangles count at
  * their true area. A surfel no sample reaches keeps REFINE_AREA_FLOOR of the mean; the total
  * is the surface area. -1 out of memory. */
-static int refine_areas(const lc_scene *scene, lc_lcb_surfel *surfels, uint32_t n, uint32_t samples_per_surfel,
-                        const float rot[2], int threads, lc_surfel_refine_stats *st) {
+static int refine_areas(const lc_scene *scene, double total, lc_lcb_surfel *surfels, uint32_t n,
+                        uint32_t samples_per_surfel, const float rot[2], int threads, lc_surfel_refine_stats *st) {
     const lc_mesh *m = &scene->mesh;
     uint64_t *first = malloc(((size_t)m->n_triangles + 1) * sizeof *first);
     uint64_t *share = calloc(n, sizeof *share);
@@ -204,11 +201,6 @@ static int refine_areas(const lc_scene *scene, lc_lcb_surfel *surfels, uint32_t 
     int hashed = 0, rc = -1;
     if (!first || !share || lc_surfel_hash_build(&hash, surfels, n) != 0) goto done;
     hashed = 1;
-    double total = 0;
-    for (uint32_t t = 0; t < m->n_triangles; t++) {
-        double at = lc_mesh_triangle_area(m, t);
-        if (isfinite(at) && at > 0) total += at;
-    }
     const double a = total / ((double)samples_per_surfel * n);
     first[0] = 0;
     for (uint32_t t = 0; t < m->n_triangles; t++) {
@@ -242,6 +234,7 @@ int lc_surfels_refine(const lc_rt *rt, const lc_scene *scene, const lc_lcb_cache
                       lc_surfel_refine_stats *stats, char *err, size_t errlen) {
     memset(stats, 0, sizeof *stats);
     const lc_mesh *m = &scene->mesh;
+    const double area = lc_mesh_total_area(m); /* the import drops non-finite triangles */
     uint32_t *misplaced = calloc(m->n_triangles ? m->n_triangles : 1, sizeof *misplaced);
     double *weights = malloc((m->n_triangles ? m->n_triangles : 1) * sizeof *weights);
     if (!misplaced || !weights) goto oom;
@@ -263,7 +256,7 @@ int lc_surfels_refine(const lc_rt *rt, const lc_scene *scene, const lc_lcb_cache
         if (r == 0) stats->pilot_hits = hits, stats->misplaced_before = share;
         uint32_t want = (uint32_t)(((uint64_t)p->extra * (r + 1)) / rounds) - stats->added;
         for (uint32_t t = 0; t < m->n_triangles; t++) weights[t] = misplaced[t];
-        int64_t added = refine_add(scene, weights, want, surfels, tri, n, rot, &next_halton);
+        int64_t added = refine_add(scene, area, weights, want, surfels, tri, n, rot, &next_halton);
         if (added < 0) goto oom;
         stats->added += (uint32_t)added;
     }
@@ -274,12 +267,12 @@ int lc_surfels_refine(const lc_rt *rt, const lc_scene *scene, const lc_lcb_cache
         weights[t] = isfinite(at) && at > 0 ? at : 0;
     }
     for (int pass = 0; pass < 4 && stats->added + stats->filled < p->extra; pass++) {
-        int64_t filled =
-            refine_add(scene, weights, p->extra - stats->added - stats->filled, surfels, tri, n, rot, &next_halton);
+        int64_t filled = refine_add(scene, area, weights, p->extra - stats->added - stats->filled, surfels, tri, n, rot,
+                                    &next_halton);
         if (filled < 0) goto oom;
         stats->filled += (uint32_t)filled;
     }
-    if (refine_areas(scene, *surfels, *n, p->area_samples, rot, p->threads, stats) != 0) goto oom;
+    if (refine_areas(scene, area, *surfels, *n, p->area_samples, rot, p->threads, stats) != 0) goto oom;
     stats->misplaced_after = refine_pilot(&c, *surfels, *n, rounds, p->threads, NULL, &hits);
     if (stats->misplaced_after < 0) goto oom;
     free(misplaced);
