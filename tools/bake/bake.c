@@ -577,6 +577,7 @@ static int bake_relocate(bake_job *b, char *err, size_t errlen) {
                              .texel_fraction = 0.6,
                              .grid_fraction = 0.8,
                              .offset = b->s->reloc_offset,
+                             .grid_clearance = b->s->grid_clearance * b->grid.cell,
                              .seed = (uint64_t)b->s->seed,
                              .threads = b->s->threads};
     lc_relocate_caches(b->rt, b->caches, b->n_caches, &rp, &b->rs);
@@ -835,6 +836,7 @@ static int bake_meta(bake_job *b, char *err, size_t errlen) {
     cJSON *jg = cJSON_AddObjectToObject(meta, "grid");
     cJSON_AddItemToObject(jg, "origin", bake_vec3(b->grid.origin));
     cJSON_AddNumberToObject(jg, "cell", b->grid.cell);
+    cJSON_AddNumberToObject(jg, "clearance", b->s->grid_clearance * b->grid.cell); /* metres, moved caches */
     double dims[3] = {b->grid.dims[0], b->grid.dims[1], b->grid.dims[2]};
     cJSON_AddItemToObject(jg, "dims", cJSON_CreateDoubleArray(dims, 3));
     cJSON *jsu = cJSON_AddObjectToObject(meta, "surfels");

@@ -53,6 +53,7 @@ typedef struct lc_bake_settings {
     int grid_max_samples;
     int reloc_rays;
     double reloc_offset;
+    double grid_clearance; /* fraction of a grid cell */
     int seed;
     int threads;
     int quiet;

@@ -25,12 +25,13 @@ typedef struct {
     uint32_t hits, back;
     float best_t; /* shortest back-facing hit */
     lc_vec3 best_dir;
+    lc_vec3 best_ng; /* that hit's geometric normal: points to the side the cache moves out to */
 } reloc_probe;
 
 /* Casts `rays` stratified directions (Fibonacci spiral, randomly rotated per cache and pass)
  * over the hemisphere around axis (hemi) or the full sphere. */
 static reloc_probe reloc_cast(const reloc_ctx *ctx, lc_vec3 org, lc_vec3 axis, int hemi, uint64_t stream) {
-    reloc_probe pr = {0, 0, FLT_MAX, {0, 0, 0}};
+    reloc_probe pr = {0, 0, FLT_MAX, {0, 0, 0}, {0, 0, 0}};
     uint32_t n = ctx->params->rays;
     lc_rng rng = lc_rng_seed(ctx->params->seed, stream);
     float u = lc_rng_float(&rng), v = lc_rng_float(&rng);
@@ -61,10 +62,25 @@ static reloc_probe reloc_cast(const reloc_ctx *ctx, lc_vec3 org, lc_vec3 axis, i
             if (hit.t < pr.best_t) {
                 pr.best_t = hit.t;
                 pr.best_dir = d;
+                pr.best_ng = lc_v3_load(hit.ng);
             }
         }
     }
     return pr;
+}
+
+/* A grid cache pushed just past a surface sees that surface's light over its whole lower
+ * hemisphere through the one or two surfels under it; clearance moves it further along the
+ * surface's normal (as DDGI offsets probes), at most half the free distance in front of it. */
+static lc_vec3 reloc_clear(const reloc_ctx *ctx, lc_vec3 at, lc_vec3 ng) {
+    float clearance = (float)ctx->params->grid_clearance;
+    if (clearance <= 0) return at;
+    float o[3], d[3];
+    lc_v3_store(o, at);
+    lc_v3_store(d, ng);
+    lc_hit hit;
+    if (lc_rt_intersect(ctx->rt, o, d, 0.0f, INFINITY, &hit)) clearance = fminf(clearance, 0.5f * hit.t);
+    return lc_v3_add(at, lc_v3_scale(ng, clearance));
 }
 
 static void reloc_range(void *arg, size_t begin, size_t end, int thread) {
@@ -92,6 +108,7 @@ static void reloc_range(void *arg, size_t begin, size_t end, int thread) {
             reloc_probe pr = reloc_cast(ctx, p, n, 0, stream);
             if (pr.back == 0 || (double)pr.back < prm->grid_fraction * (double)pr.hits) continue;
             lc_vec3 moved = lc_v3_add(p, lc_v3_scale(pr.best_dir, pr.best_t + (float)prm->offset));
+            moved = reloc_clear(ctx, moved, pr.best_ng);
             reloc_probe again = reloc_cast(ctx, moved, n, 0, stream + 1);
             if (again.back > 0 && (double)again.back >= prm->grid_fraction * (double)again.hits) {
                 c->flags |= LC_CACHE_INSIDE; /* position stays where it was */

@@ -2,7 +2,9 @@
  * From each cache, test rays are cast (texel caches: hemisphere around the normal; grid
  * caches: full sphere). If at least `backface_fraction` of the rays that hit something hit a
  * back face, the cache moves along the shortest back-facing ray to just past that surface
- * (+ offset). A grid cache that is still inside after moving is flagged LC_CACHE_INSIDE. */
+ * (+ offset); a grid cache then moves on along that face's normal by grid_clearance, or half
+ * the free distance there if less. A grid cache that is still inside after moving is flagged
+ * LC_CACHE_INSIDE. */
 #ifndef LC_RELOCATE_H
 #define LC_RELOCATE_H
 #include <stdint.h>
@@ -15,6 +17,7 @@ typedef struct lc_relocate_params {
     double texel_fraction; /* back-face fraction that triggers a move, texel caches (0.6) */
     double grid_fraction;  /* same for grid caches (0.8, misses ignored) */
     double offset;         /* metres past the back face */
+    double grid_clearance; /* metres a moved grid cache then keeps from that face (0: offset only) */
     uint64_t seed;
     int threads; /* parallel-for workers, 0 = all cores (the result does not depend on it) */
 } lc_relocate_params;

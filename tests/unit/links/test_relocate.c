@@ -97,7 +97,8 @@ static lc_lcb_cache make_cache(lc_vec3 p, lc_vec3 n, uint32_t flags) {
     return c;
 }
 
-static const lc_relocate_params params = {64, 0.6, 0.8, 0.01, 11, 0};
+static const lc_relocate_params params = {
+    .rays = 64, .texel_fraction = 0.6, .grid_fraction = 0.8, .offset = 0.01, .seed = 11, .threads = 0};
 
 static void test_buried_texel(void) {
     world w = {0};
@@ -140,6 +141,13 @@ static void test_buried_texel(void) {
         CHECK(memcmp(caches[i].position, orig[i].position, sizeof orig[i].position) == 0, "open texel %d stays", i);
     }
     CHECK(st.moved == 2 && st.inside == 0, "stats moved %u inside %u", st.moved, st.inside);
+    /* Grid clearance leaves texel caches where the plain move puts them. */
+    lc_lcb_cache cleared[4];
+    memcpy(cleared, orig, sizeof orig);
+    lc_relocate_params clear = params;
+    clear.grid_clearance = 0.3;
+    lc_relocate_caches(rt, cleared, 4, &clear, NULL);
+    CHECK(memcmp(cleared, caches, sizeof caches) == 0, "grid clearance does not move texel caches");
     lc_rt_release(rt);
     world_free(&w);
 }
@@ -212,8 +220,39 @@ static void test_grid_caches(void) {
     world_free(&w);
 }
 
+/* A grid cache buried in a slab leaves through its top face, then keeps grid_clearance from
+ * it along the face's normal, or half the free space when a ceiling is nearer. */
+static void test_grid_clearance(void) {
+    for (int ceiling = 0; ceiling < 2; ceiling++) {
+        world w = {0};
+        add_box(&w, lc_v3(-5, -1, -5), lc_v3(5, 0, 5));
+        if (ceiling) add_quad(&w, lc_v3(0, 0.4f, 0), lc_v3(0, -1, 0), 20, 20);
+        char err[256];
+        lc_rt *rt = lc_rt_create(&w.mesh, 2, err, sizeof err);
+        CHECK(rt != NULL, "rt: %s", err);
+        if (!rt) return;
+        const double clearances[2] = {0, 0.3};
+        for (int k = 0; k < 2; k++) {
+            lc_lcb_cache c = make_cache(lc_v3(0.3f, -0.1f, 0.2f), lc_v3(0, 0, 0), LC_CACHE_GRID);
+            lc_relocate_params prm = params;
+            prm.grid_clearance = clearances[k];
+            lc_relocate_caches(rt, &c, 1, &prm, NULL);
+            /* the top face is 0.1 away, the other faces 0.9 or more: out through the top, plus the offset */
+            double want = params.offset + (k == 0 ? 0 : ceiling ? 0.5 * (0.4 - params.offset) : 0.3);
+            fprintf(stderr, "grid clearance %.1f, ceiling %d: y %.4f (want %.4f)\n", clearances[k], ceiling,
+                    (double)c.position[1], want);
+            CHECK(c.flags == (LC_CACHE_GRID | LC_CACHE_MOVED), "clearance case flags %x", c.flags);
+            CHECK(fabs(c.position[1] - want) < 0.004, "clearance %.1f ceiling %d: y %.4f, want %.4f", clearances[k],
+                  ceiling, (double)c.position[1], want);
+        }
+        lc_rt_release(rt);
+        world_free(&w);
+    }
+}
+
 int main(void) {
     test_buried_texel();
     test_grid_caches();
+    test_grid_clearance();
     CHECK_DONE();
 }
