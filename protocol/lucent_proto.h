@@ -344,6 +344,12 @@ typedef struct lc_frame_header {
 /* Writes header (64 B) + tile table + payload into out (capacity cap). Computes the CRC.
  * Returns the frame length, or 0 if it does not fit. */
 size_t lc_frame_write(const lc_frame_header *h, const uint32_t *tiles, const void *payload, uint8_t *out, size_t cap);
+/* The CRC-32 of a frame's body (the tile table as written, then the payload): a server sending
+ * one body to many clients computes it once and passes it to lc_frame_write_body_crc, which
+ * writes the same bytes as lc_frame_write and combines the header's CRC with it. */
+uint32_t lc_frame_body_crc(const lc_frame_header *h, const uint32_t *tiles, const void *payload);
+size_t lc_frame_write_body_crc(const lc_frame_header *h, const uint32_t *tiles, const void *payload, uint32_t body_crc,
+                               uint8_t *out, size_t cap);
 /* Parses and checks a frame: magic, version, header size, flags (keyframe, delta, or delta +
  * residual for the lightmap), lengths consistent with len, tile indices ascending and inside
  * the image, CRC. A residual delta's payload is compressed: its inflated size is checked by

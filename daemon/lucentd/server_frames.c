@@ -15,26 +15,33 @@ typedef struct lc_encoded_lightmap {
     uint64_t pub_seq; /* the publication it encodes */
     uint8_t *words;   /* W*H texels as on the wire */
     size_t cap;
+    int crc_valid; /* crc: lc_frame_body_crc of a keyframe of words, once one was sent */
+    uint32_t crc;
 } lc_encoded_lightmap;
 
-/* One residual delta: what takes a client copy in state `from_state` to publication
- * `pub_seq`. Two clients in the same state hold bit-identical copies (the same keyframe,
- * then the same deltas), so they can share it. */
-typedef struct lc_residual_memo {
+/* One lightmap delta: what takes a client copy in state `from_state` to publication
+ * `pub_seq` (whole tiles, or residuals). Two clients in the same state hold identical copies
+ * (the same keyframe, then the same deltas), so they share it: its tiles, payload and CRC are
+ * computed once per publication, not once per client. State 0 names no shared copy. */
+typedef struct lc_delta_memo {
     int valid, keyframe; /* keyframe: not smaller than one; send that instead */
     uint64_t from_state, pub_seq, to_state;
+    uint32_t tile; /* the tile side and threshold it was computed with */
+    float thr;
     uint32_t *tiles, n_tiles;
-    uint32_t *moved, n_moved; /* the texels (y*W+x) that get their new value */
+    uint32_t *moved, n_moved; /* residuals: the texels (y*W+x) that get their new value */
     uint8_t *payload;
-    size_t payload_len;
-} lc_residual_memo;
+    size_t payload_len, payload_cap;
+    uint32_t body_crc; /* lc_frame_body_crc of tiles + payload */
+} lc_delta_memo;
 
 struct lc_frames {
     /* The lightmap of one publication encoded once per encoding, shared by every client's
      * keyframes, tiles and residuals (100 clients: one encode per frame, not 100). */
     lc_encoded_lightmap lm_encoded[4]; /* index: lc_encoding */
-    lc_residual_memo lm_residual[4];   /* the last residual delta computed per encoding */
-    uint64_t residual_states;          /* ids handed to copies made by residual deltas */
+    lc_delta_memo lm_residual[4];      /* the last residual delta computed per encoding */
+    lc_delta_memo lm_tiles[4];         /* the last whole-tile delta computed per encoding */
+    uint64_t delta_states;             /* ids handed to copies made by deltas (< 2^62) */
     int peak_valid;                    /* peak: the brightest channel of publication peak_pub_seq */
     uint64_t peak_pub_seq;
     float peak;
@@ -46,9 +53,12 @@ void lc_frames_release(lc_frames *f) {
     if (!f) return;
     for (int e = 0; e < 4; e++) {
         free(f->lm_encoded[e].words);
-        free(f->lm_residual[e].tiles);
-        free(f->lm_residual[e].moved);
-        free(f->lm_residual[e].payload);
+        lc_delta_memo *memos[2] = {&f->lm_residual[e], &f->lm_tiles[e]};
+        for (int k = 0; k < 2; k++) {
+            free(memos[k]->tiles);
+            free(memos[k]->moved);
+            free(memos[k]->payload);
+        }
     }
     free(f);
 }
@@ -123,6 +133,7 @@ static const uint8_t *frames_lightmap_words(lc_frames *f, const lc_frames_job *j
     }
     for (size_t i = 0; i < texels; i++) frames_encode_texel(enc, p->lightmap + 3 * i, e->words + i * tb);
     e->valid = 1;
+    e->crc_valid = 0;
     e->pub_seq = j->pub_seq;
     return e->words;
 }
@@ -164,12 +175,68 @@ static uint32_t frames_dirty_tiles(const lc_frames_copy *cp, const lc_frames_job
     return n;
 }
 
+/* The CRC of the frame body (tile table + payload) m's frames carry. */
+static uint32_t frames_body_crc(const lc_delta_memo *m) {
+    lc_frame_header h = {.tile_count = m->n_tiles, .payload_length = (uint32_t)m->payload_len};
+    return lc_frame_body_crc(&h, m->tiles, m->payload);
+}
+
+/* Computes into m the whole-tile delta that takes a client whose copy was encoded from
+ * cp->lm_sent to j->frame: the dirty tiles and their texels from `words`. m->keyframe when it
+ * would not be smaller than a keyframe. The caller sets m's key fields. */
+static int frames_tiles_compute(lc_delta_memo *m, const lc_frames_copy *cp, const lc_frames_job *j,
+                                const uint8_t *words, size_t tb, uint32_t S, float thr, float floor_v) {
+    const lc_published *p = j->frame;
+    const uint32_t W = p->lm_w, H = p->lm_h, T = lc_tiles_count(W, H, S);
+    m->valid = 0;
+    uint32_t *tiles = realloc(m->tiles, (size_t)T * sizeof *tiles);
+    if (!tiles) return -1;
+    m->tiles = tiles;
+    size_t delta_texels;
+    m->n_tiles = frames_dirty_tiles(cp, j, S, thr, floor_v, m->tiles, &delta_texels);
+    m->payload_len = delta_texels * tb;
+    m->keyframe = m->payload_len + 4 * (size_t)m->n_tiles >= (size_t)W * H * tb; /* no smaller than a keyframe */
+    if (!m->keyframe) {
+        if (m->payload_len > m->payload_cap) {
+            uint8_t *n = realloc(m->payload, m->payload_len);
+            if (!n) return -1;
+            m->payload = n;
+            m->payload_cap = m->payload_len;
+        }
+        uint8_t *o = m->payload;
+        for (uint32_t k = 0; k < m->n_tiles; k++) {
+            uint32_t x0, y0, x1, y1;
+            lc_tile_rect(W, H, S, m->tiles[k], &x0, &y0, &x1, &y1);
+            for (uint32_t y = y0; y < y1; y++, o += (size_t)(x1 - x0) * tb)
+                memcpy(o, words + ((size_t)y * W + x0) * tb, (size_t)(x1 - x0) * tb);
+        }
+        m->body_crc = frames_body_crc(m);
+    }
+    m->valid = 1;
+    return 0;
+}
+
+/* Commits a whole-tile delta to the session: the client's copy now holds j->frame's texels in
+ * m's tiles. */
+static void frames_commit_tiles(lc_frames_copy *cp, const lc_delta_memo *m, const lc_frames_job *j, uint32_t S) {
+    const lc_published *p = j->frame;
+    for (uint32_t k = 0; k < m->n_tiles; k++) {
+        uint32_t x0, y0, x1, y1;
+        lc_tile_rect(p->lm_w, p->lm_h, S, m->tiles[k], &x0, &y0, &x1, &y1);
+        for (uint32_t y = y0; y < y1; y++) {
+            size_t i = (size_t)y * p->lm_w + x0;
+            memcpy(cp->lm_sent + 3 * i, p->lightmap + 3 * i, (size_t)(x1 - x0) * 3 * sizeof(float));
+        }
+    }
+    cp->lm_sent_state = m->to_state;
+}
+
 /* Computes into m the residual delta (PROTOCOL.md §6.2.1) that takes a client holding
  * cp->lm_held to j->frame: the dirty tiles; in them, texels that moved get their new value
  * (`words`), the others keep the client's (residual 0); zlib-compressed. m->keyframe when it
  * would not be smaller than a keyframe. The caller sets m's key fields. */
-static int frames_residual_compute(lc_residual_memo *m, const lc_frames_copy *cp, const lc_frames_job *j,
-                                   lc_encoding enc, const uint8_t *words, uint32_t S, float thr, float floor_v) {
+static int frames_residual_compute(lc_delta_memo *m, const lc_frames_copy *cp, const lc_frames_job *j, lc_encoding enc,
+                                   const uint8_t *words, uint32_t S, float thr, float floor_v) {
     const lc_published *p = j->frame;
     const uint32_t W = p->lm_w, H = p->lm_h, T = lc_tiles_count(W, H, S);
     const size_t texels = (size_t)W * H, tb = lc_frame_texel_bytes(enc);
@@ -207,12 +274,13 @@ static int frames_residual_compute(lc_residual_memo *m, const lc_frames_copy *cp
     m->payload_len = m->n_tiles ? lc_residual_deflate(raw, raw_len, z, lc_residual_deflate_bound(raw_len)) : 0;
     free(raw);
     m->keyframe = m->n_tiles && (m->payload_len == 0 || table + m->payload_len >= texels * tb);
+    m->body_crc = frames_body_crc(m);
     m->valid = 1;
     return 0;
 }
 
 /* Commits a residual delta to the session: the client will hold the moved texels' new values. */
-static void frames_commit_residual(lc_frames_copy *cp, const lc_residual_memo *m, const lc_frames_job *j,
+static void frames_commit_residual(lc_frames_copy *cp, const lc_delta_memo *m, const lc_frames_job *j,
                                    const uint8_t *words, size_t tb) {
     const float *lightmap = j->frame->lightmap;
     for (uint32_t k = 0; k < m->n_moved; k++) {
@@ -221,101 +289,99 @@ static void frames_commit_residual(lc_frames_copy *cp, const lc_residual_memo *m
         memcpy(cp->lm_sent + 3 * i, lightmap + 3 * i, 3 * sizeof(float));
     }
     cp->lm_held_state = m->to_state;
+    cp->lm_sent_state = 0; /* lm_sent as residuals left it: no whole-tile delta is shared from it */
+}
+
+/* A keyframe of `words` for the session: its copy becomes j->frame's lightmap. */
+static void frames_commit_keyframe(lc_frames_copy *cp, const lc_frames_job *j, lc_encoding enc, const uint8_t *words) {
+    const lc_published *p = j->frame;
+    const size_t texels = (size_t)p->lm_w * p->lm_h, tb = lc_frame_texel_bytes(enc);
+    if (cp->lm_sent_texels != texels) {
+        free(cp->lm_sent);
+        cp->lm_sent = malloc(texels * 3 * sizeof(float));
+        cp->lm_sent_texels = cp->lm_sent ? texels : 0;
+    }
+    cp->lm_sent_state = 0;
+    if (cp->lm_sent) {
+        memcpy(cp->lm_sent, p->lightmap, texels * 3 * sizeof(float));
+        cp->lm_sent_state = 1ull << 63 | j->pub_seq; /* a copy made from a keyframe is named by its publication */
+    }
+    if (j->residual) {
+        if (cp->lm_held_bytes != texels * tb) {
+            free(cp->lm_held);
+            cp->lm_held = malloc(texels * tb);
+            cp->lm_held_bytes = cp->lm_held ? texels * tb : 0;
+        }
+        if (cp->lm_held) memcpy(cp->lm_held, words, texels * tb);
+        /* the encoded copy also depends on the encoding */
+        cp->lm_held_state = 1ull << 63 | j->pub_seq << 2 | (uint64_t)enc;
+    }
 }
 
 /* Lightmap frame: a keyframe when forced, first, every keyframe_interval frames or when the
  * delta would not be smaller; otherwise a delta of the tiles where some texel moved by more
  * than delta_threshold (relative) from what this client last received: whole tiles, or
  * residuals when the client subscribed to them. Sessions holding the same copy (same state
- * id) share one residual computation per publication: subscribers in step cost one
- * compression per frame, not one each. */
+ * id) share one delta per publication (its tiles, payload and CRC): subscribers in step cost
+ * one computation per frame, not one each; keyframes share the encoded lightmap and its CRC. */
 static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j, lc_frame_header *h,
                                      int force_key) {
     const lc_published *p = j->frame;
-    const uint32_t W = p->lm_w, H = p->lm_h, S = j->tile;
+    const uint32_t S = j->tile;
     const lc_encoding enc = (lc_encoding)h->encoding;
-    const size_t texels = (size_t)W * H, tb = lc_frame_texel_bytes(enc);
+    const size_t texels = (size_t)p->lm_w * p->lm_h, tb = lc_frame_texel_bytes(enc);
     const int residual_sub = j->residual;
     const uint8_t *words = frames_lightmap_words(f, j, enc);
     if (!words) return 0;
     int key = force_key || !cp->lm_sent || cp->lm_sent_texels != texels ||
         (residual_sub && cp->lm_held_bytes != texels * tb) || (h->sequence - 1) % (uint64_t)j->keyframe_interval == 0;
-    const uint32_t *tiles = NULL;
-    uint32_t *own_tiles = NULL, n_tiles = 0;
-    const uint8_t *residual = NULL;
-    size_t delta_texels = 0, payload_len = texels * tb, n = 0;
-    const float peak = key ? 0.0f : frames_lightmap_peak(f, j);
-    const float thr = (float)j->delta_threshold, floor_v = 1e-3f * peak;
-    if (!key && residual_sub) {
-        lc_residual_memo *m = &f->lm_residual[enc];
-        if (!(m->valid && m->from_state == cp->lm_held_state && m->pub_seq == j->pub_seq)) {
-            if (frames_residual_compute(m, cp, j, enc, words, S, thr, floor_v) != 0) return 0;
-            m->from_state = cp->lm_held_state;
+    const lc_delta_memo *delta = NULL;
+    if (!key) {
+        const float thr = (float)j->delta_threshold, floor_v = 1e-3f * frames_lightmap_peak(f, j);
+        lc_delta_memo *m = residual_sub ? &f->lm_residual[enc] : &f->lm_tiles[enc];
+        const uint64_t from = residual_sub ? cp->lm_held_state : cp->lm_sent_state;
+        if (!(from && m->valid && m->from_state == from && m->pub_seq == j->pub_seq && m->tile == S && m->thr == thr)) {
+            int rc = residual_sub ? frames_residual_compute(m, cp, j, enc, words, S, thr, floor_v)
+                                  : frames_tiles_compute(m, cp, j, words, tb, S, thr, floor_v);
+            if (rc != 0) return 0;
+            m->from_state = from;
             m->pub_seq = j->pub_seq;
-            m->to_state = ++f->residual_states;
+            m->tile = S;
+            m->thr = thr;
+            m->to_state = ++f->delta_states;
         }
         key = m->keyframe;
         if (!key) {
-            frames_commit_residual(cp, m, j, words, tb);
-            tiles = m->tiles;
-            n_tiles = m->n_tiles;
-            residual = m->payload;
-            payload_len = m->payload_len;
+            delta = m;
+            if (residual_sub) frames_commit_residual(cp, m, j, words, tb);
+            else frames_commit_tiles(cp, m, j, S);
         }
-    } else if (!key) {
-        own_tiles = malloc((size_t)lc_tiles_count(W, H, S) * sizeof *own_tiles);
-        if (!own_tiles) return 0;
-        n_tiles = frames_dirty_tiles(cp, j, S, thr, floor_v, own_tiles, &delta_texels);
-        tiles = own_tiles;
-        payload_len = delta_texels * tb;
-        key = payload_len + 4 * (size_t)n_tiles >= texels * tb; /* no smaller than a keyframe */
     }
-    if (key) payload_len = texels * tb;
-    size_t table = key ? 0 : 4 * (size_t)n_tiles;
-    if (frames_out_reserve(cp, j->pre + 2 * (LC_FRAME_HEADER_SIZE + table + payload_len) + 64) != 0) goto done;
-    uint8_t *stage = cp->out + j->pre + LC_FRAME_HEADER_SIZE + table + payload_len + 32, *o = stage;
+    const uint32_t *tiles = NULL;
+    const uint8_t *payload = words;
+    uint32_t body_crc;
     if (key) {
-        memcpy(stage, words, texels * tb);
-        if (cp->lm_sent_texels != texels) {
-            free(cp->lm_sent);
-            cp->lm_sent = malloc(texels * 3 * sizeof(float));
-            cp->lm_sent_texels = cp->lm_sent ? texels : 0;
-        }
-        if (cp->lm_sent) memcpy(cp->lm_sent, p->lightmap, texels * 3 * sizeof(float));
-        if (residual_sub) {
-            if (cp->lm_held_bytes != texels * tb) {
-                free(cp->lm_held);
-                cp->lm_held = malloc(texels * tb);
-                cp->lm_held_bytes = cp->lm_held ? texels * tb : 0;
-            }
-            if (cp->lm_held) memcpy(cp->lm_held, words, texels * tb);
-            /* a copy made from a keyframe is named by its publication and encoding */
-            cp->lm_held_state = 1ull << 63 | j->pub_seq << 2 | (uint64_t)enc;
-        }
+        frames_commit_keyframe(cp, j, enc, words);
         h->flags = LC_FRAME_KEYFRAME;
         h->tile_count = 0;
-    } else if (residual && n_tiles) {
-        memcpy(stage, residual, payload_len);
-        h->flags = LC_FRAME_DELTA | LC_FRAME_RESIDUAL;
-        h->tile_count = n_tiles;
-    } else { /* whole tiles (a residual subscriber's delta without tiles lands here too) */
-        for (uint32_t k = 0; k < n_tiles; k++) {
-            uint32_t x0, y0, x1, y1;
-            lc_tile_rect(W, H, S, tiles[k], &x0, &y0, &x1, &y1);
-            for (uint32_t y = y0; y < y1; y++, o += (size_t)(x1 - x0) * tb) {
-                size_t i = (size_t)y * W + x0;
-                memcpy(o, words + i * tb, (size_t)(x1 - x0) * tb);
-                memcpy(cp->lm_sent + 3 * i, p->lightmap + 3 * i, (size_t)(x1 - x0) * 3 * sizeof(float));
-            }
+        h->payload_length = (uint32_t)(texels * tb);
+        lc_encoded_lightmap *e = &f->lm_encoded[enc];
+        if (!e->crc_valid) {
+            e->crc = lc_frame_body_crc(h, NULL, words);
+            e->crc_valid = 1;
         }
-        h->flags = LC_FRAME_DELTA;
-        h->tile_count = n_tiles;
+        body_crc = e->crc;
+    } else { /* a residual subscriber's delta without tiles goes as an empty whole-tile delta */
+        h->flags = LC_FRAME_DELTA | (residual_sub && delta->n_tiles ? LC_FRAME_RESIDUAL : 0);
+        h->tile_count = delta->n_tiles;
+        h->payload_length = (uint32_t)delta->payload_len;
+        tiles = delta->tiles;
+        payload = delta->payload;
+        body_crc = delta->body_crc;
     }
-    h->payload_length = (uint32_t)payload_len;
-    n = lc_frame_write(h, key ? NULL : tiles, stage, cp->out + j->pre, LC_FRAME_HEADER_SIZE + table + payload_len);
-done:
-    free(own_tiles);
-    return n;
+    size_t len = LC_FRAME_HEADER_SIZE + 4 * (size_t)h->tile_count + h->payload_length;
+    if (frames_out_reserve(cp, j->pre + len) != 0) return 0;
+    return lc_frame_write_body_crc(h, tiles, payload, body_crc, cp->out + j->pre, len);
 }
 
 size_t lc_frames_encode(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j) {

@@ -19,7 +19,8 @@ typedef struct lc_frames lc_frames;
 typedef struct lc_frames_copy {
     float *lm_sent; /* per texel, the value the client's copy was encoded from */
     size_t lm_sent_texels;
-    uint8_t *lm_held; /* residual subscribers: the encoded texels the client holds */
+    uint64_t lm_sent_state; /* names lm_sent's content for whole-tile deltas (0: shared with none) */
+    uint8_t *lm_held;       /* residual subscribers: the encoded texels the client holds */
     size_t lm_held_bytes;
     uint64_t lm_held_state; /* names lm_held's content: equal ids, bit-identical copies */
     uint8_t *out;           /* the last frame, at out + job.pre */

@@ -4,7 +4,8 @@
  * threshold gives an empty delta; every keyframe_interval-th frame is a keyframe; residual
  * deltas applied to the client's words reproduce the new keyframe exactly, and two clients
  * in the same state get the same bytes (the shared memo); the dirty test's floor follows the
- * brightest channel of each publication (NaN ignored); SH grid and object frames carry
+ * brightest channel of each publication (NaN ignored); whole-tile deltas are shared by clients
+ * holding the same copy and not by one whose copy differs; SH grid and object frames carry
  * the floats. */
 #include <math.h>
 #include <stdlib.h>
@@ -205,6 +206,59 @@ int main(void) {
     for (int k = 0; k < 4; k++) {
         free(dimmed[k]->lightmap);
         free(dimmed[k]->grid_sh);
+    }
+
+    /* 6b. whole-tile deltas: clients u and v saw publication 30 only, w also 31 (tile 0
+     * changed); 32 reverts tile 0 and changes the last tile. u and v get one shared delta (the
+     * same bytes: the memo), w its own with both tiles; every frame passes its CRC. */
+    {
+        lc_published q30 = fake_publication(1.0f), q31 = fake_publication(1.0f), q32 = fake_publication(1.0f);
+        const int last = W * H - 1;
+        for (int ch = 0; ch < 3; ch++) {
+            q31.lightmap[ch] *= 2.0f;
+            q32.lightmap[3 * last + ch] *= 2.0f;
+        }
+        lc_frames_copy u, v, w;
+        memset(&u, 0, sizeof u);
+        memset(&v, 0, sizeof v);
+        memset(&w, 0, sizeof w);
+        lc_frames_copy *all[3] = {&u, &v, &w};
+        for (int k = 0; k < 3; k++) {
+            j = lightmap_job(&q30, 30, 1, LC_ENC_RGB9E5, 0);
+            lc_frames_encode(f, all[k], &j);
+        }
+        j = lightmap_job(&q31, 31, 2, LC_ENC_RGB9E5, 0);
+        n = lc_frames_encode(f, &w, &j);
+        pl = parse(&w, n, j.pre, &h, &tiles);
+        CHECK(pl && h.tile_count == 1, "w: publication 31 changes one tile");
+        size_t nu, nv, nw;
+        j = lightmap_job(&q32, 32, 2, LC_ENC_RGB9E5, 0);
+        nu = lc_frames_encode(f, &u, &j);
+        nw = lc_frames_encode(f, &w, &j); /* between u and v: the memo moves to w's state and back */
+        nv = lc_frames_encode(f, &v, &j);
+        CHECK(nu == nv && nu > 0 && !memcmp(u.out + j.pre, v.out + j.pre, nu), "u and v get the same delta bytes");
+        pl = parse(&u, nu, j.pre, &h, &tiles);
+        t0 = 0;
+        if (pl && h.tile_count) memcpy(&t0, tiles, 4);
+        CHECK(pl && (h.flags & LC_FRAME_DELTA) && h.tile_count == 1 && t0 == (W / tile) * (H / tile) - 1,
+              "u (at 30): only the last tile (tiles %u)", pl ? h.tile_count : 0);
+        pl = parse(&w, nw, j.pre, &h, &tiles);
+        CHECK(pl && (h.flags & LC_FRAME_DELTA) && h.tile_count == 2,
+              "w (at 31): tile 0 back and the last tile (tiles %u)", pl ? h.tile_count : 0);
+        /* the next publication unchanged: everyone's copy is 32's, so no tile for anyone */
+        j = lightmap_job(&q32, 33, 3, LC_ENC_RGB9E5, 0);
+        for (int k = 0; k < 3; k++) {
+            n = lc_frames_encode(f, all[k], &j);
+            pl = parse(all[k], n, j.pre, &h, &tiles);
+            CHECK(pl && (h.flags & LC_FRAME_DELTA) && h.tile_count == 0, "client %d is up to date (tiles %u)", k,
+                  pl ? h.tile_count : 0);
+        }
+        for (int k = 0; k < 3; k++) lc_frames_copy_release(all[k]);
+        lc_published *qs[] = {&q30, &q31, &q32};
+        for (int k = 0; k < 3; k++) {
+            free(qs[k]->lightmap);
+            free(qs[k]->grid_sh);
+        }
     }
 
     /* 7. the SH grid frame carries the floats (f32) */

@@ -1126,6 +1126,26 @@ static double rnd(void) {
     return (double)(rng_state >> 11) / 9007199254740992.0;
 }
 
+/* The shared-exponent encoding as EXT_texture_shared_exponent states it (frexp, ldexp, floor):
+ * lc_rgb9e5_encode builds its powers of two from bits and must give the same words. */
+static uint32_t rgb9e5_spec(const float rgb[3]) {
+    double c[3], m = 0;
+    for (int k = 0; k < 3; k++) {
+        c[k] = !(rgb[k] > 0) ? 0 : rgb[k] > 65408.0f ? 65408.0 : (double)rgb[k];
+        m = fmax(m, c[k]);
+    }
+    int fl = -16, e;
+    if (m > 0) {
+        frexp(m, &e);
+        if (e - 1 > fl) fl = e - 1;
+    }
+    int exp = fl + 16;
+    if (floor(m / ldexp(1.0, exp - 24) + 0.5) >= 512) exp++;
+    double scale = ldexp(1.0, exp - 24);
+    return (uint32_t)floor(c[0] / scale + 0.5) | (uint32_t)floor(c[1] / scale + 0.5) << 9 |
+        (uint32_t)floor(c[2] / scale + 0.5) << 18 | (uint32_t)exp << 27;
+}
+
 static void test_rgb9e5(void) {
     float z[3] = {0, 0, 0}, one[3] = {1, 1, 1}, mx[3] = {65408, 65408, 65408}, big[3] = {1e9f, INFINITY, 70000};
     float out[3];
@@ -1152,6 +1172,18 @@ static void test_rgb9e5(void) {
     float up[3] = {0.9995f, 0.5f, 0};
     lc_rgb9e5_decode(lc_rgb9e5_encode(up), out);
     CHECK(out[0] == 1 && out[1] == 0.5f, "carry into exponent: %g %g", out[0], out[1]);
+
+    int differ = 0;
+    for (int i = 0; i < 1000000; i++) {
+        float c[3];
+        for (int k = 0; k < 3; k++) {
+            uint32_t bits = (uint32_t)(rnd() * 4294967296.0); /* any float: NaN, inf, subnormal, negative */
+            if (i % 2) bits = (bits & 0x807FFFFFu) | (uint32_t)(96 + (int)(rnd() * 50)) << 23; /* the 9e5 range */
+            memcpy(&c[k], &bits, sizeof bits);
+        }
+        differ += lc_rgb9e5_encode(c) != rgb9e5_spec(c);
+    }
+    CHECK(differ == 0, "rgb9e5: %d of 1e6 random texels differ from the specification's formula", differ);
 
     int bad = 0, unstable = 0;
     double worst = 0;
