@@ -351,17 +351,12 @@ static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_
             m->to_state = ++f->delta_states;
         }
         key = m->keyframe;
-        if (!key) {
-            delta = m;
-            if (residual_sub) frames_commit_residual(cp, m, j, words, tb);
-            else frames_commit_tiles(cp, m, j, S);
-        }
+        if (!key) delta = m;
     }
     const uint32_t *tiles = NULL;
     const uint8_t *payload = words;
     uint32_t body_crc;
     if (key) {
-        frames_commit_keyframe(cp, j, enc, words);
         h->flags = LC_FRAME_KEYFRAME;
         h->tile_count = 0;
         h->payload_length = (uint32_t)(texels * tb);
@@ -381,6 +376,10 @@ static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_
     }
     size_t len = LC_FRAME_HEADER_SIZE + 4 * (size_t)h->tile_count + h->payload_length;
     if (frames_out_reserve(cp, j->pre + len) != 0) return 0;
+    /* the frame will be written: the client's copy follows it */
+    if (key) frames_commit_keyframe(cp, j, enc, words);
+    else if (residual_sub) frames_commit_residual(cp, delta, j, words, tb);
+    else frames_commit_tiles(cp, delta, j, S);
     return lc_frame_write_body_crc(h, tiles, payload, body_crc, cp->out + j->pre, len);
 }
 
