@@ -181,19 +181,27 @@ static uint32_t frames_body_crc(const lc_delta_memo *m) {
     return lc_frame_body_crc(&h, m->tiles, m->payload);
 }
 
+/* Invalidates m and fills its tile list with the tiles dirty against cp->lm_sent (and the texels
+ * they cover in *texels_out). */
+static int frames_memo_tiles(lc_delta_memo *m, const lc_frames_copy *cp, const lc_frames_job *j, uint32_t S, float thr,
+                             float floor_v, size_t *texels_out) {
+    m->valid = 0;
+    uint32_t *tiles = realloc(m->tiles, (size_t)lc_tiles_count(j->frame->lm_w, j->frame->lm_h, S) * sizeof *tiles);
+    if (!tiles) return -1;
+    m->tiles = tiles;
+    m->n_tiles = frames_dirty_tiles(cp, j, S, thr, floor_v, m->tiles, texels_out);
+    return 0;
+}
+
 /* Computes into m the whole-tile delta that takes a client whose copy was encoded from
  * cp->lm_sent to j->frame: the dirty tiles and their texels from `words`. m->keyframe when it
  * would not be smaller than a keyframe. The caller sets m's key fields. */
 static int frames_tiles_compute(lc_delta_memo *m, const lc_frames_copy *cp, const lc_frames_job *j,
                                 const uint8_t *words, size_t tb, uint32_t S, float thr, float floor_v) {
     const lc_published *p = j->frame;
-    const uint32_t W = p->lm_w, H = p->lm_h, T = lc_tiles_count(W, H, S);
-    m->valid = 0;
-    uint32_t *tiles = realloc(m->tiles, (size_t)T * sizeof *tiles);
-    if (!tiles) return -1;
-    m->tiles = tiles;
+    const uint32_t W = p->lm_w, H = p->lm_h;
     size_t delta_texels;
-    m->n_tiles = frames_dirty_tiles(cp, j, S, thr, floor_v, m->tiles, &delta_texels);
+    if (frames_memo_tiles(m, cp, j, S, thr, floor_v, &delta_texels) != 0) return -1;
     m->payload_len = delta_texels * tb;
     m->keyframe = m->payload_len + 4 * (size_t)m->n_tiles >= (size_t)W * H * tb; /* no smaller than a keyframe */
     if (!m->keyframe) {
@@ -238,14 +246,10 @@ static void frames_commit_tiles(lc_frames_copy *cp, const lc_delta_memo *m, cons
 static int frames_residual_compute(lc_delta_memo *m, const lc_frames_copy *cp, const lc_frames_job *j, lc_encoding enc,
                                    const uint8_t *words, uint32_t S, float thr, float floor_v) {
     const lc_published *p = j->frame;
-    const uint32_t W = p->lm_w, H = p->lm_h, T = lc_tiles_count(W, H, S);
+    const uint32_t W = p->lm_w, H = p->lm_h;
     const size_t texels = (size_t)W * H, tb = lc_frame_texel_bytes(enc);
-    m->valid = 0;
-    uint32_t *tiles = realloc(m->tiles, (size_t)T * sizeof *tiles);
-    if (!tiles) return -1;
-    m->tiles = tiles;
     size_t delta_texels;
-    m->n_tiles = frames_dirty_tiles(cp, j, S, thr, floor_v, m->tiles, &delta_texels);
+    if (frames_memo_tiles(m, cp, j, S, thr, floor_v, &delta_texels) != 0) return -1;
     const size_t raw_len = delta_texels * tb, table = 4 * (size_t)m->n_tiles;
     uint8_t *raw = malloc(raw_len ? raw_len : 1), *z = realloc(m->payload, lc_residual_deflate_bound(raw_len));
     uint32_t *moved = realloc(m->moved, (delta_texels ? delta_texels : 1) * sizeof *moved);
