@@ -70,15 +70,17 @@ void lc_frames_copy_release(lc_frames_copy *cp) {
     memset(cp, 0, sizeof *cp);
 }
 
-/* Grows the copy's frame buffer to need bytes. */
-static int frames_out_reserve(lc_frames_copy *cp, size_t need) {
-    if (need <= cp->out_cap) return 0;
-    uint8_t *nb = realloc(cp->out, need);
+/* Grows a reused buffer (a copy's frame buffer, a memo's payload) to at least need bytes. */
+static int frames_grow(uint8_t **buf, size_t *cap, size_t need) {
+    if (need <= *cap) return 0;
+    uint8_t *nb = realloc(*buf, need);
     if (!nb) return -1;
-    cp->out = nb;
-    cp->out_cap = need;
+    *buf = nb;
+    *cap = need;
     return 0;
 }
+
+static int frames_out_reserve(lc_frames_copy *cp, size_t need) { return frames_grow(&cp->out, &cp->out_cap, need); }
 
 static void frames_encode_texel(lc_encoding enc, const float *t, uint8_t *o) {
     if (enc == LC_ENC_RGB9E5) {
@@ -205,12 +207,7 @@ static int frames_tiles_compute(lc_delta_memo *m, const lc_frames_copy *cp, cons
     m->payload_len = delta_texels * tb;
     m->keyframe = m->payload_len + 4 * (size_t)m->n_tiles >= (size_t)W * H * tb; /* no smaller than a keyframe */
     if (!m->keyframe) {
-        if (m->payload_len > m->payload_cap) {
-            uint8_t *n = realloc(m->payload, m->payload_len);
-            if (!n) return -1;
-            m->payload = n;
-            m->payload_cap = m->payload_len;
-        }
+        if (frames_grow(&m->payload, &m->payload_cap, m->payload_len) != 0) return -1;
         uint8_t *o = m->payload;
         for (uint32_t k = 0; k < m->n_tiles; k++) {
             uint32_t x0, y0, x1, y1;
@@ -251,11 +248,10 @@ static int frames_residual_compute(lc_delta_memo *m, const lc_frames_copy *cp, c
     size_t delta_texels;
     if (frames_memo_tiles(m, cp, j, S, thr, floor_v, &delta_texels) != 0) return -1;
     const size_t raw_len = delta_texels * tb, table = 4 * (size_t)m->n_tiles;
-    uint8_t *raw = malloc(raw_len ? raw_len : 1), *z = realloc(m->payload, lc_residual_deflate_bound(raw_len));
+    uint8_t *raw = malloc(raw_len ? raw_len : 1);
     uint32_t *moved = realloc(m->moved, (delta_texels ? delta_texels : 1) * sizeof *moved);
     if (moved) m->moved = moved;
-    if (z) m->payload = z;
-    if (!raw || !moved || !z) {
+    if (!raw || !moved || frames_grow(&m->payload, &m->payload_cap, lc_residual_deflate_bound(raw_len)) != 0) {
         free(raw);
         return -1;
     }
@@ -275,7 +271,7 @@ static int frames_residual_compute(lc_delta_memo *m, const lc_frames_copy *cp, c
                 }
             }
     }
-    m->payload_len = m->n_tiles ? lc_residual_deflate(raw, raw_len, z, lc_residual_deflate_bound(raw_len)) : 0;
+    m->payload_len = m->n_tiles ? lc_residual_deflate(raw, raw_len, m->payload, m->payload_cap) : 0;
     free(raw);
     m->keyframe = m->n_tiles && (m->payload_len == 0 || table + m->payload_len >= texels * tb);
     m->body_crc = frames_body_crc(m);
