@@ -5,7 +5,8 @@
 //                relight rays of ray_sh[k][j] * B[hit(p, k)] (ray_sh holds y_j(dir_k) 4/n_rays)
 //   1 basis      (one invocation per cluster basis row, all clusters' rows in order): b = its
 //                row of S V^T (bound as a window from float u_base) dotted with the cluster's
-//                probes' lambda
+//                probes' lambda; rows of clusters not active this pass (lc_probes_active_clusters)
+//                do nothing, in this stage and the next
 //   2 receivers  (one invocation per receiver row): e = U row . b, written into the cache SH
 //                (the full one, stride u_nc, bound whole, and the L2 copy) as probes_store: a
 //                texel cache's cosine lobe about its normal, a grid cache's E_j / A_l. The host
@@ -39,11 +40,12 @@ void main() {
 }
 
 #elif PROBES_STAGE == 1
-layout(std430, binding = 0) readonly buffer BasisRows { uvec4 rows[]; };  // basis offset, first probe, probes, -
+layout(std430, binding = 0) readonly buffer BasisRows { uvec4 rows[]; };  // basis offset, first probe, probes, cluster
 layout(std430, binding = 1) readonly buffer Basis { float basis[]; };     // window from float u_base
 layout(std430, binding = 2) readonly buffer Probes { uint probes[]; };    // the clusters' probes
 layout(std430, binding = 3) readonly buffer Lambda { float lambda[]; };
 layout(std430, binding = 4) writeonly buffer B { float b[]; };            // [basis row][3]
+layout(std430, binding = 7) readonly buffer Active { uint cluster_on[]; };   // [cluster]
 layout(location = 1) uniform uint u_nc;
 layout(location = 2) uniform uint u_first; // this window's first basis row
 layout(location = 3) uniform uint u_base;
@@ -51,6 +53,7 @@ void main() {
     uint i = gid();
     if (i >= u_count) return;
     uvec4 r = rows[u_first + i];
+    if (cluster_on[r.w] == 0u) return;
     uint w0 = r.x - u_base;
     vec3 acc = vec3(0.0);
     for (uint q = 0u; q < r.z; q++) {
@@ -68,13 +71,14 @@ void main() {
 
 #else
 struct Cache { float nx, ny, nz; uint flags; uint link_count; uint fresh, pad1, pad2; };
-layout(std430, binding = 0) readonly buffer Rows { uvec4 rows[]; };      // cache, coeff, U offset, -
+layout(std430, binding = 0) readonly buffer Rows { uvec4 rows[]; };      // cache, coeff, U offset, cluster
 layout(std430, binding = 1) readonly buffer U { float u[]; };            // window from float u_base
 layout(std430, binding = 2) readonly buffer B { float b[]; };
 layout(std430, binding = 3) readonly buffer Caches { Cache caches[]; };
 layout(std430, binding = 4) buffer CacheSH { float cache_sh[]; };         // [cache][u_nc][3], whole
 layout(std430, binding = 5) buffer CacheSH9 { float sh9[]; };             // [cache][9][3]
 layout(std430, binding = 6) readonly buffer RowB { uvec2 row_b[]; };     // rank, first basis row
+layout(std430, binding = 7) readonly buffer Active { uint cluster_on[]; };   // [cluster]
 layout(location = 1) uniform uint u_nc;   // the cache SH's stride (bands^2)
 layout(location = 2) uniform uint u_first;
 layout(location = 3) uniform uint u_base;
@@ -89,6 +93,7 @@ void main() {
     uint i = gid();
     if (i >= u_count) return;
     uvec4 r = rows[u_first + i];
+    if (cluster_on[r.w] == 0u) return;
     uvec2 rb = row_b[u_first + i];
     vec3 e = vec3(0.0);
     for (uint s = 0u; s < rb.x; s++) {

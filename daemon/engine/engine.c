@@ -360,6 +360,10 @@ int lc_engine_check_state(const lc_lcb_view *v, const lc_engine_state *st, char 
         lc_set_err(err, errlen, "/settings/chroma_bands: %u is outside 1..bands (%u)", s->chroma_bands, s->bands);
         return -1;
     }
+    if (s->grid_cells > LC_GRID_NEEDED) {
+        lc_set_err(err, errlen, "/settings/grid_cells: %u is neither all (0) nor needed (1)", s->grid_cells);
+        return -1;
+    }
     return lc_engine_check_solver(v, LC_BACKEND_AUTO, s->solver, err, errlen);
 }
 
@@ -787,6 +791,7 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
     memcpy(fr.grid_dims, v->grid_dims, sizeof fr.grid_dims);
     memcpy(fr.grid_origin, v->grid_origin, sizeof fr.grid_origin);
     fr.grid_cell = v->grid_cell;
+    fr.grid_complete = st->settings.grid_cells == LC_GRID_ALL;
     fr.n_objects = st->n_objects;
     fr.stage_ms[LC_STAGE_DIRECT] = t2 - t1;
     /* The transport always runs its stages (chroma only when compressing). */

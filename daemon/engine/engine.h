@@ -70,6 +70,15 @@ typedef struct lc_engine_environment {
 typedef enum { LC_SOLVER_PIC = 0, LC_SOLVER_PROBES = 1 } lc_engine_solver;
 #define LC_SOLVER_COUNT 2
 
+/* Which SH grid cells (the spatial receivers) a relight computes. NEEDED is the sparse
+ * radiance probes thesis's §4.1: only the cells something else reads — the 8 corners each
+ * object's SH is sampled from, DNRT objects' corners, and the caches surfels read for the
+ * next bounce — so the lightmap, the objects' SH and the surfels' feedback are the same as
+ * with ALL, bit for bit, while the grid output holds zeros elsewhere (frame.grid_complete 0).
+ * Under the probes solver the grid receivers own most of the cluster bases, so this is most
+ * of its gather. */
+typedef enum { LC_GRID_ALL = 0, LC_GRID_NEEDED = 1 } lc_engine_grid_cells;
+
 typedef struct lc_engine_settings {
     uint32_t bounces;       /* indirect feedback passes per relight, 0..16 (see lc_engine_relight) */
     uint32_t bands;         /* SH bands of the cache / SH-lightmap output, 1..8 (the grid is always L2) */
@@ -80,6 +89,7 @@ typedef struct lc_engine_settings {
     int dnrt;               /* placed objects shadow and colour the indirect light (engine/dnrt.h) */
     int dnrt_blockers;      /* ... tested for static geometry between object and receiver with rays */
     uint32_t solver;        /* LC_SOLVER_PIC or LC_SOLVER_PROBES (engine/probes.h) */
+    uint32_t grid_cells;    /* LC_GRID_ALL (the default) or LC_GRID_NEEDED */
 } lc_engine_settings;
 
 typedef struct lc_engine_state {
@@ -122,6 +132,8 @@ typedef struct lc_engine_frame {
     uint32_t grid_dims[3];
     float grid_origin[3], grid_cell;
     const float *grid_sh; /* cells*9*3: L2 irradiance SH (cosine-convolved: E(n) = sum c_i y_i(n)) */
+    int grid_complete;    /* 1: every cell computed; 0: settings.grid_cells NEEDED, only the cells
+                             the objects and surfels read (the rest zero) */
     uint32_t n_objects;
     const float *object_sh;        /* n_objects*9*3: L2 irradiance SH at each object's position */
     const float *surfel_radiosity; /* n_surfels*3: final B (W/m^2) per surfel, for tests/debug */

@@ -16,6 +16,9 @@ struct lc_probes {
     float *lambda;    /* n_probes x coeffs x 3 */
     float *basis_out; /* per cluster rank x 3, at b_off */
     uint64_t *b_off;  /* per cluster */
+    uint32_t *active; /* per cluster: lc_probes_active_clusters */
+    uint32_t *list;   /* the active clusters of this gather */
+    uint32_t n_list;
     float *cache_sh;  /* the gather's target (borrowed for one call) */
     const float *rad; /* the gather's radiosity (borrowed for one call) */
     uint32_t bands, stride;
@@ -35,7 +38,9 @@ lc_probes *lc_probes_create(const lc_lcb_view *v, char *err, size_t errlen) {
     p->ray_sh = malloc((size_t)h->n_rays * p->coeffs * sizeof *p->ray_sh);
     p->lambda = malloc((size_t)h->n_probes * p->coeffs * 3 * sizeof *p->lambda);
     p->b_off = malloc(((size_t)h->n_clusters + 1) * sizeof *p->b_off);
-    if (!p->ray_sh || !p->lambda || !p->b_off) goto oom;
+    p->active = malloc(((size_t)h->n_clusters + 1) * sizeof *p->active);
+    p->list = malloc(((size_t)h->n_clusters + 1) * sizeof *p->list);
+    if (!p->ray_sh || !p->lambda || !p->b_off || !p->active || !p->list) goto oom;
     lc_probes_ray_sh(h, p->ray_sh);
     uint64_t at = 0;
     for (uint32_t c = 0; c < h->n_clusters; c++) {
@@ -68,6 +73,8 @@ void lc_probes_release(lc_probes *p) {
     free(p->lambda);
     free(p->basis_out);
     free(p->b_off);
+    free(p->active);
+    free(p->list);
     free(p);
 }
 
@@ -117,13 +124,27 @@ static void probes_store(const lc_probes *p, const lc_lcb_probe_row *row, const 
     for (int k = 0; k < 3; k++) dst[3 * j + k] = e[k] * inv_a;
 }
 
-/* Per cluster: b = (S V^T) lambda, then each row's U . b. */
+uint32_t lc_probes_active_clusters(const lc_lcb_view *v, const uint8_t *need, uint32_t *active) {
+    const lc_lcb_probe_header *h = v->probe_header;
+    uint32_t n = 0;
+    for (uint32_t c = 0; c < h->n_clusters; c++) {
+        const lc_lcb_probe_cluster *cl = &v->probe_clusters[c];
+        uint32_t on = 0;
+        for (uint32_t i = 0; i < cl->n_rows && !on; i++) on = need[v->probe_rows[cl->first_row + i].cache];
+        active[c] = on;
+        n += on;
+    }
+    return n;
+}
+
+/* Per active cluster: b = (S V^T) lambda, then each row's U . b. */
 static void probes_cluster_range(void *ctx, size_t begin, size_t end, int thread) {
     (void)thread;
     lc_probes *p = ctx;
     const lc_lcb_view *v = p->v;
     const uint32_t nc = p->coeffs;
-    for (size_t ci = begin; ci < end; ci++) {
+    for (size_t li = begin; li < end; li++) {
+        const uint32_t ci = p->list[li];
         const lc_lcb_probe_cluster *cl = &v->probe_clusters[ci];
         const uint32_t *probes = v->probe_cluster_probes + cl->first_probe;
         const uint32_t cols = cl->n_probes * nc;
@@ -165,7 +186,7 @@ static void probes_cluster_range(void *ctx, size_t begin, size_t end, int thread
 }
 
 void lc_probes_gather(lc_probes *p, const float *radiosity, uint32_t bands, float *cache_sh, uint32_t stride,
-                      int threads) {
+                      const uint8_t *need, int threads) {
     const lc_lcb_view *v = p->v;
     const uint32_t nc = bands * bands;
     for (uint32_t c = 0; c < v->n_caches; c++)
@@ -174,8 +195,12 @@ void lc_probes_gather(lc_probes *p, const float *radiosity, uint32_t bands, floa
     p->cache_sh = cache_sh;
     p->bands = bands;
     p->stride = stride;
+    p->n_list = 0;
+    if (need) lc_probes_active_clusters(v, need, p->active);
+    for (uint32_t c = 0; c < v->probe_header->n_clusters; c++)
+        if (!need || p->active[c]) p->list[p->n_list++] = c;
     lc_parallel_for(threads, v->probe_header->n_probes, 4, probes_sh_range, p);
-    lc_parallel_for(threads, v->probe_header->n_clusters, 4, probes_cluster_range, p);
+    lc_parallel_for(threads, p->n_list, 4, probes_cluster_range, p);
     p->rad = NULL;
     p->cache_sh = NULL;
 }

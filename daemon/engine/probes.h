@@ -26,11 +26,17 @@ typedef struct lc_probes lc_probes;
 lc_probes *lc_probes_create(const lc_lcb_view *v, char *err, size_t errlen);
 void lc_probes_release(lc_probes *p);
 
-/* One pass from radiosity (n_surfels x 3): every row's value, written into cache_sh (records
+/* One pass from radiosity (n_surfels x 3): the rows' values, written into cache_sh (records
  * of `stride` coefficients x 3 channels) for the first `bands`^2 coefficients (band 0 only
- * when bands is 1); coefficients above what a cache carries are zeroed. */
+ * when bands is 1); coefficients above what a cache carries are zeroed. need (n_caches
+ * bytes, lc_transport_needed) picks the clusters holding a row of a needed cache; NULL =
+ * all. The caches of clusters skipped read zero. */
 void lc_probes_gather(lc_probes *p, const float *radiosity, uint32_t bands, float *cache_sh, uint32_t stride,
-                      int threads);
+                      const uint8_t *need, int threads);
+
+/* active[c] = 1 when cluster c holds a row of a cache with need[cache] set (0 otherwise);
+ * returns how many are. Both backends choose their clusters with it. */
+uint32_t lc_probes_active_clusters(const lc_lcb_view *v, const uint8_t *need, uint32_t *active);
 
 /* The relight rays' SH table both backends use: out[k * bands^2 + j] = y_j(dir_k) x
  * (4 pi / n_rays) / pi, so lambda = sum_k out[k] B[hit k] (n_rays x bands^2 floats). */

@@ -82,6 +82,33 @@ int lc_transport_fill_lightmap_sh(lc_transport_outputs *o, const lc_lcb_view *v,
     return 0;
 }
 
+uint32_t lc_transport_needed(const lc_lcb_view *v, const uint8_t *feedback, const lc_transport_input *in, int last,
+                             uint8_t *need) {
+    if (last && in->settings.grid_cells == LC_GRID_ALL) {
+        memset(need, 1, v->n_caches);
+        return v->n_caches;
+    }
+    memcpy(need, feedback, v->n_caches);
+    if (last) memset(need, 1, v->n_texel_caches);
+    for (uint32_t i = 0; in->dnrt && i < in->dnrt->n_objects; i++)
+        for (int k = 0; k < 8; k++) need[in->dnrt->objects[i].corner[k]] = 1;
+    for (uint32_t i = 0; last && i < in->n_objects; i++) {
+        uint32_t corner[8];
+        float w[8];
+        lc_dnrt_grid_corners(v, in->object_pos + 3 * (size_t)i, corner, w);
+        for (int k = 0; k < 8; k++) need[corner[k]] = 1;
+    }
+    uint32_t n = 0;
+    for (uint32_t c = 0; c < v->n_caches; c++) n += need[c];
+    return n;
+}
+
+void lc_transport_clear_unneeded_cells(lc_transport_outputs *o, const lc_lcb_view *v, const uint8_t *need) {
+    const size_t cells = (size_t)v->grid_dims[0] * v->grid_dims[1] * v->grid_dims[2];
+    for (size_t i = 0; i < cells; i++)
+        if (!need[v->grid[i]]) memset(o->grid_sh + i * 27, 0, 27 * sizeof(float));
+}
+
 void lc_transport_publish(const lc_transport_outputs *o, const lc_engine_settings *st, lc_engine_frame *fr) {
     /* Arrays only: the engine front fills the dimensions from the bake and the settings. */
     fr->lightmap = o->lightmap;

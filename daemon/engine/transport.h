@@ -107,6 +107,16 @@ int lc_transport_reserve_objects(lc_transport_outputs *o, uint32_t n_objects, co
  * per-texel copy on the host is cheaper than a GPU read-back of W*H records. -1 with err. */
 int lc_transport_fill_lightmap_sh(lc_transport_outputs *o, const lc_lcb_view *v, const char *backend, char *err,
                                   size_t errlen);
+/* The caches a pass must compute (need: n_caches bytes, 1 = compute): in an intermediate
+ * pass those some surfel reads (`feedback`, per cache) and the DNRT objects' grid corners;
+ * in the last pass also every texel cache (the lightmap) and every object's corners (its
+ * SH), or everything under settings.grid_cells ALL. Returns how many. Both backends gather
+ * exactly these, so their outputs agree and NEEDED changes no output but the grid's. */
+uint32_t lc_transport_needed(const lc_lcb_view *v, const uint8_t *feedback, const lc_transport_input *in, int last,
+                             uint8_t *need);
+/* Under settings.grid_cells NEEDED, zeroes the grid cells whose cache was not computed. */
+void lc_transport_clear_unneeded_cells(lc_transport_outputs *o, const lc_lcb_view *v, const uint8_t *need);
+
 /* Points the frame's output arrays at o (the engine front fills the dimensions). */
 void lc_transport_publish(const lc_transport_outputs *o, const lc_engine_settings *st, lc_engine_frame *fr);
 

@@ -23,8 +23,10 @@ typedef struct tcpu {
     uint8_t *feedback_cache;  /* per cache: some surfel reads it */
     uint32_t *feedback_list;  /* those caches */
     uint32_t n_feedback;
-    float *texel_w; /* n_texel_caches*links_per_cache*3: tcpu_texel_weights */
-    float *dnrt_c;  /* DNRT objects' incident SH, 27 each */
+    uint8_t *need;       /* per cache: this pass computes it (lc_transport_needed) */
+    uint32_t *need_list; /* those caches, for a last pass under grid_cells NEEDED */
+    float *texel_w;      /* n_texel_caches*links_per_cache*3: tcpu_texel_weights */
+    float *dnrt_c;       /* DNRT objects' incident SH, 27 each */
     size_t dnrt_cap;
     uint32_t *dnrt_list; /* their corner caches outside the feedback list */
     uint32_t n_dnrt_list, dnrt_list_cap;
@@ -42,6 +44,8 @@ static void tcpu_release(void *impl) {
     free(t->e_ind);
     free(t->feedback_cache);
     free(t->feedback_list);
+    free(t->need);
+    free(t->need_list);
     free(t->texel_w);
     free(t->dnrt_c);
     free(t->dnrt_list);
@@ -60,8 +64,10 @@ static void *tcpu_create(const lc_lcb_view *v, int threads, char *err, size_t er
     t->e_ind = calloc((size_t)v->n_surfels * 3, sizeof(float));
     t->feedback_cache = calloc(v->n_caches ? v->n_caches : 1, 1);
     t->feedback_list = calloc(v->n_caches ? v->n_caches : 1, sizeof(uint32_t));
+    t->need = calloc(v->n_caches ? v->n_caches : 1, 1);
+    t->need_list = calloc(v->n_caches ? v->n_caches : 1, sizeof(uint32_t));
     t->texel_w = malloc(((size_t)v->n_texel_caches * v->links_per_cache * 3 + 1) * sizeof(float));
-    if (!t->e_ind || !t->feedback_cache || !t->feedback_list || !t->texel_w) goto oom;
+    if (!t->e_ind || !t->feedback_cache || !t->feedback_list || !t->need || !t->need_list || !t->texel_w) goto oom;
     for (uint32_t s = 0; s < v->n_surfels; s++)
         if (v->surfels[s].cache != LC_NONE) t->feedback_cache[v->surfels[s].cache] = 1;
     for (uint32_t c = 0; c < v->n_caches; c++)
@@ -568,7 +574,8 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
         if (chroma) tcpu_to_ycocg(t);
         double t3 = lc_clock_ms();
         ms_pull += t3 - t2;
-        /* Intermediate passes only need the caches some surfel reads. */
+        /* Intermediate passes only need the caches some surfel reads; the last one every
+         * cache, or under grid_cells NEEDED the texel caches and what reads the grid. */
         tcpu_gather_job job = {t,
                                last ? NULL : t->feedback_list,
                                bands,
@@ -576,9 +583,19 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
                                chroma,
                                lc_transport_texel_bands(st),
                                lc_transport_texel_band1(st)};
-        if (probes) /* every receiver each pass: the probes' cost does not shrink with fewer */
-            lc_probes_gather(t->probes, t->out.radiosity, (uint32_t)bands, t->out.cache_sh, t->coeff_cap, t->threads);
-        else lc_parallel_for(t->threads, last ? v->n_caches : t->n_feedback, 64, tcpu_gather_range, &job);
+        uint32_t n_gather = last ? v->n_caches : t->n_feedback;
+        if (probes || (last && st->grid_cells == LC_GRID_NEEDED)) {
+            n_gather = lc_transport_needed(v, t->feedback_cache, in, last, t->need);
+            if (!probes) {
+                for (uint32_t c = 0, n = 0; c < v->n_caches; c++)
+                    if (t->need[c]) t->need_list[n++] = c;
+                job.list = t->need_list;
+            }
+        }
+        if (probes) /* clusters holding a needed row; the DNRT corners included */
+            lc_probes_gather(t->probes, t->out.radiosity, (uint32_t)bands, t->out.cache_sh, t->coeff_cap, t->need,
+                             t->threads);
+        else lc_parallel_for(t->threads, n_gather, 64, tcpu_gather_range, &job);
         double t4 = lc_clock_ms();
         ms_gather += t4 - t3;
         if (last) { /* the objects' SH before any object changes the caches */
@@ -618,6 +635,7 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     double t2 = lc_clock_ms();
     fr->stage_ms[LC_STAGE_LIGHTMAP] = t2 - t1;
     tcpu_grid(t, bands);
+    if (st->grid_cells == LC_GRID_NEEDED) lc_transport_clear_unneeded_cells(&t->out, v, t->need);
     fr->stage_ms[LC_STAGE_GRID] = lc_clock_ms() - t2;
     fr->stage_ms[LC_STAGE_DNRT] = ms_dnrt;
     fr->stage_ms[LC_STAGE_DRT] = ms_drt;

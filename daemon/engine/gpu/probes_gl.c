@@ -22,6 +22,7 @@ enum {
     PGL_ROWS,
     PGL_ROW_B,
     PGL_U,
+    PGL_ACTIVE,
     PGL_NBUF
 };
 
@@ -33,6 +34,7 @@ struct lc_probes_gl {
     size_t bind_limit, align;
     uint64_t *basis_start, *u_start; /* per basis row / receiver row: its first float */
     uint32_t *basis_len, *u_len;     /* ... and its floats */
+    uint32_t *active;                /* per cluster, uploaded each gather (lc_probes_active_clusters) */
 };
 
 void lc_probes_gl_release(lc_probes_gl *g) {
@@ -44,6 +46,7 @@ void lc_probes_gl_release(lc_probes_gl *g) {
     free(g->u_start);
     free(g->basis_len);
     free(g->u_len);
+    free(g->active);
     free(g);
 }
 
@@ -62,8 +65,9 @@ static int pgl_upload_rows(lc_probes_gl *g, char *err, size_t errlen) {
     g->basis_len = calloc((size_t)nb + 1, sizeof *g->basis_len);
     g->u_start = calloc((size_t)h->n_rows + 1, sizeof *g->u_start);
     g->u_len = calloc((size_t)h->n_rows + 1, sizeof *g->u_len);
+    g->active = calloc((size_t)h->n_clusters + 1, sizeof *g->active);
     int rc = -1;
-    if (!brow || !rows || !row_b || !g->basis_start || !g->basis_len || !g->u_start || !g->u_len) {
+    if (!brow || !rows || !row_b || !g->basis_start || !g->basis_len || !g->u_start || !g->u_len || !g->active) {
         lc_set_err(err, errlen, "probes (egl): out of memory");
         goto out;
     }
@@ -76,6 +80,7 @@ static int pgl_upload_rows(lc_probes_gl *g, char *err, size_t errlen) {
             brow[at][0] = (uint32_t)g->basis_start[at];
             brow[at][1] = cl->first_probe;
             brow[at][2] = cl->n_probes;
+            brow[at][3] = c;
         }
         for (uint32_t i = 0; i < cl->n_rows; i++) {
             uint32_t row = cl->first_row + i;
@@ -84,6 +89,7 @@ static int pgl_upload_rows(lc_probes_gl *g, char *err, size_t errlen) {
             rows[row][0] = v->probe_rows[row].cache;
             rows[row][1] = v->probe_rows[row].coeff;
             rows[row][2] = (uint32_t)g->u_start[row];
+            rows[row][3] = c;
             row_b[row][0] = cl->rank;
             row_b[row][1] = first;
         }
@@ -95,7 +101,8 @@ static int pgl_upload_rows(lc_probes_gl *g, char *err, size_t errlen) {
     if (!(g->buf[PGL_BASIS_ROWS] = lc_gl_buffer((size_t)nb * 16, brow, "probe basis rows", err, errlen)) ||
         !(g->buf[PGL_ROWS] = lc_gl_buffer((size_t)h->n_rows * 16, rows, "probe rows", err, errlen)) ||
         !(g->buf[PGL_ROW_B] = lc_gl_buffer((size_t)h->n_rows * 8, row_b, "probe row clusters", err, errlen)) ||
-        !(g->buf[PGL_B] = lc_gl_buffer((size_t)nb * 12, NULL, "probe cluster basis", err, errlen)))
+        !(g->buf[PGL_B] = lc_gl_buffer((size_t)nb * 12, NULL, "probe cluster basis", err, errlen)) ||
+        !(g->buf[PGL_ACTIVE] = lc_gl_buffer((size_t)h->n_clusters * 4, NULL, "active clusters", err, errlen)))
         goto out;
     rc = 0;
 out:
@@ -184,6 +191,12 @@ int lc_probes_gl_gather(lc_probes_gl *g, const lc_probes_gl_pass *p, char *err, 
                    sh_bytes);
         return -1;
     }
+    if (p->need) {
+        lc_probes_active_clusters(v, p->need, g->active);
+    } else {
+        for (uint32_t c = 0; c < h->n_clusters; c++) g->active[c] = 1;
+    }
+    glNamedBufferSubData(g->buf[PGL_ACTIVE], 0, (GLsizeiptr)((size_t)h->n_clusters * 4), g->active);
     GLuint s0 = g->prog[0], s1 = g->prog[1], s2 = g->prog[2];
     glUseProgram(s0); /* probe SH */
     lc_gl_bind(0, g->buf[PGL_HITS], 0, (size_t)h->n_probes * h->n_rays * 4);
@@ -200,6 +213,7 @@ int lc_probes_gl_gather(lc_probes_gl *g, const lc_probes_gl_pass *p, char *err, 
     lc_gl_bind(2, g->buf[PGL_PROBES], 0, v->n_probe_cluster_probes * 4);
     lc_gl_bind(3, g->buf[PGL_LAMBDA], 0, (size_t)h->n_probes * 3 * g->nc * 4);
     lc_gl_bind(4, g->buf[PGL_B], 0, (size_t)g->n_basis_rows * 12);
+    lc_gl_bind(7, g->buf[PGL_ACTIVE], 0, (size_t)h->n_clusters * 4);
     glProgramUniform1ui(s1, 1, g->nc);
     pgl_windows(g, s1, g->buf[PGL_BASIS], 1, g->n_basis_rows, g->basis_start, g->basis_len);
     glClearNamedBufferData(p->cache_sh, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
@@ -212,6 +226,7 @@ int lc_probes_gl_gather(lc_probes_gl *g, const lc_probes_gl_pass *p, char *err, 
     lc_gl_bind(4, p->cache_sh, 0, sh_bytes);
     lc_gl_bind(5, p->sh9, 0, (size_t)v->n_caches * 108);
     lc_gl_bind(6, g->buf[PGL_ROW_B], 0, (size_t)h->n_rows * 8);
+    lc_gl_bind(7, g->buf[PGL_ACTIVE], 0, (size_t)h->n_clusters * 4);
     glProgramUniform1ui(s2, 1, p->nc);
     pgl_windows(g, s2, g->buf[PGL_U], 1, h->n_rows, g->u_start, g->u_len);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);

@@ -23,7 +23,8 @@ void lc_probes_gl_release(lc_probes_gl *g);
 /* What one pass reads and writes: the transport's buffers. */
 typedef struct lc_probes_gl_pass {
     GLuint radiosity, caches, cache_sh, sh9;
-    uint32_t nc; /* the cache SH's stride (bands^2) */
+    uint32_t nc;         /* the cache SH's stride (bands^2) */
+    const uint8_t *need; /* per cache, as lc_probes_gather's (NULL = every cluster) */
 } lc_probes_gl_pass;
 /* One gather (ends with its writes visible). -1 with err when the cache SH does not fit one
  * binding. */

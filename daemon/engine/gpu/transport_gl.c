@@ -103,6 +103,9 @@ typedef struct tgl {
     lc_gl_staging staging; /* every output's read-back (gl_util.h: keeps them in video memory) */
     /* DNRT (engine/dnrt.h), uploaded when the frame changes: */
     uint8_t *feedback_cache; /* per cache: some surfel reads it */
+    uint8_t *need;           /* per cache: this pass computes it (lc_transport_needed) */
+    uint32_t *need_list;     /* those caches, for a last PIC pass under grid_cells NEEDED */
+    GLuint b_need_list;      /* ... uploaded */
     GLuint b_dn_obj, b_dn_inc, b_dn_rec, b_dn_list;
     size_t dn_obj_bytes, dn_inc_bytes, dn_rec_bytes, dn_list_bytes; /* their sizes */
     uint32_t n_dn_list;                                             /* corner caches no surfel reads */
@@ -133,7 +136,7 @@ static void tgl_release(void *impl) {
         GLuint bufs[] = {t->b_surfels, t->b_nodes,    t->b_links,  t->b_caches,   t->b_lm_index,  t->b_grid_index,
                          t->b_cone,    t->b_shk,      t->b_list,   t->b_b0,       t->b_radiosity, t->b_e_ind,
                          t->b_flux,    t->b_cache_sh, t->b_sh9,    t->b_lightmap, t->b_grid_sh,   t->b_obj_pos,
-                         t->b_obj_sh,  t->b_dn_obj,   t->b_dn_inc, t->b_dn_rec,   t->b_dn_list};
+                         t->b_obj_sh,  t->b_dn_obj,   t->b_dn_inc, t->b_dn_rec,   t->b_dn_list,   t->b_need_list};
         glDeleteBuffers((GLsizei)(sizeof bufs / sizeof bufs[0]), bufs); /* 0 names are ignored */
         if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
         lc_gl_staging_release(&t->staging);
@@ -142,6 +145,8 @@ static void tgl_release(void *impl) {
     lc_transport_outputs_release(&t->out);
     free(t->cache_tmp);
     free(t->feedback_cache);
+    free(t->need);
+    free(t->need_list);
     free(t->dn_stage);
     free(t);
 }
@@ -286,8 +291,10 @@ static int tgl_upload_feedback_list(tgl *t, char *err, size_t errlen) {
     const lc_lcb_view *v = t->v;
     uint8_t *used = t->feedback_cache = calloc(v->n_caches ? v->n_caches : 1, 1);
     uint32_t *list = calloc(v->n_caches ? v->n_caches : 1, sizeof *list);
+    t->need = calloc(v->n_caches ? v->n_caches : 1, 1);
+    t->need_list = calloc(v->n_caches ? v->n_caches : 1, sizeof *t->need_list);
     int rc = -1;
-    if (!used || !list) {
+    if (!used || !list || !t->need || !t->need_list) {
         lc_set_err(err, errlen, "egl transport: out of memory");
         goto err;
     }
@@ -295,7 +302,9 @@ static int tgl_upload_feedback_list(tgl *t, char *err, size_t errlen) {
         if (v->surfels[s].cache != LC_NONE) used[v->surfels[s].cache] = 1;
     for (uint32_t c = 0; c < v->n_caches; c++)
         if (used[c]) list[t->n_feedback++] = c;
-    if (!(t->b_list = lc_gl_buffer((size_t)t->n_feedback * 4, list, "feedback cache list", err, errlen))) goto err;
+    if (!(t->b_list = lc_gl_buffer((size_t)t->n_feedback * 4, list, "feedback cache list", err, errlen)) ||
+        !(t->b_need_list = lc_gl_buffer((size_t)v->n_caches * 4, NULL, "needed cache list", err, errlen)))
+        goto err;
     rc = 0;
 err:
     free(list);
@@ -835,6 +844,7 @@ static int tgl_read_back(tgl *t, const lc_transport_input *in, double rb[LC_STAG
     if (in->settings.sh_lightmap && lc_transport_fill_lightmap_sh(&t->out, v, "egl", err, errlen) != 0) return -1;
     rb[LC_STAGE_LIGHTMAP] += lc_clock_ms() - t0;
     tgl_read(t, t->b_grid_sh, (size_t)t->cells * 108, t->out.grid_sh, &rb[LC_STAGE_GRID]);
+    if (in->settings.grid_cells == LC_GRID_NEEDED) lc_transport_clear_unneeded_cells(&t->out, v, t->need);
     tgl_read(t, t->b_obj_sh, (size_t)in->n_objects * 108, t->out.object_sh, &rb[LC_STAGE_OBJECTS]);
     return 0;
 }
@@ -864,13 +874,23 @@ static int tgl_pass(tgl *t, GLuint gather, const lc_transport_input *in, int las
     tgl_stamp(t, ts, LC_STAGE_PULL);
     if (lc_transport_chroma(st)) tgl_to_ycocg(t);
     tgl_stamp(t, ts, LC_STAGE_CHROMA);
-    if (st->solver == LC_SOLVER_PROBES) { /* every receiver each pass, as the CPU backend */
+    const int probes = st->solver == LC_SOLVER_PROBES, sparse_grid = last && st->grid_cells == LC_GRID_NEEDED;
+    uint32_t n_need = probes || sparse_grid ? lc_transport_needed(t->v, t->feedback_cache, in, last, t->need) : 0;
+    if (probes) { /* the clusters holding a needed row, as the CPU backend */
         lc_probes_gl_pass pp = {.radiosity = t->b_radiosity,
                                 .caches = t->b_caches,
                                 .cache_sh = t->b_cache_sh,
                                 .sh9 = t->b_sh9,
-                                .nc = st->bands * st->bands};
+                                .nc = st->bands * st->bands,
+                                .need = t->need};
         if (lc_probes_gl_gather(t->probes, &pp, err, errlen) != 0) return -1;
+    } else if (sparse_grid && t->chunk >= t->v->n_caches) { /* the texel caches and the grid's readers */
+        for (uint32_t c = 0, n = 0; c < t->v->n_caches; c++)
+            if (t->need[c]) t->need_list[n++] = c;
+        glNamedBufferSubData(t->b_need_list, 0, (GLsizeiptr)((size_t)n_need * 4), t->need_list);
+        tgl_gather_setup(t, gather, st);
+        tgl_gather_list(t, gather, st, t->b_need_list, n_need);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
     } else {
         tgl_gather(t, gather, st, last);
     }

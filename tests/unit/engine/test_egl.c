@@ -20,6 +20,7 @@
 #include <stdint.h>
 
 #include "check.h"
+#include "engine/dnrt.h"
 #include "engine/drt.h"
 #include "engine_fixture.h"
 #include "gpu/egl_context.h"
@@ -370,6 +371,87 @@ static void test_cornell_probes(lc_engine *gpu, const fixture *f, const char *qu
     fprintf(stderr, "cornell %s probes: worst EGL/CPU difference %.3g\n", quality, worst);
 }
 
+/* settings.grid_cells NEEDED (engine.h) against ALL, per backend and solver: the lightmap, the
+ * objects' SH and the surfels' radiosity must be the same bits; the grid only at the cells the
+ * objects are sampled from, zero elsewhere, and the frame says it is incomplete. A DNRT cube
+ * and a second object out of DNRT (its SH is read from its own corners) are in the box. */
+static void test_grid_needed(lc_engine *e, const fixture *f, const char *label) {
+    lc_engine_object obj[2] = {{.asset = 0, .scale = {1.5f, 1.5f, 1.5f}, .rotation = {0, 0, 0, 1}, .visible = 1},
+                               {.asset = 0, .scale = {1, 1, 1}, .rotation = {0, 0, 0, 1}, .visible = 1, .dnrt_off = 1}};
+    snprintf(obj[0].id, sizeof obj[0].id, "a");
+    snprintf(obj[1].id, sizeof obj[1].id, "b");
+    obj[0].translation[0] = 0.3f, obj[0].translation[2] = 0.3f;
+    obj[1].translation[0] = -0.5f, obj[1].translation[1] = 1.2f, obj[1].translation[2] = -0.4f;
+    const lc_lcb_view *v = f->v;
+    const size_t texels = (size_t)v->lightmap_width * v->lightmap_height,
+                 cells = (size_t)v->grid_dims[0] * v->grid_dims[1] * v->grid_dims[2];
+    float *lm = malloc(texels * 3 * 4), *grid = malloc(cells * 27 * 4), *rad = malloc((size_t)v->n_surfels * 12);
+    float objs[54];
+    uint8_t *corner = calloc(v->n_caches, 1);
+    if (!lm || !grid || !rad || !corner) goto out;
+    for (int i = 0; i < 2; i++) { /* sampled at the asset's centre, placed (no rotation here) */
+        uint32_t c[8];
+        float w[8], p[3];
+        for (int k = 0; k < 3; k++)
+            p[k] = obj[i].translation[k] +
+                obj[i].scale[k] * 0.5f * (v->assets[0].bounds_min[k] + v->assets[0].bounds_max[k]);
+        lc_dnrt_grid_corners(v, p, c, w);
+        for (int k = 0; k < 8; k++) corner[c[k]] = 1;
+    }
+    for (uint32_t solver = 0; solver < LC_SOLVER_COUNT; solver++) {
+        lc_engine_state st = {.objects = obj, .n_objects = 2};
+        st.settings = lc_engine_default_settings(f->bake);
+        st.settings.solver = solver;
+        st.settings.bounces = 2;
+        st.settings.progressive = 0;
+        const lc_engine_frame *fr;
+        char err[512];
+        double ms[2];
+        for (uint32_t g = LC_GRID_ALL; g <= LC_GRID_NEEDED; g++) {
+            st.settings.grid_cells = g;
+            st.revision = 300 + g;
+            if (lc_engine_relight(e, &st, &fr, err, sizeof err) != 0) {
+                CHECK(0, "%s, solver %u, grid_cells %u: %s", label, solver, g, err);
+                goto out;
+            }
+            ms[g] = fr->stage_ms[LC_STAGE_GATHER];
+            CHECK(fr->grid_complete == (g == LC_GRID_ALL), "%s: grid_complete %d with grid_cells %u", label,
+                  fr->grid_complete, g);
+            if (g == LC_GRID_ALL) {
+                memcpy(lm, fr->lightmap, texels * 12);
+                memcpy(grid, fr->grid_sh, cells * 108);
+                memcpy(rad, fr->surfel_radiosity, (size_t)v->n_surfels * 12);
+                memcpy(objs, fr->object_sh, sizeof objs);
+                continue;
+            }
+            CHECK(!memcmp(lm, fr->lightmap, texels * 12), "%s, solver %u: the lightmap changed with NEEDED", label,
+                  solver);
+            CHECK(!memcmp(rad, fr->surfel_radiosity, (size_t)v->n_surfels * 12),
+                  "%s, solver %u: the surfels' radiosity changed with NEEDED", label, solver);
+            CHECK(!memcmp(objs, fr->object_sh, sizeof objs), "%s, solver %u: the objects' SH changed with NEEDED",
+                  label, solver);
+            size_t kept = 0, wrong = 0;
+            for (size_t i = 0; i < cells; i++) {
+                const float *a = grid + 27 * i, *b = fr->grid_sh + 27 * i;
+                int zero = 1;
+                for (int k = 0; k < 27; k++) zero &= b[k] == 0;
+                if (corner[v->grid[i]]) wrong += memcmp(a, b, 108) != 0;
+                kept += !zero;
+            }
+            CHECK(wrong == 0, "%s, solver %u: %zu cells the objects read differ with NEEDED", label, solver, wrong);
+            CHECK(kept >= 8 && kept < cells, "%s, solver %u: %zu of %zu cells computed with NEEDED", label, solver,
+                  kept, cells);
+            fprintf(stderr, "%s, solver %u: grid NEEDED keeps %zu of %zu cells; gather %.2f -> %.2f ms\n", label,
+                    solver, kept, cells, ms[0], ms[1]);
+        }
+    }
+out:
+    free(lm);
+    free(grid);
+    free(rad);
+    free(corner);
+}
+
 static void test_cornell(const char *quality, int runs) {
     char path[512];
     char *obj = slurp(check_source_path("scenes/cornell-box/cornell-box.obj", path, sizeof path));
@@ -426,6 +508,10 @@ static void test_cornell(const char *quality, int runs) {
         test_cornell_dnrt(gpu, &f, quality);
         test_cornell_drt(gpu, &f, quality);
         test_cornell_probes(gpu, &f, quality);
+        snprintf(label, sizeof label, "cornell %s, cpu", quality);
+        test_grid_needed(f.engine, &f, label);
+        snprintf(label, sizeof label, "cornell %s, egl", quality);
+        test_grid_needed(gpu, &f, label);
         lc_engine_release(gpu);
         /* Many windows, as a bake larger than one SSBO binding gets them: the links (laid out
          * link-major per window), the cache SH, DNRT and DRT windows give the same light. */

@@ -316,6 +316,10 @@ static void test_lights_and_occlusion(void) {
     CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == -1 && strstr(err, "/settings/bands"),
           "bad bands: %s", err);
     st.settings.bands = 3;
+    st.settings.grid_cells = 2;
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == -1 && strstr(err, "/settings/grid_cells"),
+          "bad grid_cells: %s", err);
+    st.settings.grid_cells = LC_GRID_ALL;
     CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight after errors: %s", err);
     fixture_release(&f);
 }

@@ -89,7 +89,7 @@ static void test_closed_box(void) {
     CHECK(pr != NULL, "lc_probes_create: %s", err);
     if (pr) {
         float *sh = calloc((size_t)f.v->n_caches * LC_SH_MAX_COEFFS * 3, sizeof *sh);
-        lc_probes_gather(pr, fr->surfel_radiosity, 3, sh, LC_SH_MAX_COEFFS, 1);
+        lc_probes_gather(pr, fr->surfel_radiosity, 3, sh, LC_SH_MAX_COEFFS, NULL, 1);
         const float *lam = lc_probes_sh(pr);
         const uint32_t nc = f.v->probe_header->sh_bands * f.v->probe_header->sh_bands;
         double b = 0;
