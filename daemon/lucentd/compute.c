@@ -50,6 +50,8 @@ struct lc_compute {
     char failure[256];        /* guarded by lock: why it failed */
     lc_drt_ops **clutter_in;  /* guarded by lock: operators handed over, not yet attached */
     uint32_t n_clutter_in, clutter_in_cap; /* guarded by lock */
+    int grid_whole;                        /* guarded by lock: relight with settings.grid_cells ALL */
+    int regrid;                            /* guarded by lock: relight the last state for the whole grid */
 };
 
 static void compute_job_free(compute_job *j) {
@@ -114,6 +116,7 @@ static lc_published *compute_publish(lc_engine *e, const lc_engine_frame *fr, co
     p->lm_w = fr->lightmap_width;
     p->lm_h = fr->lightmap_height;
     memcpy(p->grid_dims, fr->grid_dims, sizeof p->grid_dims);
+    p->grid_complete = fr->grid_complete;
     p->n_objects = fr->n_objects;
     return p;
 }
@@ -186,7 +189,7 @@ static void *compute_main(void *arg) {
     for (;;) {
         pthread_mutex_lock(&c->lock);
         for (;;) {
-            if (c->pending || c->stop || c->n_clutter_in) break;
+            if (c->pending || c->stop || c->n_clutter_in || c->regrid) break;
             if (last && refine_left > 0) {
                 /* The first refinement pass waits a moment after an update's frame, so
                  * that frame reaches the clients before the passes take the cores. */
@@ -210,13 +213,15 @@ static void *compute_main(void *arg) {
         uint32_t n_clutter = c->n_clutter_in;
         c->clutter_in = NULL;
         c->n_clutter_in = c->clutter_in_cap = 0;
+        const int regrid = c->regrid, grid_whole = c->grid_whole;
+        c->regrid = 0;
         pthread_mutex_unlock(&c->lock);
         for (uint32_t i = 0; i < n_clutter; i++)
             if (lc_engine_clutter_attach(e, clutter[i], err, sizeof err) != 0)
                 lc_warn("compute", "clutter operators not applied: %s", err);
         free(clutter);
-        if (!job && !last) continue;  /* operators before any state: the first relight applies them */
-        int fresh = job || n_clutter; /* a new solution: its own series of refinement passes */
+        if (!job && !last) continue;            /* operators before any state: the first relight applies them */
+        int fresh = job || n_clutter || regrid; /* a new solution: its own series of refinement passes */
         if (fresh) {
             if (job) {
                 compute_job_free(last);
@@ -232,6 +237,7 @@ static void *compute_main(void *arg) {
 
         const lc_engine_frame *fr;
         lc_published *p = NULL;
+        last->st.settings.grid_cells = grid_whole ? LC_GRID_ALL : LC_GRID_NEEDED;
         if (lc_engine_relight(e, &last->st, &fr, err, sizeof err) != 0) {
             lc_error("compute", "relight of revision %llu failed: %s", (unsigned long long)last->st.revision, err);
             refine_left = 0;
@@ -268,6 +274,7 @@ static void *compute_main(void *arg) {
         lc_published *old = c->latest;
         c->latest = p;
         c->failed_revision = 0;
+        if (c->grid_whole && !p->grid_complete) c->regrid = 1; /* wanted while this relight ran */
         c->sequence++;
         c->count++;
         int b = 0;
@@ -409,6 +416,16 @@ lc_published *lc_published_ref(lc_compute *c, lc_published *p) {
     p->refs++;
     pthread_mutex_unlock(&c->lock);
     return p;
+}
+
+void lc_compute_want_grid(lc_compute *c, int whole) {
+    pthread_mutex_lock(&c->lock);
+    c->grid_whole = whole != 0;
+    if (whole && c->latest && !c->latest->grid_complete) {
+        c->regrid = 1;
+        pthread_cond_signal(&c->cond);
+    }
+    pthread_mutex_unlock(&c->lock);
 }
 
 uint64_t lc_compute_count(lc_compute *c) {

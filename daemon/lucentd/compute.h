@@ -34,7 +34,8 @@ typedef struct lc_published {
     uint32_t lm_w, lm_h;
     float *lightmap; /* W*H*3 irradiance */
     uint32_t grid_dims[3];
-    float *grid_sh; /* cells*27 */
+    float *grid_sh;    /* cells*27 */
+    int grid_complete; /* 0: only the cells the objects read were computed (lc_compute_want_grid) */
     uint32_t n_objects;
     char (*object_ids)[LC_PROTO_ID_MAX + 1];
     float *object_sh;                     /* n_objects*27 */
@@ -82,6 +83,11 @@ lc_published *lc_published_ref(lc_compute *c, lc_published *p);
  * next publication applies them if the object is still where they were built for. A CPU
  * backend only: with another, they are released and logged. */
 void lc_compute_clutter_give(lc_compute *c, lc_drt_ops *ops);
+/* Service thread: whether relights compute the whole SH grid (engine settings.grid_cells ALL)
+ * or only the cells the objects and surfels read (NEEDED, the default until this is called):
+ * lucentd wants it whole while a client subscribes to the shgrid stream. Turning it on when
+ * the newest result lacks the grid relights the last state, so the grid follows soon. */
+void lc_compute_want_grid(lc_compute *c, int whole);
 /* Relights finished so far (for /metrics). */
 uint64_t lc_compute_count(lc_compute *c);
 

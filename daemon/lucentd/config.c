@@ -111,6 +111,10 @@ static const lc_opt config_options[] = {
      NULL, NULL},
     {"bounces", LC_OPT_INT, OFF(bounces), 0, 16, "0", NULL,
      "initial feedback bounces per relight (updates stay fast; refinement adds the rest)", NULL, NULL},
+    {"grid", LC_OPT_ENUM, OFF(grid), 0, 0, "subscribed", "subscribed|always",
+     "when relights compute the whole SH grid: while a client subscribes to the shgrid stream, else only the cells "
+     "the objects and surfels read (subscribed), or every relight (always)",
+     NULL, NULL},
     {"tile", LC_OPT_INT, OFF(tile), 0, 256, "0", NULL,
      "lightmap tile size for delta frames (texels, >= 8; 0 = 32, 16 or 8: at least 64 tiles)", NULL, NULL},
     {"keyframe-interval", LC_OPT_INT, OFF(keyframe_interval), 1, 100000, "30", NULL,
@@ -272,6 +276,7 @@ void lc_config_apply_reloadable(lc_config *dst, const lc_config *src, char *rest
     RESTART_IF(refine_tolerance, "refine-tolerance")
     RESTART_IF(refine_delay, "refine-delay")
     RESTART_IF(bounces, "bounces")
+    RESTART_IF(grid, "grid")
     RESTART_IF(max_lights, "max-lights")
     RESTART_IF(max_objects, "max-objects")
     RESTART_IF(tile, "tile")

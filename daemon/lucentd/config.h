@@ -39,6 +39,7 @@ typedef struct lc_config {
     double refine_tolerance; /* stop refining once the estimated remaining change is below this */
     int refine_delay;        /* ms after an update's frame before the refinement passes */
     int bounces;             /* initial feedback bounces per relight (a snapshot's settings win) */
+    int grid;                /* 0 subscribed: the whole SH grid only while a client takes it; 1 always */
     int tile;                /* lightmap tile size for delta frames */
     int keyframe_interval;
     double delta_threshold;     /* relative change that marks a tile dirty */

@@ -146,10 +146,20 @@ static int session_tx_reserve(lc_session *ss, size_t need) {
 static int session_stream_pending(const lc_session *ss, int k) {
     const lc_server *s = ss->srv;
     if (!ss->stream[k].on) return 0;
+    /* a result without the whole grid: the next one has it (server_update_grid) */
+    if (k == LC_STREAM_SHGRID && ss->frame && !ss->frame->grid_complete) return 0;
     if (ss->stream[k].force) return 1;
     if (k == LC_STREAM_MR_VPL) return ss->stream[k].sent_mr_seq < s->mr_seq;
     if (ss->stream[k].sent_pub_seq < ss->frame_seq) return 1;
     return k == LC_STREAM_OBJECTS && ss->stream[k].sent_mr_seq < s->mr_seq;
+}
+
+void server_update_grid(lc_server *s) {
+    int want = s->cfg->grid == 1;
+    for (const lc_session *o = s->sessions; o && !want; o = o->next) want = o->stream[LC_STREAM_SHGRID].on;
+    if (want == s->grid_wanted) return;
+    s->grid_wanted = want;
+    lc_compute_want_grid(s->compute, want);
 }
 
 int session_wants_frame(const lc_session *ss) {
@@ -280,6 +290,7 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         for (int i = 0; i < ss->outq_n; i++) free(ss->outq[(ss->outq_head + i) % SERVER_OUTQ]);
         server_mr_end(s, ss);
         server_cluster_session_gone(s, ss);
+        server_update_grid(s); /* it is out of s->sessions */
         lc_published_release(s->compute, ss->frame);
         free(ss->rx);
         free(ss->tx);
@@ -721,6 +732,7 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
         goto done;
     }
     lc_state_set_backend(&s->state, lc_compute_backend_kind(s->compute)); /* settings.solver: what it runs */
+    server_update_grid(s);                                                /* --grid always: from the first */
     lc_compute_submit(s->compute, &s->state, NULL);                       /* the first frame: the restored state */
     signal(SIGINT, server_on_signal);
     signal(SIGTERM, server_on_signal);

@@ -122,6 +122,7 @@ struct lc_server {
     lc_session *sessions;
     uint32_t n_sessions;
     uint64_t pub_seq;  /* compute publications seen */
+    int grid_wanted;   /* relights compute the whole SH grid (server_update_grid) */
     uint32_t tile;     /* lightmap delta tile side: --tile, or chosen from the lightmap size */
     lc_frames *frames; /* what sessions' frames share (each lightmap encoded once per encoding) */
     const char **asset_names, **material_names;
@@ -183,6 +184,9 @@ void session_error(lc_server *s, lc_session *ss, const lc_proto_id *id, lc_proto
 void session_close(lc_session *ss, int code, const char *reason);
 /* 1 when some stream has a newer frame than the client got. */
 int session_wants_frame(const lc_session *ss);
+/* Relights compute the whole SH grid while some client subscribes to shgrid (or --grid
+ * always); call after a subscription changes or a session goes. */
+void server_update_grid(lc_server *s);
 /* accept() failures seen so far (for /metrics). */
 uint64_t server_accept_errors_total(void);
 

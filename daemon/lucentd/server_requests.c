@@ -219,11 +219,13 @@ void server_request(lc_server *s, lc_session *ss, const char *text, size_t len) 
         ss->stream[req.stream].enc = req.encoding;
         ss->stream[req.stream].max_rate = req.max_rate;
         ss->stream[req.stream].residual = req.residual;
+        server_update_grid(s);
         session_send(ss, lc_proto_build_ok(&req.id, s->state.revision));
         break;
     }
     case LC_REQ_UNSUBSCRIBE:
         ss->stream[req.stream].on = 0;
+        server_update_grid(s);
         session_send(ss, lc_proto_build_ok(&req.id, s->state.revision));
         break;
     case LC_REQ_SNAPSHOT:

@@ -8,6 +8,10 @@ small Cornell bakes made here with lucent-bake:
                 restart, and pic comes back the same as before
   probes_only   a --solver probes bake: solvers ["probes"], the state starts on probes, pic is
                 refused naming /settings/solver and the state keeps probes
+  grid          lucentd computes the SH grid only while a client takes the shgrid stream (--grid
+                subscribed, the default; the thesis's §4.1): after converged lightmaps without any
+                grid, a client that subscribes to shgrid gets a whole grid, the one a lucentd with
+                --grid always serves; the objects stream is the same either way
 """
 import array
 import os
@@ -35,9 +39,9 @@ def check(cond, msg):
     return cond
 
 
-def bake(name, solver):
+def bake(name, solver, *extra):
     out = os.path.join(TMP, name + ".lcb")
-    subprocess.run([lt.LUCENT_BAKE, "bake", CORNELL, "-o", out, "--solver", solver, *SMALL], check=True)
+    subprocess.run([lt.LUCENT_BAKE, "bake", CORNELL, "-o", out, "--solver", solver, *SMALL, *extra], check=True)
     return out
 
 
@@ -145,7 +149,77 @@ def case_probes_only():
         stop(p)
 
 
-for case in (case_both, case_probes_only):
+def converged_keyframe(ws, stream, rid):
+    """(header, payload) of the first converged keyframe of `stream` after a snapshot, or None."""
+    request(ws, {"type": "snapshot", "id": rid})
+    end = time.time() + 30
+    while time.time() < end:
+        ws.s.settimeout(max(0.01, end - time.time()))
+        try:
+            op, data = ws.recv_frame()
+        except (socket.timeout, TimeoutError):
+            break
+        if op != 2:
+            continue
+        f = parse_frame(data)
+        if f["stream"] != stream or not f["flags"] & 1:
+            continue
+        if f["converged"]:
+            return f, frame_payload(data)
+        if stream == 1:  # lightmap keyframes only when asked: ask again later
+            request(ws, {"type": "snapshot", "id": rid + 1000})
+            time.sleep(0.2)
+    return None
+
+
+def floats(payload):
+    a = array.array("f")
+    a.frombytes(payload)
+    return a
+
+
+def case_grid():
+    path = bake("grid", "probes", "--asset", "cube=" + os.path.join(lt.SOURCE_DIR, "scenes", "cornell-box", "cube.obj"))
+    box = {"type": "object.set", "id": 3, "object": {"id": "o1", "asset": "cube", "translation": [0.28, 0, 0.28],
+                                                     "scale": [2, 2, 2], "mode": "dynamic"}}
+    served = {}
+    for mode in ("always", "subscribed"):
+        p, port = lt.start_lucentd(os.path.join(TMP, "grid-" + mode), "--grid", mode, bake=path)
+        try:
+            ws, _ = connect(port)
+            has_asset = check(request(ws, box).get("type") == "ok", "grid %s: the cube placed" % mode)
+            request(ws, {"type": "subscribe", "id": 4, "stream": "objects", "encoding": "f32"})
+            lm = converged_keyframe(ws, 1, 5)
+            check(lm is not None, "grid %s: a converged lightmap" % mode)
+            obj = converged_keyframe(ws, 3, 6) if has_asset else None
+            g = RawWS(port, timeout=30)
+            g.hello()
+            request(g, {"type": "subscribe", "id": 2, "stream": "shgrid", "encoding": "f32"})
+            grid = converged_keyframe(g, 2, 3)
+            check(grid is not None, "grid %s: a converged shgrid keyframe after subscribing late" % mode)
+            served[mode] = (lm, obj, grid)
+            g.close()
+            ws.close()
+        finally:
+            check(stop(p) == 0, "grid %s: clean stop" % mode)
+    if any(x is None for x in served["always"] + served["subscribed"]):
+        return
+    a, b = floats(served["always"][2][1]), floats(served["subscribed"][2][1])
+    peak = max(abs(x) for x in a)
+    worst = max(abs(x - y) for x, y in zip(a, b))
+    zero = sum(1 for i in range(0, len(b), 27) if not any(b[i:i + 27]))
+    check(len(a) == len(b) and peak > 0 and worst <= 1e-2 * peak,
+          "grid: the late subscriber's grid is the whole one (worst %.3g of peak %.3g)" % (worst, peak))
+    check(zero < len(b) // 27 // 2, "grid: %d of %d cells zero" % (zero, len(b) // 27))
+    la, lb = floats(served["always"][0][1]), floats(served["subscribed"][0][1])
+    check(max(abs(x - y) for x, y in zip(la, lb)) <= 1e-3 * max(la), "grid: the lightmap does not depend on --grid")
+    if served["always"][1] and served["subscribed"][1]:
+        oa, ob = floats(served["always"][1][1]), floats(served["subscribed"][1][1])
+        check(max(abs(x - y) for x, y in zip(oa, ob)) <= 1e-2 * max(abs(x) for x in oa),
+              "grid: the objects' SH does not depend on --grid")
+
+
+for case in (case_both, case_probes_only, case_grid):
     try:
         case()
     except Exception as e:  # a crash in one case is a failure, the others still run

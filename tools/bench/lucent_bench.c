@@ -1,7 +1,7 @@
 /* lucent-bench: relight-engine benchmark. For each bake file given, and each backend
  * available, times a relight after one light change (median of --runs), per stage, and
  * prints a table beside the PIC paper's figures plus a JSON document.
- *   lucent-bench [--runs N] [--backend cpu|egl|both] [--json FILE] BAKE.lcb...
+ *   lucent-bench [--runs N] [--backend cpu|egl|both] [--grid all|needed] [--json FILE] BAKE.lcb...
  * Exit codes: 0 ok, 1 a bake or engine failed, 2 usage. */
 #include <math.h>
 #include <stdio.h>
@@ -17,6 +17,10 @@
 
 static const char *stage_names[LC_STAGE_COUNT] = {"direct", "bounce",  "pull",   "gather", "lightmap",
                                                   "grid",   "objects", "chroma", "dnrt",   "drt"};
+
+/* --grid: settings.grid_cells of every relight (all: the whole SH grid, as lucentd computes
+ * while a client takes the shgrid stream; needed: the cells objects and surfels read). */
+static uint32_t bench_grid_cells = LC_GRID_ALL;
 
 static int cmp_double(const void *a, const void *b) {
     double x = *(const double *)a, y = *(const double *)b;
@@ -121,6 +125,7 @@ static int bench_one(const char *path, lc_backend_kind kind, uint32_t solver, in
     lc_engine_settings settings = lc_engine_default_settings(bake);
     settings.bounces = (uint32_t)bounces;
     settings.solver = solver;
+    settings.grid_cells = bench_grid_cells;
     lc_engine_light light;
     lc_engine_state st;
     const lc_engine_frame *fr;
@@ -293,6 +298,7 @@ static int bench_dnrt(const char *path, lc_backend_kind kind, int runs, int n_ob
     }
     lc_engine_settings settings = lc_engine_default_settings(bake);
     settings.dnrt_blockers = blockers;
+    settings.grid_cells = bench_grid_cells;
     lc_engine_light light;
     lc_engine_state st;
     const lc_engine_frame *fr;
@@ -409,6 +415,7 @@ static int bench_drt(const char *path, lc_backend_kind backend, int runs, int n_
         fprintf(stderr, "\r%s: clutter %d/%d built", path, i + 1, n_objects);
     }
     lc_engine_settings settings = lc_engine_default_settings(bake);
+    settings.grid_cells = bench_grid_cells;
     lc_engine_light light;
     lc_engine_state st;
     const lc_engine_frame *fr;
@@ -490,7 +497,8 @@ static int bench_write_json(const char *json, int runs, int bounces, double bw, 
         fprintf(stderr, "lucent-bench: cannot write %s\n", json);
         return -1;
     }
-    fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"memcpy_gbps\": %.2f, \"results\": [", runs, bounces, bw);
+    fprintf(out, "{\"runs\": %d, \"bounces\": %d, \"grid_cells\": \"%s\", \"memcpy_gbps\": %.2f, \"results\": [", runs,
+            bounces, bench_grid_cells == LC_GRID_ALL ? "all" : "needed", bw);
     for (int i = 0; i < nrows; i++) {
         fprintf(out,
                 "%s\n  {\"bake\": \"%s\", \"backend\": \"%s\", \"solver\": \"%s\", \"surfels\": %u, "
@@ -548,9 +556,18 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--backend") && i + 1 < argc) backend = argv[++i];
         else if (!strcmp(argv[i], "--object-size") && i + 1 < argc) object_size = atof(argv[++i]);
         else if (!strcmp(argv[i], "--no-dnrt")) dnrt = 0;
-        else if (!strcmp(argv[i], "--help")) {
+        else if (!strcmp(argv[i], "--grid") && i + 1 < argc) {
+            const char *g = argv[++i];
+            if (strcmp(g, "all") && strcmp(g, "needed")) {
+                fprintf(stderr, "lucent-bench: --grid '%s' is not all or needed\n", g);
+                return 2;
+            }
+            bench_grid_cells = strcmp(g, "all") ? LC_GRID_NEEDED : LC_GRID_ALL;
+        } else if (!strcmp(argv[i], "--help")) {
             printf("usage: lucent-bench [--runs N] [--bounces N] [--backend cpu|egl|both] [--json FILE]\n"
-                   "                    [--object-size METRES] [--no-dnrt] BAKE.lcb...\n"
+                   "                    [--object-size METRES] [--no-dnrt] [--grid all|needed] BAKE.lcb...\n"
+                   "  --grid needed: relights compute only the SH grid cells objects and surfels read, as lucentd\n"
+                   "  does while no client takes the shgrid stream (default all: the whole grid)\n"
                    "  bakes with an asset transfer grid also get the DNRT rows: 1 and 10 objects of --object-size\n"
                    "  (default: 1 m, or 0.27 x the room's smaller horizontal extent when that is less) on the\n"
                    "  floor, with and without blocker rays; and the DRT rows: the same objects as clutter,\n"
@@ -610,7 +627,8 @@ int main(int argc, char **argv) {
     }
     bench_compare_backends(rows, nrows);
     bench_compare_object_rows(drows, ndrows, crows, ncrows);
-    printf("\nrelight after one light change, median of %d runs, %d feedback bounce(s), ms\n", runs, bounces);
+    printf("\nrelight after one light change, median of %d runs, %d feedback bounce(s), %s, ms\n", runs, bounces,
+           bench_grid_cells == LC_GRID_ALL ? "the whole SH grid" : "only the grid cells objects and surfels read");
     printf("%-28s %-4s %-6s %7s %7s %5s", "bake", "bk", "solver", "surfels", "caches", "links");
     for (int s = 0; s < LC_STAGE_COUNT; s++) printf(" %8s", stage_names[s]);
     printf(" %8s %8s %8s\n", "total", "peakMiB", "vs cpu");
