@@ -246,6 +246,26 @@ static int session_write_frame(lc_server *s, lc_session *ss, struct lws *wsi) {
     return 0;
 }
 
+/* A session's connection closed: out of the list, its resources freed. Service thread. */
+static void session_closed(lc_server *s, lc_session *ss) {
+    for (lc_session **pp = &s->sessions; *pp; pp = &(*pp)->next)
+        if (*pp == ss) {
+            *pp = ss->next;
+            break;
+        }
+    s->n_sessions--;
+    if (ss->authed) lc_info("server", "client '%s' disconnected", ss->client);
+    for (int i = 0; i < ss->outq_n; i++) free(ss->outq[(ss->outq_head + i) % SERVER_OUTQ]);
+    server_mr_end(s, ss);
+    server_cluster_session_gone(s, ss);
+    server_update_grid(s); /* it is out of s->sessions */
+    lc_published_release(s->compute, ss->frame);
+    free(ss->rx);
+    free(ss->tx);
+    lc_frames_copy_release(&ss->copy);
+    ss->wsi = NULL;
+}
+
 static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len) {
     struct lws_vhost *vh = lws_get_vhost(wsi);
     lc_server *s = vh ? lws_get_vhost_user(vh) : NULL;
@@ -278,26 +298,9 @@ static int server_ws_callback(struct lws *wsi, enum lws_callback_reasons reason,
         s->sessions = ss;
         s->n_sessions++;
         return 0;
-    case LWS_CALLBACK_CLOSED: {
-        if (!ss || !ss->wsi) return 0; /* refused before ESTABLISHED */
-        for (lc_session **pp = &s->sessions; *pp; pp = &(*pp)->next)
-            if (*pp == ss) {
-                *pp = ss->next;
-                break;
-            }
-        s->n_sessions--;
-        if (ss->authed) lc_info("server", "client '%s' disconnected", ss->client);
-        for (int i = 0; i < ss->outq_n; i++) free(ss->outq[(ss->outq_head + i) % SERVER_OUTQ]);
-        server_mr_end(s, ss);
-        server_cluster_session_gone(s, ss);
-        server_update_grid(s); /* it is out of s->sessions */
-        lc_published_release(s->compute, ss->frame);
-        free(ss->rx);
-        free(ss->tx);
-        lc_frames_copy_release(&ss->copy);
-        ss->wsi = NULL;
+    case LWS_CALLBACK_CLOSED:
+        if (ss && ss->wsi) session_closed(s, ss); /* else refused before ESTABLISHED */
         return 0;
-    }
     case LWS_CALLBACK_RECEIVE: {
         if (ss->closing) return 0; /* a closing session's requests are not served */
         if (lws_is_first_fragment(wsi)) {
