@@ -57,25 +57,8 @@ def request(ws, msg):
 
 def converged_lightmap(ws, rid, revision=None):
     """The lightmap of the first converged keyframe (of `revision`, when given), after a snapshot."""
-    request(ws, {"type": "snapshot", "id": rid})
-    end = time.time() + 30
-    while time.time() < end:
-        ws.s.settimeout(max(0.01, end - time.time()))
-        try:
-            op, data = ws.recv_frame()
-        except (socket.timeout, TimeoutError):
-            break
-        if op != 2:
-            continue
-        f = parse_frame(data)
-        if f["flags"] & 1 and (revision is None or f["revision"] >= revision):
-            if f["converged"]:
-                lm = array.array("f")
-                lm.frombytes(frame_payload(data))
-                return lm
-            request(ws, {"type": "snapshot", "id": rid + 1000})  # not converged yet: ask again later
-            time.sleep(0.2)
-    return None
+    got = converged_keyframe(ws, 1, rid, revision)
+    return floats(got[1]) if got else None
 
 
 def mean(a):
@@ -149,8 +132,10 @@ def case_probes_only():
         stop(p)
 
 
-def converged_keyframe(ws, stream, rid):
-    """(header, payload) of the first converged keyframe of `stream` after a snapshot, or None."""
+def converged_keyframe(ws, stream, rid, revision=None):
+    """(header, payload) of the first converged keyframe of `stream` (of `revision` or later,
+    when given) after a snapshot, or None. Lightmap keyframes come only when asked: while they
+    are not converged, ask again."""
     request(ws, {"type": "snapshot", "id": rid})
     end = time.time() + 30
     while time.time() < end:
@@ -162,11 +147,11 @@ def converged_keyframe(ws, stream, rid):
         if op != 2:
             continue
         f = parse_frame(data)
-        if f["stream"] != stream or not f["flags"] & 1:
+        if f["stream"] != stream or not f["flags"] & 1 or (revision is not None and f["revision"] < revision):
             continue
         if f["converged"]:
             return f, frame_payload(data)
-        if stream == 1:  # lightmap keyframes only when asked: ask again later
+        if stream == 1:
             request(ws, {"type": "snapshot", "id": rid + 1000})
             time.sleep(0.2)
     return None
