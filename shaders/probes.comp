@@ -10,7 +10,8 @@
 //   2 receivers  (one invocation per receiver row): e = U row . b, written into the cache SH
 //                (the full one, stride u_nc, bound whole, and the L2 copy) as probes_store: a
 //                texel cache's cosine lobe about its normal, a grid cache's E_j / A_l. The host
-//                clears both buffers first.
+//                clears both buffers first. Each row also adds its unseen rays (lcb.h PRUF/PRUS:
+//                sum of weight x B over the surfels they hit; no entries when the bake has none).
 layout(local_size_x = 64) in;
 
 layout(location = 0) uniform uint u_count;
@@ -79,6 +80,9 @@ layout(std430, binding = 4) buffer CacheSH { float cache_sh[]; };         // [ca
 layout(std430, binding = 5) buffer CacheSH9 { float sh9[]; };             // [cache][9][3]
 layout(std430, binding = 6) readonly buffer RowB { uvec2 row_b[]; };     // rank, first basis row
 layout(std430, binding = 7) readonly buffer Active { uint cluster_on[]; };   // [cluster]
+layout(std430, binding = 8) readonly buffer UnseenFirst { uint unseen_first[]; }; // [row + 1]
+layout(std430, binding = 9) readonly buffer Unseen { uvec2 unseen[]; };       // surfel, weight bits
+layout(std430, binding = 10) readonly buffer Radiosity { float rad[]; };      // [surfel][3]
 layout(location = 1) uniform uint u_nc;   // the cache SH's stride (bands^2)
 layout(location = 2) uniform uint u_first;
 layout(location = 3) uniform uint u_base;
@@ -99,6 +103,10 @@ void main() {
     for (uint s = 0u; s < rb.x; s++) {
         uint bi = 3u * (rb.y + s);
         e += u[r.z - u_base + s] * vec3(b[bi], b[bi + 1u], b[bi + 2u]);
+    }
+    for (uint k = unseen_first[u_first + i]; k < unseen_first[u_first + i + 1u]; k++) {
+        uvec2 un = unseen[k];
+        e += uintBitsToFloat(un.y) * vec3(rad[3u * un.x], rad[3u * un.x + 1u], rad[3u * un.x + 2u]);
     }
     Cache c = caches[r.x];
     if ((c.flags & 1u) != 0u) {

@@ -137,7 +137,19 @@ uint32_t lc_probes_active_clusters(const lc_lcb_view *v, const uint8_t *need, ui
     return n;
 }
 
-/* Per active cluster: b = (S V^T) lambda, then each row's U . b. */
+/* The row's unseen rays, straight from the surfels they hit (lcb.h: PRUF/PRUS). */
+static void probes_add_unseen(const lc_probes *p, uint32_t row, float e[3]) {
+    const lc_lcb_view *v = p->v;
+    for (uint32_t k = v->probe_unseen_first[row]; k < v->probe_unseen_first[row + 1]; k++) {
+        const lc_lcb_probe_unseen *u = &v->probe_unseen[k];
+        const float *b = p->rad + 3 * (size_t)u->surfel;
+        e[0] += u->weight * b[0];
+        e[1] += u->weight * b[1];
+        e[2] += u->weight * b[2];
+    }
+}
+
+/* Per active cluster: b = (S V^T) lambda, then each row's U . b (plus its unseen rays). */
 static void probes_cluster_range(void *ctx, size_t begin, size_t end, int thread) {
     (void)thread;
     lc_probes *p = ctx;
@@ -180,6 +192,7 @@ static void probes_cluster_range(void *ctx, size_t begin, size_t end, int thread
                 e[1] += u[r] * b[3 * r + 1];
                 e[2] += u[r] * b[3 * r + 2];
             }
+            if (v->probe_unseen_first) probes_add_unseen(p, cl->first_row + i, e);
             probes_store(p, &v->probe_rows[cl->first_row + i], e);
         }
     }

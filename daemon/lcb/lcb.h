@@ -40,6 +40,9 @@
  *   PRCB  float                each cluster's basis S V^T: rank x (probes x coefficients)
  *   PRRW  lc_lcb_probe_row     receiver rows, cluster by cluster
  *   PRRU  float                each cluster's U: rows x rank, row-major
+ *   PRUF  uint32_t             optional with the probes: per PRRW row, its first PRUS entry, and
+ *                              one more (the end); PRUF and PRUS come together
+ *   PRUS  lc_lcb_probe_unseen  per row, the surfels its unseen rays hit (rows in PRRW order)
  * PIC (links) and probes are two solvers of the same quantities; a bake may carry both
  * (LINK is then present but may hold zero links per cache for --solver probes).
  * Optional sections were added without a version change (the minor stays 0): a reader that
@@ -223,6 +226,10 @@ typedef struct lc_lcb_sparse_vertex {
  *              (dir_k = lc_probe_ray_dir(k, n_rays), the same for every probe; a miss adds 0)
  *   basis      b[c][r] = sum_col PRCB[c][r][col] lambda[PRCP[c][col / coeffs]][col % coeffs]
  *   receivers  value[row] = sum_r PRRU[c][row][r] b[c][r]
+ *              + sum_{e in PRUF[row]..PRUF[row+1]} PRUS[e].weight B[PRUS[e].surfel]
+ * The second sum gathers a receiver's unseen rays: those whose hit point none of its supporting
+ * probes sees (under a table, behind a pillar), which the probes cannot reconstruct; each goes
+ * straight to the surfel it hit (weight: the ray's share of the row / pi, summed per surfel).
  * A row of a texel cache (coeff 0) is the irradiance E for the cache normal; a grid cache has
  * 9 rows, coeff j the cosine-convolved L2 irradiance SH coefficient E_j = A_l L_j. RGB
  * throughout (the matrices are shared by the channels). */
@@ -256,6 +263,11 @@ typedef struct lc_lcb_probe_cluster {
     uint64_t basis_offset; /* floats into PRCB: rank x (n_probes x coeffs) */
     uint64_t u_offset;     /* floats into PRRU: n_rows x rank */
 } lc_lcb_probe_cluster;
+
+typedef struct lc_lcb_probe_unseen {
+    uint32_t surfel; /* SURF index */
+    float weight;    /* row value per unit of the surfel's radiosity */
+} lc_lcb_probe_unseen;
 
 typedef struct lc_lcb_probe_row {
     uint32_t cache; /* CACH index */
@@ -294,6 +306,7 @@ _Static_assert(sizeof(lc_lcb_probe_header) == 64, "probe header layout");
 _Static_assert(sizeof(lc_lcb_probe) == 16, "probe layout");
 _Static_assert(sizeof(lc_lcb_probe_cluster) == 40, "probe cluster layout");
 _Static_assert(sizeof(lc_lcb_probe_row) == 8, "probe row layout");
+_Static_assert(sizeof(lc_lcb_probe_unseen) == 8, "probe unseen-ray layout");
 
 /* --- link direction/cone packing ------------------------------------------------------- */
 
@@ -403,6 +416,8 @@ typedef struct lc_lcb_view {
     const lc_lcb_probe_row *probe_rows;
     const float *probe_u;
     uint64_t n_probe_u;
+    const uint32_t *probe_unseen_first;      /* n_rows + 1, or NULL (a bake without PRUF/PRUS) */
+    const lc_lcb_probe_unseen *probe_unseen; /* probe_unseen_first[n_rows] entries */
 } lc_lcb_view;
 
 /* The asset's DNRT transfer grid, or NULL (no data: an older bake, or baked without). */

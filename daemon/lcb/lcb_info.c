@@ -15,12 +15,13 @@ typedef struct lcb_stats {
     uint64_t owned, dilated, empty; /* lightmap texels */
     uint64_t file_size;
     double surfel_area;
-    uint64_t probe_bytes; /* the eight probe sections together */
+    uint64_t probe_bytes; /* the probe sections together */
     double probe_mean_rank;
 } lcb_stats;
 
 /* The probes solver's sections (lcb.h), for their size in `info`. */
-static const char lcb_probe_ids[8][5] = {"PRBH", "PRBP", "PRBR", "PRCL", "PRCP", "PRCB", "PRRW", "PRRU"};
+static const char lcb_probe_ids[][5] = {"PRBH", "PRBP", "PRBR", "PRCL", "PRCP", "PRCB", "PRRW", "PRRU", "PRUF", "PRUS"};
+#define LCB_PROBE_IDS (sizeof lcb_probe_ids / sizeof lcb_probe_ids[0])
 
 static void lcb_gather(const lc_lcb *f, const lc_lcb_view *v, const cJSON *meta, lcb_stats *st) {
     memset(st, 0, sizeof *st);
@@ -43,7 +44,7 @@ static void lcb_gather(const lc_lcb *f, const lc_lcb_view *v, const cJSON *meta,
     for (uint32_t i = 0; i < lc_lcb_section_count(f); i++) {
         const lc_lcb_section *s = lc_lcb_section_at(f, i);
         if (s->offset + s->size > end) end = s->offset + s->size;
-        for (int k = 0; v->probe_header && k < 8; k++)
+        for (size_t k = 0; v->probe_header && k < LCB_PROBE_IDS; k++)
             if (memcmp(s->id, lcb_probe_ids[k], 4) == 0) st->probe_bytes += s->size;
     }
     if (v->probe_header && v->probe_header->n_clusters) {
@@ -112,6 +113,8 @@ static void lcb_print_probes(const lc_lcb_view *v, const lcb_stats *st, FILE *ou
         out,
         "              overlaps %u, receiver rays %u, support radius %.4g m, SVD error %.3g; %s in the probe sections\n",
         h->overlaps, h->receiver_rays, h->support_radius, h->svd_error, b);
+    if (v->probe_unseen_first)
+        fprintf(out, "              unseen rays gathered from surfels: %u entries\n", v->probe_unseen_first[h->n_rows]);
 }
 
 static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *meta, const lcb_stats *st,
@@ -195,6 +198,7 @@ static int lcb_json_probes(cJSON *cnt, const lc_lcb_view *v, const lcb_stats *st
         {"support_radius", h->support_radius},
         {"svd_error", h->svd_error},
         {"bytes", (double)st->probe_bytes},
+        {"unseen_entries", v->probe_unseen_first ? v->probe_unseen_first[h->n_rows] : 0},
     };
     for (size_t i = 0; i < sizeof nums / sizeof nums[0]; i++)
         if (!lcb_add_num(p, nums[i].k, nums[i].v)) return 0;

@@ -76,6 +76,8 @@ enum {
     S_PRCB,
     S_PRRW,
     S_PRRU,
+    S_PRUF,
+    S_PRUS,
     S_COUNT
 };
 static const struct {
@@ -111,6 +113,8 @@ static const struct {
     {"PRCB", sizeof(float), 0, "float"},
     {"PRRW", sizeof(lc_lcb_probe_row), 0, "lc_lcb_probe_row"},
     {"PRRU", sizeof(float), 0, "float"},
+    {"PRUF", sizeof(uint32_t), 0, "uint32_t"},
+    {"PRUS", sizeof(lc_lcb_probe_unseen), 0, "lc_lcb_probe_unseen"},
 };
 
 /* What META says; the sections are checked against it. */
@@ -977,11 +981,47 @@ static int lcb_check_probe_arrays(lcb_ctx *c, const lc_lcb_probe_header *h) {
     return lcb_check_floats(c, S_PRCB) || lcb_check_floats(c, S_PRRU) ? -1 : 0;
 }
 
+/* PRUF/PRUS (optional, together): PRUF holds n_rows + 1 offsets from 0, never decreasing, the
+ * last PRUS's count; each entry's surfel in range and weight finite. */
+static int lcb_check_probe_unseen(lcb_ctx *c, const lc_lcb_probe_header *h) {
+    if (!c->sec[S_PRUF] && !c->sec[S_PRUS]) return 0;
+    if (!c->sec[S_PRUF] || !c->sec[S_PRUS])
+        return lcb_fail(c, "%s: missing (PRUF and PRUS come together)" LCB_INCONSISTENT,
+                        c->sec[S_PRUF] ? "PRUS" : "PRUF");
+    if (lcb_count(c, S_PRUF) != (uint64_t)h->n_rows + 1)
+        return lcb_fail(c, "PRUF: %llu offsets, expected PRBH n_rows + 1 = %llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_PRUF), (unsigned long long)h->n_rows + 1);
+    const uint32_t *first = lcb_data(c, S_PRUF);
+    if (first[0] != 0) return lcb_fail(c, "PRUF: offset 0 is %u, must be 0" LCB_INCONSISTENT, first[0]);
+    for (uint32_t r = 0; r < h->n_rows; r++)
+        if (first[r + 1] < first[r])
+            return lcb_fail(c, "PRUF: row %u ends at %u before it starts (%u)" LCB_INCONSISTENT, r, first[r + 1],
+                            first[r]);
+    if (first[h->n_rows] != lcb_count(c, S_PRUS))
+        return lcb_fail(c, "PRUF: the rows end at entry %u, PRUS has %llu entries" LCB_INCONSISTENT, first[h->n_rows],
+                        (unsigned long long)lcb_count(c, S_PRUS));
+    const lc_lcb_probe_unseen *e = lcb_data(c, S_PRUS);
+    uint64_t n_surf = lcb_count(c, S_SURF);
+    for (uint64_t i = 0; i < lcb_count(c, S_PRUS); i++) {
+        if (e[i].surfel >= n_surf)
+            return lcb_fail(c, "PRUS: entry %llu surfel %u >= %llu surfels" LCB_INCONSISTENT, (unsigned long long)i,
+                            e[i].surfel, (unsigned long long)n_surf);
+        if (!isfinite(e[i].weight))
+            return lcb_fail(c, "PRUS: entry %llu weight is not finite" LCB_INCONSISTENT, (unsigned long long)i);
+    }
+    return 0;
+}
+
 static int lcb_check_probes(lcb_ctx *c) {
     const int n_secs = (int)(sizeof lcb_probe_secs / sizeof lcb_probe_secs[0]);
     int present = 0;
     for (int i = 0; i < n_secs; i++) present += !!c->sec[lcb_probe_secs[i]];
-    if (present == 0) return 0;
+    if (present == 0) {
+        if (c->sec[S_PRUF] || c->sec[S_PRUS])
+            return lcb_fail(c, "%s: present without the probe sections it belongs to" LCB_INCONSISTENT,
+                            c->sec[S_PRUF] ? "PRUF" : "PRUS");
+        return 0;
+    }
     for (int i = 0; i < n_secs; i++)
         if (!c->sec[lcb_probe_secs[i]])
             return lcb_fail(c,
@@ -992,7 +1032,9 @@ static int lcb_check_probes(lcb_ctx *c) {
         return lcb_fail(c, "PRBH: %llu records, expected exactly 1" LCB_INCONSISTENT,
                         (unsigned long long)lcb_count(c, S_PRBH));
     const lc_lcb_probe_header *h = lcb_data(c, S_PRBH);
-    if (lcb_check_probe_header(c, h) || lcb_check_probe_clusters(c, h) || lcb_check_probe_arrays(c, h)) return -1;
+    if (lcb_check_probe_header(c, h) || lcb_check_probe_clusters(c, h) || lcb_check_probe_arrays(c, h) ||
+        lcb_check_probe_unseen(c, h))
+        return -1;
     return 0;
 }
 
@@ -1066,6 +1108,8 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     v->probe_rows = LCB_ARR(S_PRRW);
     v->probe_u = LCB_ARR(S_PRRU);
     v->n_probe_u = lcb_count(&c, S_PRRU);
+    v->probe_unseen_first = LCB_ARR(S_PRUF);
+    v->probe_unseen = LCB_ARR(S_PRUS);
 #undef LCB_ARR
     return 0;
 }

@@ -712,6 +712,7 @@ static int bake_probes(bake_job *b, char *err, size_t errlen) {
                               .svd_error = s->probe_svd_error,
                               .band_weight = s->probe_band_weight,
                               .visibility = s->probe_visibility,
+                              .unseen = s->probe_unseen,
                               .seed = (uint64_t)s->seed,
                               .threads = s->threads};
     if (lc_probebake_run(b->rt, b->scene.bounds_min, b->scene.bounds_max, b->surfels, b->n_surfels, b->caches,
@@ -881,6 +882,7 @@ static int bake_meta(bake_job *b, char *err, size_t errlen) {
         cJSON_AddNumberToObject(jp, "worst_error", pb->worst_error);
         cJSON_AddNumberToObject(jp, "orphan_rays_texel", pb->orphan_fraction[0]);
         cJSON_AddNumberToObject(jp, "orphan_rays_grid", pb->orphan_fraction[1]);
+        cJSON_AddNumberToObject(jp, "unseen_entries", (double)pb->n_unseen);
         cJSON_AddNumberToObject(jp, "rays", (double)pb->rays);
         double st[4] = {pb->seconds[0], pb->seconds[1], pb->seconds[2], pb->seconds[3]};
         cJSON_AddItemToObject(jp, "stage_seconds", cJSON_CreateDoubleArray(st, 4));
@@ -922,6 +924,10 @@ static int bake_add_sections(bake_job *b, char *err, size_t errlen) {
         add_rc |= lc_lcb_writer_add(w, "PRCB", sizeof(float), pb->basis, pb->n_basis);
         add_rc |= lc_lcb_writer_add(w, "PRRW", sizeof(lc_lcb_probe_row), pb->rows, pb->header.n_rows);
         add_rc |= lc_lcb_writer_add(w, "PRRU", sizeof(float), pb->u, pb->n_u);
+        if (pb->unseen_first) {
+            add_rc |= lc_lcb_writer_add(w, "PRUF", sizeof(uint32_t), pb->unseen_first, (uint64_t)pb->header.n_rows + 1);
+            add_rc |= lc_lcb_writer_add(w, "PRUS", sizeof(lc_lcb_probe_unseen), pb->unseen, pb->n_unseen);
+        }
     }
     if (b->assets.n_assets) {
         add_rc |= lc_lcb_writer_add(w, "ASET", sizeof(lc_lcb_asset), b->assets.assets, b->assets.n_assets);

@@ -151,6 +151,10 @@ static const lc_opt bake_options[] = {
     {"probe-visibility", LC_OPT_BOOL, OFF(probe_visibility), 0, 1, "true", NULL,
      "probes solver: a probe lights only the points it sees (off: the naive weights that leak through walls)", NULL,
      NULL},
+    {"probe-unseen", LC_OPT_ENUM, OFF(probe_unseen), 0, 0, "grid", "off|grid|all",
+     "probes solver: which receivers' rays whose hit no supporting probe sees gather from the surfel they hit (off: "
+     "they add nothing, as the thesis; grid: SH grid cells only, measured best in bench/RESULTS.md)",
+     NULL, NULL},
     {"seed", LC_OPT_INT, OFF(seed), 0, 2147483647, "1", NULL, "random seed (same seed, same bytes)", NULL, NULL},
     {"threads", LC_OPT_INT, OFF(threads), 0, 256, "0", NULL, "worker threads (0 = all cores)", NULL, NULL},
     {"stats-json", LC_OPT_STRING, OFF(stats_json), 0, LC_BAKE_PATH_MAX, NULL, NULL,

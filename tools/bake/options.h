@@ -78,6 +78,7 @@ typedef struct lc_bake_settings {
     double probe_svd_error;
     double probe_band_weight;
     int probe_visibility; /* the thesis's visibility match (off: the naive, leaking weights) */
+    int probe_unseen;     /* LC_PROBE_UNSEEN_*: unseen receiver rays gathered from their surfels */
 } lc_bake_settings;
 
 /* The option table (NULL-terminated). */

@@ -42,6 +42,13 @@ typedef struct {
     uint32_t first_row; /* into pb_job.rows */
 } pb_recv;
 
+/* A receiver's unseen rays by surfel: n_surfels entries per row, row after row (the weights
+ * differ per row of a grid cache, the surfels do not). n_surfels UINT32_MAX: out of memory. */
+typedef struct {
+    lc_lcb_probe_unseen *e;
+    uint32_t n_surfels;
+} pb_unseen;
+
 /* A row before compression: which receiver and coefficient, where (for the split). */
 typedef struct {
     uint32_t recv, coeff, group;
@@ -76,7 +83,10 @@ typedef struct {
     uint32_t n_rows;
     uint64_t *ray_count; /* per receiver */
     uint64_t *orphans;   /* per receiver */
-    void *hit_scratch;   /* per thread: receiver_rays hits (pb_hit) */
+    uint32_t n_recv;
+    pb_unseen *unseen;      /* per receiver (empty where prm->unseen skips its kind) */
+    void *hit_scratch;      /* per thread: receiver_rays hits (pb_hit) */
+    uint32_t *pair_scratch; /* per thread: receiver_rays x 2 (pb_unseen_gather) */
     lc_progress *progress;
 } pb_job;
 
@@ -299,9 +309,10 @@ static float pb_support_radius(const pb_job *j) {
 /* A receiver ray's hit: where, its surface's normal (facing the receiver), the weights of the
  * rows it feeds, and which candidate probes see it. */
 typedef struct {
-    float y[3], ng[3];
+    float y[3], ng[3], dir[3];
     float out_w[PB_GRID_ROWS];
-    uint64_t seen; /* bit i: candidate i sees y */
+    uint64_t seen;   /* bit i: candidate i sees y */
+    uint32_t surfel; /* an unseen ray's surfel (pb_transport_one), else LC_NONE */
 } pb_hit;
 
 /* Whether the probe at pp sees hit y (in front of its surface, nothing between). */
@@ -345,8 +356,9 @@ static uint32_t pb_trace(const pb_job *j, const lc_lcb_cache *c, pb_hit *hits, u
         (*rays)++;
         if (!lc_rt_intersect(j->rt, o3, d, 0.0f, INFINITY, &hit) || hit.backface) continue;
         pb_hit *h = &hits[n_hits++];
-        for (int a = 0; a < 3; a++) h->y[a] = o3[a] + d[a] * hit.t, h->ng[a] = hit.ng[a];
+        for (int a = 0; a < 3; a++) h->y[a] = o3[a] + d[a] * hit.t, h->ng[a] = hit.ng[a], h->dir[a] = d[a];
         h->seen = 0;
+        h->surfel = LC_NONE;
         if (texel) {
             h->out_w[0] = (float)M_PI / (float)m; /* cosine-weighted: E = pi/m sum L */
         } else {                                  /* E_lm = A_l L_lm, L_lm = 4 pi/m sum L y_lm(d) */
@@ -389,8 +401,9 @@ static uint32_t pb_choose(const pb_job *j, const pb_hit *hits, uint32_t n_hits, 
 }
 
 /* One receiver: its hits, the candidates' visibility, its support and weights, then each
- * hit shared by the chosen probes that see it (the thesis's K_ij, with the cosine). */
-static void pb_transport_one(pb_job *j, uint32_t ri, pb_hit *hits) {
+ * hit shared by the chosen probes that see it (the thesis's K_ij, with the cosine); an
+ * unseen hit gets its surfel when prm->unseen asks for its kind. Returns the hits. */
+static uint32_t pb_transport_one(pb_job *j, uint32_t ri, pb_hit *hits) {
     pb_recv *r = &j->recv[ri];
     const lc_lcb_cache *c = &j->caches[r->cache];
     uint32_t cand[PB_MAX_CANDIDATES], pick[PB_MAX_CANDIDATES];
@@ -402,6 +415,8 @@ static void pb_transport_one(pb_job *j, uint32_t ri, pb_hit *hits) {
         for (uint32_t i = 0; i < n_cand; i++)
             if (pb_sees(j, j->probes[cand[i]].position, &hits[h], &j->ray_count[ri])) hits[h].seen |= 1ull << i;
     uint32_t n_sup = pb_choose(j, hits, n_hits, d2, n_cand, pick);
+    const int gather_unseen =
+        j->prm->unseen == LC_PROBE_UNSEEN_ALL || (j->prm->unseen == LC_PROBE_UNSEEN_GRID && r->n_rows != 1);
     uint32_t *sup = j->sup + (size_t)ri * j->prm->overlaps;
     float w[PB_MAX_CANDIDATES], rx = j->radius;
     for (uint32_t i = 0; i < n_sup; i++) rx = fmaxf(rx, 1.25f * sqrtf(d2[pick[i]]));
@@ -417,6 +432,8 @@ static void pb_transport_one(pb_job *j, uint32_t ri, pb_hit *hits) {
         for (uint32_t i = 0; i < n_sup; i++) wsum += (hits[h].seen >> pick[i] & 1) ? w[i] : 0;
         if (wsum <= 0) {
             j->orphans[ri]++;
+            if (gather_unseen)
+                hits[h].surfel = lc_surfel_hash_nearest(&j->hash, j->surfels, hits[h].y, hits[h].ng, hits[h].dir);
             continue;
         }
         for (uint32_t i = 0; i < n_sup; i++) {
@@ -435,12 +452,52 @@ static void pb_transport_one(pb_job *j, uint32_t ri, pb_hit *hits) {
             }
         }
     }
+    return n_hits;
+}
+
+/* (surfel, hit) pairs of unseen rays, by surfel then hit: the sums run in one order. */
+static int pb_pair_cmp(const void *a, const void *b) {
+    const uint32_t *x = a, *y = b;
+    if (x[0] != y[0]) return x[0] < y[0] ? -1 : 1;
+    return (x[1] > y[1]) - (x[1] < y[1]);
+}
+
+/* The receiver's unseen rays (pb_transport_one marked their surfels), summed per surfel into
+ * each row's weights: the ray's share of the row over pi (the surfel's radiance is B / pi).
+ * pairs: receiver_rays x 2 scratch. */
+static void pb_unseen_gather(pb_job *j, uint32_t ri, const pb_hit *hits, uint32_t n_hits, uint32_t *pairs) {
+    const pb_recv *r = &j->recv[ri];
+    uint32_t n = 0;
+    for (uint32_t h = 0; h < n_hits; h++)
+        if (hits[h].surfel != LC_NONE) pairs[2 * n] = hits[h].surfel, pairs[2 * n + 1] = h, n++;
+    if (!n) return;
+    qsort(pairs, n, 2 * sizeof *pairs, pb_pair_cmp);
+    uint32_t n_surf = 0;
+    for (uint32_t i = 0; i < n; i++) n_surf += i == 0 || pairs[2 * i] != pairs[2 * i - 2];
+    lc_lcb_probe_unseen *e = calloc((size_t)n_surf * r->n_rows, sizeof *e);
+    if (!e) {
+        j->unseen[ri].n_surfels = UINT32_MAX;
+        return;
+    }
+    for (uint32_t i = 0, s = 0; i < n; i++) {
+        if (i > 0 && pairs[2 * i] != pairs[2 * i - 2]) s++;
+        const pb_hit *h = &hits[pairs[2 * i + 1]];
+        for (uint32_t o = 0; o < r->n_rows; o++) {
+            e[(size_t)o * n_surf + s].surfel = pairs[2 * i];
+            e[(size_t)o * n_surf + s].weight += h->out_w[o] * (float)M_1_PI;
+        }
+    }
+    j->unseen[ri] = (pb_unseen){e, n_surf};
 }
 
 static void pb_transport_range(void *ctx, size_t begin, size_t end, int thread) {
     pb_job *j = ctx;
     pb_hit *hits = (pb_hit *)j->hit_scratch + (size_t)thread * j->prm->receiver_rays;
-    for (size_t i = begin; i < end; i++) pb_transport_one(j, (uint32_t)i, hits);
+    uint32_t *pairs = j->pair_scratch + (size_t)thread * j->prm->receiver_rays * 2;
+    for (size_t i = begin; i < end; i++) {
+        uint32_t n_hits = pb_transport_one(j, (uint32_t)i, hits);
+        if (j->prm->unseen) pb_unseen_gather(j, (uint32_t)i, hits, n_hits, pairs);
+    }
     lc_progress_add(j->progress, end - begin);
 }
 
@@ -461,7 +518,10 @@ static int pb_receivers(pb_job *j) {
     j->vals = calloc((size_t)n_rows * j->row_stride + 1, sizeof *j->vals);
     j->ray_count = calloc(n_recv + 1, sizeof *j->ray_count);
     j->orphans = calloc(n_recv + 1, sizeof *j->orphans);
-    if (!j->recv || !j->sup || !j->sup_w || !j->rows || !j->vals || !j->ray_count || !j->orphans) return -1;
+    j->unseen = calloc(n_recv + 1, sizeof *j->unseen);
+    if (!j->recv || !j->sup || !j->sup_w || !j->rows || !j->vals || !j->ray_count || !j->orphans || !j->unseen)
+        return -1;
+    j->n_recv = n_recv;
     for (uint32_t c = 0, ri = 0, row = 0; c < j->n_caches; c++) {
         const lc_lcb_cache *cc = &j->caches[c];
         if (cc->flags & LC_CACHE_INSIDE) continue;
@@ -735,6 +795,28 @@ static int pb_order_cmp(const void *a, const void *b, void *ctx) {
     return (*(const uint32_t *)a > *(const uint32_t *)b) - (*(const uint32_t *)a < *(const uint32_t *)b);
 }
 
+/* PRUF/PRUS in the file's row order: each row's entries from its receiver's unseen rays. */
+static int pb_assemble_unseen(const pb_job *j, const uint32_t *order, lc_probebake *out) {
+    uint64_t n = 0;
+    for (uint32_t r = 0; r < j->n_rows; r++) n += j->unseen[j->rows[order[r]].recv].n_surfels;
+    if (n > UINT32_MAX) return -1; /* PRUF's offsets are 32-bit */
+    out->unseen_first = malloc(((size_t)j->n_rows + 1) * sizeof *out->unseen_first);
+    out->unseen = malloc((n + 1) * sizeof *out->unseen);
+    if (!out->unseen_first || !out->unseen) return -1;
+    uint32_t at = 0;
+    for (uint32_t r = 0; r < j->n_rows; r++) {
+        const pb_row *pr = &j->rows[order[r]];
+        const pb_unseen *u = &j->unseen[pr->recv];
+        out->unseen_first[r] = at;
+        if (u->n_surfels)
+            memcpy(out->unseen + at, u->e + (size_t)pr->coeff * u->n_surfels, u->n_surfels * sizeof *u->e);
+        at += u->n_surfels;
+    }
+    out->unseen_first[j->n_rows] = at;
+    out->n_unseen = at;
+    return 0;
+}
+
 /* The file's arrays from the accepted clusters. */
 static int pb_assemble(pb_job *j, const uint32_t *order, pb_cluster *cl, uint32_t n_cl, lc_probebake *out) {
     uint64_t n_cp = 0, n_basis = 0, n_u = 0;
@@ -776,6 +858,7 @@ static int pb_assemble(pb_job *j, const uint32_t *order, pb_cluster *cl, uint32_
             out->rows[r] = (lc_lcb_probe_row){.cache = j->recv[pr->recv].cache, .coeff = pr->coeff};
         }
     }
+    if (j->prm->unseen && pb_assemble_unseen(j, order, out) != 0) return -1;
     out->n_cluster_probes = n_cp, out->n_basis = n_basis, out->n_u = n_u;
     out->header.n_clusters = n_cl;
     out->header.n_rows = j->n_rows;
@@ -816,21 +899,27 @@ static void pb_job_release(pb_job *j) {
     free(j->rows);
     free(j->ray_count);
     free(j->orphans);
+    for (uint32_t i = 0; j->unseen && i < j->n_recv; i++) free(j->unseen[i].e);
+    free(j->unseen);
     free(j->hit_scratch);
+    free(j->pair_scratch);
 }
 
 /* Stages 4-5 and their statistics, after placement and the relight rays. */
 static int pb_transport_and_compress(pb_job *j, lc_probebake *out, double *t0, char *err, size_t errlen) {
     int n_recv = pb_receivers(j);
     if (n_recv < 0) goto oom;
-    j->hit_scratch = malloc((size_t)lc_parallel_threads(j->prm->threads) * j->prm->receiver_rays * sizeof(pb_hit));
-    if (!j->hit_scratch) goto oom;
+    const size_t n_threads = (size_t)lc_parallel_threads(j->prm->threads);
+    j->hit_scratch = malloc(n_threads * j->prm->receiver_rays * sizeof(pb_hit));
+    j->pair_scratch = malloc(n_threads * j->prm->receiver_rays * 2 * sizeof *j->pair_scratch);
+    if (!j->hit_scratch || !j->pair_scratch) goto oom;
     j->progress = lc_progress_begin("probes: transport", (uint64_t)n_recv);
     lc_parallel_for(j->prm->threads, (size_t)n_recv, 4, pb_transport_range, j);
     lc_progress_end(j->progress);
     j->progress = NULL;
     uint64_t rays = 0, orphans[2] = {0, 0}, n_kind[2] = {0, 0}, sup = 0;
     for (int i = 0; i < n_recv; i++) {
+        if (j->unseen[i].n_surfels == UINT32_MAX) goto oom;
         int grid = j->recv[i].n_rows != 1;
         rays += j->ray_count[i], orphans[grid] += j->orphans[i], n_kind[grid]++;
         sup += j->recv[i].n_sup;
@@ -922,5 +1011,7 @@ void lc_probebake_release(lc_probebake *b) {
     free(b->basis);
     free(b->rows);
     free(b->u);
+    free(b->unseen_first);
+    free(b->unseen);
     memset(b, 0, sizeof *b);
 }

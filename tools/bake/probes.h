@@ -37,6 +37,9 @@
 #include "bake/rt.h"
 #include "lcb/lcb.h"
 
+/* Which receivers gather their unseen rays (the order of --probe-unseen off|grid|all). */
+typedef enum { LC_PROBE_UNSEEN_OFF = 0, LC_PROBE_UNSEEN_GRID, LC_PROBE_UNSEEN_ALL } lc_probe_unseen;
+
 typedef struct lc_probebake_params {
     uint32_t count;         /* target probes; 0: density x the scene's bounding volume, at least
                                one per 400 texel caches and 8 */
@@ -50,6 +53,8 @@ typedef struct lc_probebake_params {
     double svd_error;       /* relative Frobenius truncation error per cluster (band-weighted) */
     double band_weight;     /* the SVD weighs SH band l by (l + 1)^-band_weight; 0: plain Frobenius */
     int visibility;         /* 1: V_i as the thesis; 0: V_i = 1 (naive weights, for the leak test) */
+    int unseen;             /* LC_PROBE_UNSEEN_*: whose rays no supporting probe sees gather from
+                               their surfel (PRUF/PRUS); OFF: they add nothing (the thesis) */
     uint64_t seed;
     int threads;
 } lc_probebake_params;
@@ -66,6 +71,9 @@ typedef struct lc_probebake {
     lc_lcb_probe_row *rows;
     float *u;
     uint64_t n_u;
+    uint32_t *unseen_first; /* n_rows + 1 (NULL when params.unseen is 0) */
+    lc_lcb_probe_unseen *unseen;
+    uint64_t n_unseen;
     /* what the bake reports */
     uint32_t n_candidates;     /* free-space voxels before thinning */
     double seconds[4];         /* placement, relight rays, transport, compression */

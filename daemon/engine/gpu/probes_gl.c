@@ -23,6 +23,8 @@ enum {
     PGL_ROW_B,
     PGL_U,
     PGL_ACTIVE,
+    PGL_UNSEEN_FIRST,
+    PGL_UNSEEN,
     PGL_NBUF
 };
 
@@ -48,6 +50,33 @@ void lc_probes_gl_release(lc_probes_gl *g) {
     free(g->u_len);
     free(g->active);
     free(g);
+}
+
+/* PRUF/PRUS as they are; a bake without them gets rows of no entries (stage 2 reads the same). */
+static int pgl_upload_unseen(lc_probes_gl *g, char *err, size_t errlen) {
+    const lc_lcb_view *v = g->v;
+    const uint32_t n_rows = v->probe_header->n_rows;
+    const size_t first_bytes = ((size_t)n_rows + 1) * 4;
+    const uint32_t n = v->probe_unseen_first ? v->probe_unseen_first[n_rows] : 0;
+    if (first_bytes > g->bind_limit || (size_t)n * 8 > g->bind_limit) {
+        lc_set_err(err, errlen, "probes (egl): %u unseen-ray entries over %u rows are over one binding (%zu bytes)", n,
+                   n_rows, g->bind_limit);
+        return -1;
+    }
+    uint32_t *zeros = v->probe_unseen_first ? NULL : calloc((size_t)n_rows + 1, 4);
+    if (!v->probe_unseen_first && !zeros) {
+        lc_set_err(err, errlen, "probes (egl): out of memory");
+        return -1;
+    }
+    const uint32_t *first = v->probe_unseen_first ? v->probe_unseen_first : zeros;
+    const uint64_t none = 0;
+    g->buf[PGL_UNSEEN_FIRST] = lc_gl_buffer(first_bytes, first, "probe unseen rows", err, errlen);
+    g->buf[PGL_UNSEEN] = g->buf[PGL_UNSEEN_FIRST]
+        ? lc_gl_buffer(n ? (size_t)n * 8 : 8, n ? (const void *)v->probe_unseen : &none, "probe unseen rays", err,
+                       errlen)
+        : 0;
+    free(zeros);
+    return g->buf[PGL_UNSEEN] ? 0 : -1;
 }
 
 /* The per-row records the stages index: basis rows (offset, first probe, probes) and receiver
@@ -98,6 +127,7 @@ static int pgl_upload_rows(lc_probes_gl *g, char *err, size_t errlen) {
         lc_set_err(err, errlen, "probes (egl): more than 2^32 basis or U floats");
         goto out;
     }
+    if (pgl_upload_unseen(g, err, errlen) != 0) goto out;
     if (!(g->buf[PGL_BASIS_ROWS] = lc_gl_buffer((size_t)nb * 16, brow, "probe basis rows", err, errlen)) ||
         !(g->buf[PGL_ROWS] = lc_gl_buffer((size_t)h->n_rows * 16, rows, "probe rows", err, errlen)) ||
         !(g->buf[PGL_ROW_B] = lc_gl_buffer((size_t)h->n_rows * 8, row_b, "probe row clusters", err, errlen)) ||
@@ -227,6 +257,11 @@ int lc_probes_gl_gather(lc_probes_gl *g, const lc_probes_gl_pass *p, char *err, 
     lc_gl_bind(5, p->sh9, 0, (size_t)v->n_caches * 108);
     lc_gl_bind(6, g->buf[PGL_ROW_B], 0, (size_t)h->n_rows * 8);
     lc_gl_bind(7, g->buf[PGL_ACTIVE], 0, (size_t)h->n_clusters * 4);
+    lc_gl_bind(8, g->buf[PGL_UNSEEN_FIRST], 0, ((size_t)h->n_rows + 1) * 4);
+    lc_gl_bind(9, g->buf[PGL_UNSEEN], 0,
+               v->probe_unseen_first && v->probe_unseen_first[h->n_rows] ? (size_t)v->probe_unseen_first[h->n_rows] * 8
+                                                                         : 8);
+    lc_gl_bind(10, p->radiosity, 0, (size_t)v->n_surfels * 12);
     glProgramUniform1ui(s2, 1, p->nc);
     pgl_windows(g, s2, g->buf[PGL_U], 1, h->n_rows, g->u_start, g->u_len);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);

@@ -341,8 +341,12 @@ done:
  * bands 3), printing per-stage times of a few relights. */
 /* The probes solver (engine/probes.h) on EGL against the CPU: cache SH, lightmap, grid, objects
  * for 3 and 1 output bands, progressive, with a DNRT object in the box (its intermediate passes
- * gather no corner list: the probes compute every receiver). */
+ * gather no corner list: the probes compute every receiver). The bake's rows gather their
+ * unseen rays (PRUF/PRUS: the blocks hide points from the probes), so both backends add them. */
 static void test_cornell_probes(lc_engine *gpu, const fixture *f, const char *quality) {
+    const lc_lcb_probe_header *ph = f->v->probe_header;
+    CHECK(f->v->probe_unseen_first && f->v->probe_unseen_first[ph->n_rows] > 0,
+          "cornell %s probes: the bake has unseen-ray entries", quality);
     lc_engine_state st = {0};
     st.settings = lc_engine_default_settings(f->bake);
     st.settings.solver = LC_SOLVER_PROBES;

@@ -38,6 +38,7 @@ enum {
     N_CP = 3,
     N_BASIS = 16, /* cluster 0: rank 1 x (2 probes x 4); cluster 1: rank 2 x (1 probe x 4) */
     N_U = 5,      /* cluster 0: 1 row x rank 1; cluster 1: 2 rows x rank 2 */
+    N_UNSEEN = 3, /* PRUS: row 0 two surfels, row 1 none, row 2 one */
     N_PROBE_SECS = 8
 };
 
@@ -61,7 +62,11 @@ typedef struct bake {
     float prcb[N_BASIS];
     lc_lcb_probe_row prrw[N_ROW];
     float prru[N_U];
-    uint64_t n_link; /* LINK records as written */
+    uint32_t pruf[N_ROW + 1];
+    lc_lcb_probe_unseen prus[N_UNSEEN];
+    uint64_t n_pruf, n_prus; /* records written */
+    int unseen;              /* bit 0: write PRUF, bit 1: PRUS */
+    uint64_t n_link;         /* LINK records as written */
     int with_probes;
     int skip_probe;               /* index into probe_order to leave out, or -1 */
     uint64_t count[N_PROBE_SECS]; /* records written per probe section */
@@ -197,6 +202,13 @@ static void bake_init_probes(bake *b) {
     static const uint64_t count[N_PROBE_SECS] = {1, N_PROBE, N_HIT, N_CLUSTER, N_CP, N_BASIS, N_ROW, N_U};
     memcpy(b->count, count, sizeof count);
     b->prrw_record = sizeof(lc_lcb_probe_row);
+    static const uint32_t first[N_ROW + 1] = {0, 2, 2, N_UNSEEN};
+    memcpy(b->pruf, first, sizeof first);
+    b->prus[0] = (lc_lcb_probe_unseen){1, 0.25f};
+    b->prus[1] = (lc_lcb_probe_unseen){3, 0.125f};
+    b->prus[2] = (lc_lcb_probe_unseen){0, -0.5f}; /* a grid row's weight may be negative */
+    b->n_pruf = N_ROW + 1, b->n_prus = N_UNSEEN;
+    b->unseen = 3;
 }
 
 static void bake_init(bake *b) {
@@ -240,13 +252,18 @@ static int bake_write(const bake *b, const char *path, char *err, size_t errlen)
         {"PRCB", 4, b->prcb, b->count[5]},
         {"PRRW", b->prrw_record, b->prrw, b->count[6] * sizeof(lc_lcb_probe_row) / b->prrw_record},
         {"PRRU", 4, b->prru, b->count[7]},
+        {"PRUF", 4, b->pruf, b->n_pruf},
+        {"PRUS", sizeof(lc_lcb_probe_unseen), b->prus, b->n_prus},
     };
     const int first_probe = 11;
     lc_lcb_writer *w = lc_lcb_writer_create();
     int rc = -1;
     if (!w) return -1;
     for (int i = 0; i < (int)(sizeof s / sizeof s[0]); i++) {
-        if (i >= first_probe && (!b->with_probes || i - first_probe == b->skip_probe)) continue;
+        int unseen_bit = !strcmp(s[i].id, "PRUF") ? 1 : !strcmp(s[i].id, "PRUS") ? 2 : 0;
+        if (unseen_bit ? !(b->unseen & unseen_bit)
+                       : i >= first_probe && (!b->with_probes || i - first_probe == b->skip_probe))
+            continue;
         if (lc_lcb_writer_add(w, s[i].id, s[i].rec, s[i].data, s[i].n) != 0) goto err;
     }
     rc = lc_lcb_writer_write(w, path, err, errlen);
@@ -303,7 +320,8 @@ static void check_info(const lc_lcb *f) {
     char *text = info_text(f, 0);
     CHECK(text &&
               strstr(text, "probes      2 probes x 4 rays, SH bands 2; 2 clusters over 3 rows, rank max 2 mean 1.5") &&
-              strstr(text, "overlaps 2, receiver rays 64, support radius 1.5 m") && strstr(text, "PRRU"),
+              strstr(text, "overlaps 2, receiver rays 64, support radius 1.5 m") && strstr(text, "PRRU") &&
+              strstr(text, "unseen rays gathered from surfels: 3 entries"),
           "human info:\n%s", text ? text : "");
     free(text);
     text = info_text(f, 1);
@@ -312,12 +330,12 @@ static void check_info(const lc_lcb *f) {
     /* the probe sections' bytes: the records, without padding */
     double bytes = sizeof(lc_lcb_probe_header) + N_PROBE * sizeof(lc_lcb_probe) + 4.0 * N_HIT +
         N_CLUSTER * sizeof(lc_lcb_probe_cluster) + 4.0 * N_CP + 4.0 * N_BASIS + N_ROW * sizeof(lc_lcb_probe_row) +
-        4.0 * N_U;
+        4.0 * N_U + 4.0 * (N_ROW + 1) + N_UNSEEN * sizeof(lc_lcb_probe_unseen);
     CHECK(p && json_num(p, "probes") == N_PROBE && json_num(p, "rays") == N_RAY && json_num(p, "sh_bands") == 2 &&
               json_num(p, "clusters") == N_CLUSTER && json_num(p, "rows") == N_ROW && json_num(p, "max_rank") == 2 &&
               json_num(p, "mean_rank") == 1.5 && json_num(p, "overlaps") == 2 && json_num(p, "receiver_rays") == 64 &&
               json_num(p, "support_radius") == 1.5 && fabs(json_num(p, "svd_error") - 0.01) < 1e-6 &&
-              json_num(p, "bytes") == bytes,
+              json_num(p, "bytes") == bytes && json_num(p, "unseen_entries") == N_UNSEEN,
           "JSON info probes:\n%s", text ? text : "");
     cJSON_Delete(j);
     free(text);
@@ -345,6 +363,8 @@ static void test_round_trip(void) {
         SAME(v->probe_basis, b.prcb);
         SAME(v->probe_rows, b.prrw);
         SAME(v->probe_u, b.prru);
+        SAME(v->probe_unseen_first, b.pruf);
+        SAME(v->probe_unseen, b.prus);
 #undef SAME
         CHECK(v->n_probe_cluster_probes == N_CP && v->n_probe_basis == N_BASIS && v->n_probe_u == N_U,
               "counts %llu %llu %llu", (unsigned long long)v->n_probe_cluster_probes,
@@ -353,6 +373,18 @@ static void test_round_trip(void) {
                   v->caches[v->probe_rows[2].cache].flags == LC_CACHE_GRID,
               "rows: one texel and one grid cache");
         check_info(f);
+        lc_lcb_close(f);
+    }
+    free(buf);
+
+    /* without PRUF/PRUS (a bake before them, or --probe-unseen off): valid, no entries */
+    b.unseen = 0;
+    buf = bake_bytes(&b, &len);
+    f = NULL;
+    CHECK(buf && lc_lcb_open_memory(buf, len, &f, err, sizeof err) == 0, "open without unseen rays: %s", err);
+    if (f) {
+        const lc_lcb_view *v = lc_lcb_get(f);
+        CHECK(v->probe_header && !v->probe_unseen_first && !v->probe_unseen, "unseen fields set without PRUF/PRUS");
         lc_lcb_close(f);
     }
     free(buf);
@@ -464,6 +496,23 @@ static void test_arrays(void) {
     CASE("U -inf", b.prru[0] = -INFINITY, "PRRU", "value 0");
 }
 
+/* PRUF/PRUS: together, with the probes, offsets that tile PRUS, entries in range. */
+static void test_unseen(void) {
+    bake b;
+    CASE("PRUF alone", b.unseen = 1, "PRUS", "PRUF and PRUS come together");
+    CASE("PRUS alone", b.unseen = 2, "PRUF", "PRUF and PRUS come together");
+    CASE("unseen rays without probes", b.with_probes = 0, "PRUF", "without the probe sections");
+    CASE("PRUF one short", b.n_pruf = N_ROW, "PRUF", "3 offsets, expected PRBH n_rows + 1 = 4");
+    CASE("PRUF first", b.pruf[0] = 1, "PRUF", "offset 0 is 1");
+    CASE("PRUF decreasing", b.pruf[2] = 1, "PRUF", "row 1 ends at 1 before it starts (2)");
+    CASE("PRUF end", b.pruf[3] = 2, "PRUF", "the rows end at entry 2, PRUS has 3 entries");
+    CASE("PRUF end huge", b.pruf[3] = UINT32_MAX, "PRUF", "PRUS has 3 entries");
+    CASE("PRUS surfel", b.prus[1].surfel = N_SURF, "PRUS", "entry 1 surfel 4 >= 4");
+    CASE("PRUS surfel LC_NONE", b.prus[0].surfel = LC_NONE, "PRUS", "entry 0 surfel");
+    CASE("PRUS weight NaN", b.prus[2].weight = NAN, "PRUS", "entry 2 weight is not finite");
+    CASE("PRUS weight inf", b.prus[0].weight = INFINITY, "PRUS", "entry 0 weight");
+}
+
 static void test_clusters(void) {
     bake b;
     CASE("first cluster not at row 0", b.prcl[0].first_row = 1, "PRCL", "cluster 0 first_row 1, expected 0");
@@ -559,6 +608,7 @@ int main(void) {
     test_probes_only();
     test_presence_and_header();
     test_arrays();
+    test_unseen();
     test_clusters();
     test_robustness();
     const char *corpus = getenv("LUCENT_WRITE_CORPUS");
