@@ -395,6 +395,7 @@ static uint32_t pb_choose(const pb_job *j, const pb_hit *hits, uint32_t n_hits, 
         pick[n++] = best, chosen |= 1ull << best;
     }
     uint32_t at_least = PB_MIN_SUPPORT < n_cand ? PB_MIN_SUPPORT : n_cand;
+    if (at_least > j->prm->overlaps) at_least = j->prm->overlaps; /* the row holds overlaps probes */
     for (uint32_t i = 0; i < n_cand && n < at_least; i++)
         if (!(chosen >> i & 1)) pick[n++] = i, chosen |= 1ull << i;
     return n;
@@ -1014,4 +1015,35 @@ void lc_probebake_release(lc_probebake *b) {
     free(b->unseen_first);
     free(b->unseen);
     memset(b, 0, sizeof *b);
+}
+
+int lc_probebake_transport(const lc_rt *rt, const lc_lcb_probe *probes, uint32_t n_probes, float radius,
+                           const lc_lcb_cache *cache, const lc_probebake_params *prm, float *rows, uint32_t *sup) {
+    lc_probebake_params one = *prm;
+    one.unseen = LC_PROBE_UNSEEN_OFF;
+    char err[128];
+    if (n_probes == 0 || (cache->flags & LC_CACHE_INSIDE) || pb_check_params(&one, err, sizeof err) != 0) return -1;
+    pb_recv recv = {.cache = 0, .n_rows = (cache->flags & LC_CACHE_TEXEL) ? 1 : PB_GRID_ROWS};
+    uint64_t ray_count = 0, orphans = 0;
+    pb_job j = {.rt = rt,
+                .caches = cache,
+                .n_caches = 1,
+                .prm = &one,
+                .coeffs = one.sh_bands * one.sh_bands,
+                .probes = (lc_lcb_probe *)probes, /* read only: stage 4 does not place */
+                .n_probes = n_probes,
+                .radius = radius,
+                .recv = &recv,
+                .sup = sup,
+                .vals = rows,
+                .row_stride = (size_t)one.overlaps * one.sh_bands * one.sh_bands,
+                .ray_count = &ray_count,
+                .orphans = &orphans,
+                .n_recv = 1};
+    pb_hit *hits = malloc(one.receiver_rays * sizeof *hits);
+    if (!hits) return -1;
+    memset(rows, 0, recv.n_rows * j.row_stride * sizeof *rows);
+    pb_transport_one(&j, 0, hits);
+    free(hits);
+    return (int)recv.n_sup;
 }

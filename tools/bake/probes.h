@@ -91,4 +91,12 @@ int lc_probebake_run(const lc_rt *rt, const float bmin[3], const float bmax[3], 
                      lc_probebake *out, char *err, size_t errlen);
 void lc_probebake_release(lc_probebake *b);
 
+/* One receiver's exact transport (stage 4 alone; for tests): the cache against the given
+ * probes with the support radius given, its rays that no probe sees dropped. rows: 1 (texel
+ * cache) or 9 (grid cache) rows of prm->overlaps x sh_bands^2 floats, the support's probe
+ * indices in sup (prm->overlaps). Returns the support's size, or -1 (bad parameters, no
+ * memory). */
+int lc_probebake_transport(const lc_rt *rt, const lc_lcb_probe *probes, uint32_t n_probes, float radius,
+                           const lc_lcb_cache *cache, const lc_probebake_params *prm, float *rows, uint32_t *sup);
+
 #endif

@@ -1,5 +1,6 @@
 /* The probes solver (tools/bake/probes.h, engine/probes.h) against closed forms and the
- * claims of the method: a closed emitting box converges to pi Le / (1 - rho) (this catches
+ * claims of the method: a receiver at an unoccluded probe transports the clamped cosine
+ * (A_l y_lm(n); A_l for a grid cell's SH); a closed emitting box converges to pi Le / (1 - rho) (this catches
  * the thesis's missing cosine: without it the box reads 2 pi L), its probes' SH is that of a
  * constant field; the compressed transport stays within its SVD error of the exact one; two
  * rooms side by side: a light in one does not reach the other, while the naive weights
@@ -11,6 +12,7 @@
 #include <string.h>
 
 #include "bake/links.h"
+#include "bake/probes.h"
 #include "bake/rt.h"
 #include "check.h"
 #include "engine/probes.h"
@@ -494,7 +496,93 @@ static void test_unseen(void) {
           "table: grid-only gathering leaves the texels as off (%.4f%% vs %.4f%%)", 100 * err_all[1], 100 * err_all[0]);
 }
 
+/* An empty closed box of side 2 h around the origin, every face's front inward. mesh owns
+ * its two arrays. */
+static void closed_box_mesh(float h, lc_mesh *mesh) {
+    mesh->n_vertices = 36, mesh->n_triangles = 12;
+    mesh->position = malloc(36 * 3 * sizeof(float));
+    mesh->index = malloc(36 * sizeof(uint32_t));
+    if (!mesh->position || !mesh->index) return;
+    for (int face = 0, v = 0; face < 6; face++) {
+        int a = face / 2, u = (a + 1) % 3, w = (a + 2) % 3;
+        float side = face % 2 ? h : -h, corner[4][2] = {{-h, -h}, {h, -h}, {h, h}, {-h, h}};
+        static const int tri[6] = {0, 1, 2, 0, 2, 3};
+        for (int k = 0; k < 6; k++, v++) {
+            float *p = mesh->position + 3 * v;
+            p[a] = side, p[u] = corner[tri[k]][0], p[w] = corner[tri[k]][1];
+        }
+        /* (u, w) counter-clockwise faces +a: the -a face (inward at +h) keeps it, the other flips */
+        if (face % 2 == 1)
+            for (int t = 0; t < 2; t++) {
+                float *p1 = mesh->position + 3 * (v - 6 + 3 * t + 1), *p2 = p1 + 3, tmp[3];
+                memcpy(tmp, p1, sizeof tmp), memcpy(p1, p2, sizeof tmp), memcpy(p2, tmp, sizeof tmp);
+            }
+    }
+    for (uint32_t i = 0; i < 36; i++) mesh->index[i] = i;
+}
+
+/* A receiver at an unoccluded probe (the only one, at the receiver, in an empty closed box):
+ * its exact transport is the clamped cosine, row_k = A_l y_k(n) for a texel cache (this is the
+ * estimator's cosine: without it, as in the thesis, coefficient 0 reads 2 pi y_0, not pi y_0)
+ * and A_l delta_ok for a grid cache's 9 rows (E_lm = A_l L_lm). A support never holds more
+ * probes than --probe-overlaps, however few. */
+static void test_clamped_cosine(void) {
+    lc_mesh mesh = {0};
+    closed_box_mesh(5.0f, &mesh);
+    char err[256] = "";
+    lc_rt *rt = mesh.position && mesh.index ? lc_rt_create(&mesh, 2, err, sizeof err) : NULL;
+    CHECK(rt != NULL, "clamped cosine: rt: %s", err);
+    const lc_probebake_params prm = {.count = 1,
+                                     .relight_rays = 512,
+                                     .sh_bands = 4,
+                                     .overlaps = 10,
+                                     .receiver_rays = 4096,
+                                     .cluster_rows = 1024,
+                                     .max_rank = 32,
+                                     .svd_error = 0.05,
+                                     .visibility = 1,
+                                     .seed = 1,
+                                     .threads = 1};
+    const float at[3] = {0.3f, -0.2f, 0.1f}, nn = sqrtf(0.09f + 0.64f + 0.25f);
+    const lc_lcb_probe probes[2] = {{.position = {at[0], at[1], at[2]}}, {.position = {at[0] + 1, at[1], at[2]}}};
+    lc_lcb_cache texel = {
+        .position = {at[0], at[1], at[2]}, .normal = {0.3f / nn, 0.8f / nn, -0.5f / nn}, .flags = LC_CACHE_TEXEL};
+    lc_lcb_cache grid = {.position = {at[0], at[1], at[2]}, .flags = LC_CACHE_GRID};
+    float rows[9 * 10 * 16], yn[16];
+    uint32_t sup[10];
+    lc_sh_eval(4, texel.normal, yn);
+    double worst_texel = 1e9, worst_grid = 1e9;
+    if (rt && lc_probebake_transport(rt, probes, 1, 1.0f, &texel, &prm, rows, sup) == 1) {
+        worst_texel = 0;
+        for (int k = 0; k < 16; k++) {
+            int l = k < 1 ? 0 : k < 4 ? 1 : k < 9 ? 2 : 3;
+            worst_texel = fmax(worst_texel, fabs(rows[k] - lc_sh_cosine_factor(l) * yn[k]));
+        }
+    }
+    if (rt && lc_probebake_transport(rt, probes, 1, 1.0f, &grid, &prm, rows, sup) == 1) {
+        worst_grid = 0;
+        for (int o = 0; o < 9; o++)
+            for (int k = 0; k < 16; k++) {
+                int l = o < 1 ? 0 : o < 4 ? 1 : 2;
+                double want = o == k ? lc_sh_cosine_factor(l) : 0;
+                worst_grid = fmax(worst_grid, fabs(rows[(size_t)o * 10 * 16 + k] - want));
+            }
+    }
+    fprintf(stderr, "clamped cosine: worst coefficient off by %.2e (texel), %.2e (grid); pi y_0 = %.3f\n", worst_texel,
+            worst_grid, M_PI * yn[0]);
+    CHECK(worst_texel < 0.01, "clamped cosine: a texel receiver at its probe is A_l y_k(n) within %.2e", worst_texel);
+    CHECK(worst_grid < 0.01, "clamped cosine: a grid receiver at its probe is A_l delta within %.2e", worst_grid);
+    lc_probebake_params one = prm;
+    one.overlaps = 1;
+    int n_sup = rt ? lc_probebake_transport(rt, probes, 2, 1.0f, &texel, &one, rows, sup) : -1;
+    CHECK(n_sup == 1, "clamped cosine: --probe-overlaps 1 gives a support of %d probes", n_sup);
+    lc_rt_release(rt);
+    free(mesh.position);
+    free(mesh.index);
+}
+
 int main(void) {
+    test_clamped_cosine();
     test_closed_box();
     test_unseen();
     test_leak();
