@@ -59,6 +59,8 @@ for sid in ["META","MATL","VERT","TRIS","SURF","NODE","LEVL","CACH","LMAP","GRID
     check(sid in ids, "section " + sid)
 check(stats["total_s"] > 0 and stats["peak_rss_mib"] > 0, "stats")
 check(stats["stages_s"].keys() >= {"import","lightmap-uv","texels","surfels","hierarchy","links","write"}, "stages")
+peaks = [stats["stages_peak_mib"][k] for k in stats["stages_s"]]
+check(peaks == sorted(peaks) and 0 < peaks[-1] <= stats["peak_rss_mib"], "per-stage peak memory rises to the peak: %r" % peaks)
 check(m["surfels"]["exposure"] is False and m["settings"]["exposure"] is False, "exposure off by default")
 PY
 

@@ -48,6 +48,8 @@ static void bake_stage(lc_bake_report *r, const char *name, double *t0, int quie
     if (r->n_stages < LC_BAKE_MAX_STAGES) {
         r->stages[r->n_stages].name = name;
         r->stages[r->n_stages].seconds = t - *t0;
+        struct rusage ru;
+        r->stages[r->n_stages].peak_mib = getrusage(RUSAGE_SELF, &ru) == 0 ? ru.ru_maxrss / 1024.0 : 0;
         r->n_stages++;
     }
     if (!quiet) lc_info("bake", "[%d/%d] %s done in %.3f s", r->n_stages, BAKE_N_STAGES, name, t - *t0);
@@ -1041,8 +1043,9 @@ int lc_bake_run(const lc_bake_settings *s, lc_bake_report *report, char *err, si
 /* --- report --------------------------------------------------------------------------------- */
 
 void lc_bake_report_print(const lc_bake_report *r, FILE *out) {
-    fprintf(out, "%-14s %10s\n", "stage", "seconds");
-    for (int i = 0; i < r->n_stages; i++) fprintf(out, "%-14s %10.3f\n", r->stages[i].name, r->stages[i].seconds);
+    fprintf(out, "%-14s %10s %12s\n", "stage", "seconds", "peak MiB");
+    for (int i = 0; i < r->n_stages; i++)
+        fprintf(out, "%-14s %10.3f %12.1f\n", r->stages[i].name, r->stages[i].seconds, r->stages[i].peak_mib);
     fprintf(out, "%-14s %10.3f\n", "total", r->total_seconds);
     fprintf(out, "peak memory    %10.1f MiB\n", r->peak_rss_kib / 1024.0);
     fprintf(out, "file size      %10.1f MiB\n", r->file_bytes / (1024.0 * 1024.0));
@@ -1061,6 +1064,8 @@ int lc_bake_report_write_json(const lc_bake_report *r, const lc_bake_settings *s
     cJSON_AddStringToObject(o, "quality", qualities[s->quality]);
     cJSON *st = cJSON_AddObjectToObject(o, "stages_s");
     for (int i = 0; i < r->n_stages; i++) cJSON_AddNumberToObject(st, r->stages[i].name, r->stages[i].seconds);
+    cJSON *sm = cJSON_AddObjectToObject(o, "stages_peak_mib"); /* the high-water mark as each stage ended */
+    for (int i = 0; i < r->n_stages; i++) cJSON_AddNumberToObject(sm, r->stages[i].name, r->stages[i].peak_mib);
     cJSON_AddNumberToObject(o, "total_s", r->total_seconds);
     cJSON_AddNumberToObject(o, "peak_rss_mib", r->peak_rss_kib / 1024.0);
     cJSON_AddNumberToObject(o, "file_bytes", (double)r->file_bytes);

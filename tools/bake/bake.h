@@ -15,6 +15,7 @@ typedef struct lc_bake_report {
     struct {
         const char *name;
         double seconds;
+        double peak_mib; /* the process's peak resident memory when the stage ended */
     } stages[LC_BAKE_MAX_STAGES];
     double total_seconds;
     long peak_rss_kib;
