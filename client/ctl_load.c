@@ -43,6 +43,7 @@
 #include <unistd.h>
 
 #include "ctl.h"
+#include "util/sigflag.h"
 #include "lucent_proto.h"
 
 #define LOAD_POLL_NS_PER_CLIENT 250       /* service turns at least N x this apart (load_serve) */
@@ -61,7 +62,7 @@
 #define LOAD_WARMUP_SEEN_S 30.0 /* the warm-up revision must reach every viewer within this */
 #define LOAD_ACK_WAIT_S 10.0    /* oks of the last updates: this + --settle */
 
-static volatile sig_atomic_t load_stop = 0;
+static lc_sigflag load_stop;
 
 static void load_on_signal(int sig) {
     (void)sig;

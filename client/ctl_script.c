@@ -7,6 +7,7 @@
  * leave a half-played animation behind. Messages go out at t0 + at / speed on the monotonic
  * clock: each is due at an absolute time, so a late send does not shift the ones after it. */
 #include "ctl.h"
+#include "util/sigflag.h"
 
 #include <errno.h>
 #include <math.h>
@@ -45,7 +46,7 @@ typedef struct ctl_script_opts {
     int keep_going, dry_run, verbose;
 } ctl_script_opts;
 
-static volatile sig_atomic_t ctl_script_stop;
+static lc_sigflag ctl_script_stop;
 
 static void ctl_script_on_signal(int sig) {
     (void)sig;

@@ -23,8 +23,9 @@
 #include "ctl.h"
 #include "ctl_image.h"
 #include "util/log.h"
+#include "util/sigflag.h"
 
-static volatile sig_atomic_t stream_stop = 0;
+static lc_sigflag stream_stop;
 
 static void stream_on_signal(int sig) {
     (void)sig;

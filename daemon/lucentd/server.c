@@ -19,6 +19,7 @@
 #include "server_internal.h"
 #include "util/clock.h"
 #include "util/log.h"
+#include "util/sigflag.h"
 
 /* accept() failures seen in lws's log (server_lws_log); service thread only. */
 static uint64_t server_accept_errors;       /* service thread only */
@@ -28,8 +29,8 @@ static uint64_t server_accept_logged_count; /* service thread only */
 
 uint64_t server_accept_errors_total(void) { return server_accept_errors; }
 
-static volatile sig_atomic_t server_stop_flag = 0;
-static volatile sig_atomic_t server_reload_flag = 0;
+static lc_sigflag server_stop_flag;
+static lc_sigflag server_reload_flag;
 
 static void server_on_signal(int sig) {
     if (sig == SIGHUP) server_reload_flag = 1;
@@ -698,7 +699,8 @@ int lc_server_run(const lc_config *cfg_in, int argc, char **argv, const lc_lcb *
         lc_error("server", "out of memory");
         return 1;
     }
-    server_stop_flag = server_reload_flag = 0; /* a second run in one process starts afresh */
+    atomic_store(&server_stop_flag, 0); /* a second run in one process starts afresh */
+    atomic_store(&server_reload_flag, 0);
     int rc = 1;
     char err[512];
     s->cfg_live = *cfg_in;
