@@ -27,6 +27,14 @@ layout(location = 3) uniform uint u_use_list; // 1: caches are list[idx] (single
 layout(location = 4) uniform int u_texel_nc;   // coefficients gathered at texel caches (lc_transport_texel_bands^2)
 layout(location = 5) uniform int u_texel_band1; // 1: texel caches carry band 1 only (lc_transport_texel_band1)
 layout(location = 6) uniform uint u_window;     // caches in the bound links window
+layout(location = 7) uniform int u_texel_surfels; // 1: texel caches from their surfel lists (lc_transport_texel_surfels)
+layout(location = 8) uniform uint u_n_texel;      // texel caches are [0, u_n_texel)
+
+// The bake's texel surfel lists (TSGF/TSGW; one-entry dummies without them) and the radiosity.
+struct SurfelWeight { uint surfel; float weight; };
+layout(std430, binding = 8) readonly buffer TexelFirst { uint texel_first[]; };
+layout(std430, binding = 9) readonly buffer TexelSurfels { SurfelWeight texel_surfels[]; };
+layout(std430, binding = 10) readonly buffer Radiosity { float radiosity[]; };
 
 const int BAND_OF[64] = int[64](0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5,
                                 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7);
@@ -106,11 +114,50 @@ void sh_eval(float x, float y, float z, out float o[NC]) {
 }
 #endif
 
+void store_coeff(uint c, uint local, int j, vec3 o) {
+    uint ob = local * uint(NC * 3);
+    cache_sh[ob + 3u * uint(j) + 0u] = o.x;
+    cache_sh[ob + 3u * uint(j) + 1u] = o.y;
+    cache_sh[ob + 3u * uint(j) + 2u] = o.z;
+    // The irradiance stages read only bands <= 2, at random caches: a compact copy that
+    // is never windowed.
+    if (j < 9) {
+        sh9[27u * c + 3u * uint(j) + 0u] = o.x;
+        sh9[27u * c + 3u * uint(j) + 1u] = o.y;
+        sh9[27u * c + 3u * uint(j) + 2u] = o.z;
+    }
+}
+
+// A texel cache from its surfel list, E = sum weight B in list order (tcpu_gather_texel_surfels),
+// stored as lc_transport_texel_store: band 1 a cosine lobe about the normal, band 0 with one band.
+void texel_from_surfels(uint c, uint local) {
+    precise vec3 e = vec3(0.0);
+    for (uint k = texel_first[c]; k < texel_first[c + 1u]; k++) {
+        SurfelWeight w = texel_surfels[k];
+        uint b = 3u * w.surfel;
+        precise vec3 add = w.weight * vec3(radiosity[b], radiosity[b + 1u], radiosity[b + 2u]);
+        e += add;
+    }
+    for (int j = 0; j < NC; j++) store_coeff(c, local, j, vec3(0.0));
+#if BANDS < 2
+    store_coeff(c, local, 0, e * (1.0 / (2.0 * 3.14159265358979323846 * 0.282094791774)));
+#else
+    vec3 n = vec3(caches[c].nx, caches[c].ny, caches[c].nz);
+    store_coeff(c, local, 1, e * (0.488602511903 * n.y));
+    store_coeff(c, local, 2, e * (0.488602511903 * n.z));
+    store_coeff(c, local, 3, e * (0.488602511903 * n.x));
+#endif
+}
+
 void main() {
     uint idx = gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x + gl_GlobalInvocationID.x;
     if (idx >= u_count) return;
     uint c = u_use_list != 0u ? list[idx] : u_base + idx;
     uint local = c - u_base;
+    if (u_texel_surfels != 0 && c < u_n_texel) {
+        texel_from_surfels(c, local);
+        return;
+    }
     precise float acc0[NC], acc1[NC], acc2[NC];
     for (int j = 0; j < NC; j++) {
         acc0[j] = 0.0;
@@ -146,7 +193,6 @@ void main() {
         acc1[0] = 0.0;
         acc2[0] = 0.0;
     }
-    uint ob = local * uint(NC * 3);
     for (int j = 0; j < NC; j++) {
         float a = acc0[j], b = acc1[j], g = acc2[j];
         precise vec3 o;
@@ -157,15 +203,6 @@ void main() {
 #else
         o = vec3(a, b, g);
 #endif
-        cache_sh[ob + 3u * uint(j) + 0u] = o.x;
-        cache_sh[ob + 3u * uint(j) + 1u] = o.y;
-        cache_sh[ob + 3u * uint(j) + 2u] = o.z;
-        // The irradiance stages read only bands <= 2, at random caches: a compact copy that
-        // is never windowed.
-        if (j < 9) {
-            sh9[27u * c + 3u * uint(j) + 0u] = o.x;
-            sh9[27u * c + 3u * uint(j) + 1u] = o.y;
-            sh9[27u * c + 3u * uint(j) + 2u] = o.z;
-        }
+        store_coeff(c, local, j, o);
     }
 }

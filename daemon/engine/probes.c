@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "engine/transport.h"
 #include "util/log.h"
 #include "util/parallel.h"
 #include "util/sh.h"
@@ -107,15 +108,7 @@ static void probes_store(const lc_probes *p, const lc_lcb_probe_row *row, const 
     const lc_lcb_cache *c = &p->v->caches[row->cache];
     float *dst = p->cache_sh + (size_t)row->cache * p->stride * 3;
     if (c->flags & LC_CACHE_TEXEL) {
-        if (p->bands < 2) {
-            const float s = 1.0f / (float)(2.0 * M_PI * 0.282094791774);
-            for (int k = 0; k < 3; k++) dst[k] = e[k] * s;
-            return;
-        }
-        const float y[3] = {0.488602511903f * c->normal[1], 0.488602511903f * c->normal[2],
-                            0.488602511903f * c->normal[0]};
-        for (int m = 0; m < 3; m++)
-            for (int k = 0; k < 3; k++) dst[3 * (1 + m) + k] = e[k] * y[m];
+        lc_transport_texel_store(dst, c->normal, p->bands, e);
         return;
     }
     uint32_t j = row->coeff;

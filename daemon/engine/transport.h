@@ -65,6 +65,28 @@ static inline int lc_transport_texel_bands(const lc_engine_settings *st) {
  * basis; the GL backend keeps its SH evaluation and clears band 0. Identical results. */
 static inline int lc_transport_texel_band1(const lc_engine_settings *st) { return !st->sh_lightmap && st->bands >= 2; }
 
+/* A bake's texel surfel lists (TSGF/TSGW) replace the links at texel caches unless the SH
+ * lightmap is asked for: a list gives the irradiance for the cache normal, not its radiance's
+ * directions. Both backends, both reading it here. */
+static inline int lc_transport_texel_surfels(const lc_lcb_view *v, const lc_engine_settings *st) {
+    return v->texel_surfels_first != NULL && !st->sh_lightmap;
+}
+
+/* A texel cache's irradiance E (RGB, for its unit normal n) as the radiance SH a gather leaves
+ * there: band 1 a cosine lobe about n (bands >= 2), else band 0, so that the lightmap's
+ * 4pi/3 sum_m L_1m y_1m(n) (or band 0's 2pi y_0 L_00) and the feedback read back E. Writes only
+ * those coefficients of dst ([coeff][3]); the caller zeroes the rest. */
+static inline void lc_transport_texel_store(float *dst, const float n[3], uint32_t bands, const float e[3]) {
+    if (bands < 2) {
+        const float s = 1.0f / (float)(2.0 * 3.14159265358979323846 * 0.282094791774);
+        for (int k = 0; k < 3; k++) dst[k] = e[k] * s;
+        return;
+    }
+    const float y[3] = {0.488602511903f * n[1], 0.488602511903f * n[2], 0.488602511903f * n[0]};
+    for (int m = 0; m < 3; m++)
+        for (int k = 0; k < 3; k++) dst[3 * (1 + m) + k] = e[k] * y[m];
+}
+
 /* Chroma compression is on only when it drops bands: Co/Cg get chroma_bands < bands. */
 static inline int lc_transport_chroma(const lc_engine_settings *st) {
     return st->chroma_compression && st->chroma_bands < st->bands;

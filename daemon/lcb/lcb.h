@@ -42,7 +42,11 @@
  *   PRRU  float                each cluster's U: rows x rank, row-major
  *   PRUF  uint32_t             optional with the probes: per PRRW row, its first PRUS entry, and
  *                              one more (the end); PRUF and PRUS come together
- *   PRUS  lc_lcb_probe_unseen  per row, the surfels its unseen rays hit (rows in PRRW order)
+ *   PRUS  lc_lcb_surfel_weight per row, the surfels its unseen rays hit (rows in PRRW order)
+ *   TSGF  uint32_t             optional (--texel-gather surfels): per texel cache, its first TSGW
+ *                              entry, and one more (the end); TSGF and TSGW come together
+ *   TSGW  lc_lcb_surfel_weight per texel cache, the surfels its gather rays hit: the PIC solver
+ *                              then gathers texel caches per surfel, E = sum weight B, not by links
  * PIC (links) and probes are two solvers of the same quantities; a bake may carry both
  * (LINK is then present but may hold zero links per cache for --solver probes).
  * Optional sections were added without a version change (the minor stays 0): a reader that
@@ -264,10 +268,12 @@ typedef struct lc_lcb_probe_cluster {
     uint64_t u_offset;     /* floats into PRRU: n_rows x rank */
 } lc_lcb_probe_cluster;
 
-typedef struct lc_lcb_probe_unseen {
+/* One surfel of a gather list (PRUS, TSGW): the value it adds per unit of its radiosity. */
+typedef struct lc_lcb_surfel_weight {
     uint32_t surfel; /* SURF index */
-    float weight;    /* row value per unit of the surfel's radiosity */
-} lc_lcb_probe_unseen;
+    float weight;    /* the row's value per unit of the surfel's radiosity B */
+} lc_lcb_surfel_weight;
+typedef lc_lcb_surfel_weight lc_lcb_probe_unseen;
 
 typedef struct lc_lcb_probe_row {
     uint32_t cache; /* CACH index */
@@ -306,7 +312,7 @@ _Static_assert(sizeof(lc_lcb_probe_header) == 64, "probe header layout");
 _Static_assert(sizeof(lc_lcb_probe) == 16, "probe layout");
 _Static_assert(sizeof(lc_lcb_probe_cluster) == 40, "probe cluster layout");
 _Static_assert(sizeof(lc_lcb_probe_row) == 8, "probe row layout");
-_Static_assert(sizeof(lc_lcb_probe_unseen) == 8, "probe unseen-ray layout");
+_Static_assert(sizeof(lc_lcb_surfel_weight) == 8, "surfel weight layout");
 
 /* --- link direction/cone packing ------------------------------------------------------- */
 
@@ -418,6 +424,9 @@ typedef struct lc_lcb_view {
     uint64_t n_probe_u;
     const uint32_t *probe_unseen_first;      /* n_rows + 1, or NULL (a bake without PRUF/PRUS) */
     const lc_lcb_probe_unseen *probe_unseen; /* probe_unseen_first[n_rows] entries */
+    /* texel caches gathered per surfel (TSGF/TSGW), NULL when the bake gathers them by links */
+    const uint32_t *texel_surfels_first;       /* n_texel_caches + 1 */
+    const lc_lcb_surfel_weight *texel_surfels; /* texel_surfels_first[n_texel_caches] entries */
 } lc_lcb_view;
 
 /* The asset's DNRT transfer grid, or NULL (no data: an older bake, or baked without). */

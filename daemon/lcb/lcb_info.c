@@ -152,6 +152,11 @@ static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *
             st->moved, st->inside);
     fprintf(out, "  links       %u per cache (%llu total), link SH bands %u, output SH bands %u\n", v->links_per_cache,
             (unsigned long long)v->n_caches * v->links_per_cache, v->link_sh_bands, v->sh_bands);
+    if (v->texel_surfels_first) {
+        uint32_t n = v->texel_surfels_first[v->n_texel_caches];
+        fprintf(out, "              texel caches gather per surfel: %u entries, %.1f per texel cache\n", n,
+                v->n_texel_caches ? (double)n / v->n_texel_caches : 0.0);
+    }
     fprintf(out, "  lightmap    %ux%u: %llu texels own a cache (%.1f%%), %llu dilated, %llu empty\n", v->lightmap_width,
             v->lightmap_height, (unsigned long long)st->owned, texels ? 100.0 * (double)st->owned / (double)texels : 0,
             (unsigned long long)st->dilated, (unsigned long long)st->empty);
@@ -245,6 +250,7 @@ static int lcb_print_json(const lc_lcb *f, const lc_lcb_view *v, const cJSON *me
         {"links_per_cache", v->links_per_cache},
         {"links", (double)v->n_caches * v->links_per_cache},
         {"link_sh_bands", v->link_sh_bands},
+        {"texel_surfel_entries", v->texel_surfels_first ? v->texel_surfels_first[v->n_texel_caches] : 0},
         {"sh_bands", v->sh_bands},
         {"assets", v->n_assets},
         {"asset_vertices", v->n_asset_vertices},

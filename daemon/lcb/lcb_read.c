@@ -78,6 +78,8 @@ enum {
     S_PRRU,
     S_PRUF,
     S_PRUS,
+    S_TSGF,
+    S_TSGW,
     S_COUNT
 };
 static const struct {
@@ -114,7 +116,9 @@ static const struct {
     {"PRRW", sizeof(lc_lcb_probe_row), 0, "lc_lcb_probe_row"},
     {"PRRU", sizeof(float), 0, "float"},
     {"PRUF", sizeof(uint32_t), 0, "uint32_t"},
-    {"PRUS", sizeof(lc_lcb_probe_unseen), 0, "lc_lcb_probe_unseen"},
+    {"PRUS", sizeof(lc_lcb_surfel_weight), 0, "lc_lcb_surfel_weight"},
+    {"TSGF", sizeof(uint32_t), 0, "uint32_t"},
+    {"TSGW", sizeof(lc_lcb_surfel_weight), 0, "lc_lcb_surfel_weight"},
 };
 
 /* What META says; the sections are checked against it. */
@@ -981,33 +985,34 @@ static int lcb_check_probe_arrays(lcb_ctx *c, const lc_lcb_probe_header *h) {
     return lcb_check_floats(c, S_PRCB) || lcb_check_floats(c, S_PRRU) ? -1 : 0;
 }
 
-/* PRUF/PRUS (optional, together): PRUF holds n_rows + 1 offsets from 0, never decreasing, the
- * last PRUS's count; each entry's surfel in range and weight finite. */
-static int lcb_check_probe_unseen(lcb_ctx *c, const lc_lcb_probe_header *h) {
-    if (!c->sec[S_PRUF] && !c->sec[S_PRUS]) return 0;
-    if (!c->sec[S_PRUF] || !c->sec[S_PRUS])
-        return lcb_fail(c, "%s: missing (PRUF and PRUS come together)" LCB_INCONSISTENT,
-                        c->sec[S_PRUF] ? "PRUS" : "PRUF");
-    if (lcb_count(c, S_PRUF) != (uint64_t)h->n_rows + 1)
-        return lcb_fail(c, "PRUF: %llu offsets, expected PRBH n_rows + 1 = %llu" LCB_INCONSISTENT,
-                        (unsigned long long)lcb_count(c, S_PRUF), (unsigned long long)h->n_rows + 1);
-    const uint32_t *first = lcb_data(c, S_PRUF);
-    if (first[0] != 0) return lcb_fail(c, "PRUF: offset 0 is %u, must be 0" LCB_INCONSISTENT, first[0]);
-    for (uint32_t r = 0; r < h->n_rows; r++)
+/* An offsets/entries pair of (surfel, weight) lists (PRUF/PRUS, TSGF/TSGW), optional and
+ * together: OFFS holds n_rows + 1 offsets (ROWS names what counts them) from 0, never
+ * decreasing, ending at ENTS's count; each entry's surfel in range and its weight finite. */
+static int lcb_check_surfel_weights(lcb_ctx *c, int offs, int ents, uint64_t n_rows, const char *rows) {
+    const char *fo = lcb_known[offs].id, *fe = lcb_known[ents].id;
+    if (!c->sec[offs] && !c->sec[ents]) return 0;
+    if (!c->sec[offs] || !c->sec[ents])
+        return lcb_fail(c, "%s: missing (%s and %s come together)" LCB_INCONSISTENT, c->sec[offs] ? fe : fo, fo, fe);
+    if (lcb_count(c, offs) != n_rows + 1)
+        return lcb_fail(c, "%s: %llu offsets, expected %s + 1 = %llu" LCB_INCONSISTENT, fo,
+                        (unsigned long long)lcb_count(c, offs), rows, (unsigned long long)n_rows + 1);
+    const uint32_t *first = lcb_data(c, offs);
+    if (first[0] != 0) return lcb_fail(c, "%s: offset 0 is %u, must be 0" LCB_INCONSISTENT, fo, first[0]);
+    for (uint64_t r = 0; r < n_rows; r++)
         if (first[r + 1] < first[r])
-            return lcb_fail(c, "PRUF: row %u ends at %u before it starts (%u)" LCB_INCONSISTENT, r, first[r + 1],
-                            first[r]);
-    if (first[h->n_rows] != lcb_count(c, S_PRUS))
-        return lcb_fail(c, "PRUF: the rows end at entry %u, PRUS has %llu entries" LCB_INCONSISTENT, first[h->n_rows],
-                        (unsigned long long)lcb_count(c, S_PRUS));
-    const lc_lcb_probe_unseen *e = lcb_data(c, S_PRUS);
+            return lcb_fail(c, "%s: row %llu ends at %u before it starts (%u)" LCB_INCONSISTENT, fo,
+                            (unsigned long long)r, first[r + 1], first[r]);
+    if (first[n_rows] != lcb_count(c, ents))
+        return lcb_fail(c, "%s: the rows end at entry %u, %s has %llu entries" LCB_INCONSISTENT, fo, first[n_rows], fe,
+                        (unsigned long long)lcb_count(c, ents));
+    const lc_lcb_surfel_weight *e = lcb_data(c, ents);
     uint64_t n_surf = lcb_count(c, S_SURF);
-    for (uint64_t i = 0; i < lcb_count(c, S_PRUS); i++) {
+    for (uint64_t i = 0; i < lcb_count(c, ents); i++) {
         if (e[i].surfel >= n_surf)
-            return lcb_fail(c, "PRUS: entry %llu surfel %u >= %llu surfels" LCB_INCONSISTENT, (unsigned long long)i,
+            return lcb_fail(c, "%s: entry %llu surfel %u >= %llu surfels" LCB_INCONSISTENT, fe, (unsigned long long)i,
                             e[i].surfel, (unsigned long long)n_surf);
         if (!isfinite(e[i].weight))
-            return lcb_fail(c, "PRUS: entry %llu weight is not finite" LCB_INCONSISTENT, (unsigned long long)i);
+            return lcb_fail(c, "%s: entry %llu weight is not finite" LCB_INCONSISTENT, fe, (unsigned long long)i);
     }
     return 0;
 }
@@ -1033,7 +1038,7 @@ static int lcb_check_probes(lcb_ctx *c) {
                         (unsigned long long)lcb_count(c, S_PRBH));
     const lc_lcb_probe_header *h = lcb_data(c, S_PRBH);
     if (lcb_check_probe_header(c, h) || lcb_check_probe_clusters(c, h) || lcb_check_probe_arrays(c, h) ||
-        lcb_check_probe_unseen(c, h))
+        lcb_check_surfel_weights(c, S_PRUF, S_PRUS, h->n_rows, "PRBH n_rows"))
         return -1;
     return 0;
 }
@@ -1050,7 +1055,8 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     if (lcb_check_header(&c, f) || lcb_check_sections(&c, f) || lcb_find_sections(&c, f) || lcb_check_meta(&c, f) ||
         lcb_check_geometry(&c) || lcb_check_surfels(&c) || lcb_check_levels(&c) || lcb_check_nodes(&c) ||
         lcb_check_caches(&c) || lcb_check_links(&c) || lcb_check_assets(&c) || lcb_check_transfers(&c) ||
-        lcb_check_sparse(&c) || lcb_check_probes(&c))
+        lcb_check_sparse(&c) || lcb_check_probes(&c) ||
+        lcb_check_surfel_weights(&c, S_TSGF, S_TSGW, c.m.texel, "the texel caches"))
         return -1;
 
     lc_lcb_view *v = &f->view;
@@ -1110,6 +1116,8 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     v->n_probe_u = lcb_count(&c, S_PRRU);
     v->probe_unseen_first = LCB_ARR(S_PRUF);
     v->probe_unseen = LCB_ARR(S_PRUS);
+    v->texel_surfels_first = LCB_ARR(S_TSGF);
+    v->texel_surfels = LCB_ARR(S_TSGW);
 #undef LCB_ARR
     return 0;
 }

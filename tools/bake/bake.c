@@ -469,6 +469,9 @@ typedef struct bake_job {
     uint32_t *seen; /* per surfel: caches that see it (--exposure only) */
     lc_link_stats ls;
     lc_exposure_stats es;
+    uint32_t *texel_surfels_first;       /* 9. --texel-gather surfels: per texel cache (TSGF) */
+    lc_lcb_surfel_weight *texel_surfels; /* its (surfel, weight) list (TSGW) */
+    uint64_t n_texel_surfels;
     lc_probebake probes;   /* 10. the probes solver (--solver probes|both) */
     bake_assets assets;    /* 11. dynamic-object assets */
     lc_lcb_material *mats; /* 12. the file's sections */
@@ -490,6 +493,8 @@ static void bake_job_release(bake_job *b) {
     free(b->tris);
     free(b->links);
     free(b->link_sh);
+    free(b->texel_surfels_first);
+    free(b->texel_surfels);
     lc_hierarchy_release(&b->hier);
     free(b->perm);
     free(b->tri_sorted);
@@ -696,6 +701,19 @@ static int bake_links(bake_job *b, char *err, size_t errlen) {
     if (!s->quiet && b->seen)
         lc_info("bake", "exposure: %u surfels (%.2f%% of the area) seen by no cache", b->es.unseen,
                 100.0 * b->es.unseen_area / lc_mesh_total_area(&b->scene.mesh));
+    if (lc_bake_texel_surfels(s, b->probe_rays)) {
+        if (lc_links_texel_surfels(b->rt, b->surfels, b->n_surfels, b->caches, b->n_texel_caches,
+                                   (uint32_t)s->texel_gather_rays, (uint64_t)s->seed, s->threads,
+                                   &b->texel_surfels_first, &b->texel_surfels, &b->n_texel_surfels) != 0) {
+            lc_set_err(err, errlen, "texel surfel lists failed (out of memory? lower --texel-gather-rays)");
+            return 1;
+        }
+        if (!s->quiet)
+            lc_info("bake", "texel surfel lists: %llu entries, %.1f per texel cache (%.1f MiB)",
+                    (unsigned long long)b->n_texel_surfels,
+                    b->n_texel_caches ? (double)b->n_texel_surfels / b->n_texel_caches : 0.0,
+                    (double)b->n_texel_surfels * sizeof(lc_lcb_surfel_weight) / (1 << 20));
+    }
     return 0;
 }
 
@@ -868,6 +886,8 @@ static int bake_meta(bake_job *b, char *err, size_t errlen) {
     cJSON_AddNumberToObject(jk, "mean_solid_angle", b->ls.mean_solid_angle);
     cJSON_AddNumberToObject(jk, "rays", (double)b->ls.rays);
     cJSON_AddNumberToObject(jk, "probe_rays", b->probe_rays);
+    cJSON_AddStringToObject(jk, "texel_gather", b->texel_surfels_first ? "surfels" : "links");
+    cJSON_AddNumberToObject(jk, "texel_surfel_entries", (double)b->n_texel_surfels);
     cJSON *jsv = cJSON_AddArrayToObject(meta, "solvers");
     if (s->solver != LC_BAKE_SOLVER_PROBES) cJSON_AddItemToArray(jsv, cJSON_CreateString("pic"));
     if (s->solver != LC_BAKE_SOLVER_PIC) {
@@ -915,6 +935,11 @@ static int bake_add_sections(bake_job *b, char *err, size_t errlen) {
     add_rc |= lc_lcb_writer_add(w, "LINK", sizeof(lc_lcb_link), b->links, b->n_links);
     if (b->link_sh)
         add_rc |= lc_lcb_writer_add(w, "LKSH", sizeof(uint16_t), b->link_sh, b->n_links * s->bands * s->bands);
+    if (b->texel_surfels_first) {
+        add_rc |=
+            lc_lcb_writer_add(w, "TSGF", sizeof(uint32_t), b->texel_surfels_first, (uint64_t)b->n_texel_caches + 1);
+        add_rc |= lc_lcb_writer_add(w, "TSGW", sizeof(lc_lcb_surfel_weight), b->texel_surfels, b->n_texel_surfels);
+    }
     const lc_probebake *pb = &b->probes;
     if (pb->probes) {
         add_rc |= lc_lcb_writer_add(w, "PRBH", sizeof(lc_lcb_probe_header), &pb->header, 1);

@@ -571,31 +571,92 @@ err: /* also the success path: scratch is freed either way */
     return rc;
 }
 
-/* --- the lossless-transport bound ------------------------------------------------------------ */
+/* --- per-surfel gathers: the lossless-transport bound and the texel surfel lists --------------- */
+
+/* The cache's probe hits (sorted by surfel) merged per surfel: weight = sum over its hits of
+ * cos * (solid angle per ray) / pi, the irradiance per unit of the surfel's radiosity. Writes at
+ * most sc->n_hits entries, in surfel order; returns how many. */
+static uint32_t links_surfel_weights(const links_scratch *sc, const links_cache *lc, lc_lcb_surfel_weight *out) {
+    uint32_t n = 0;
+    const double scale = sc->ray_omega / M_PI;
+    for (uint32_t h = 0; h < sc->n_hits; h++) {
+        const float *d = sc->hits[h].dir;
+        float w = (float)((d[0] * lc->n[0] + d[1] * lc->n[1] + d[2] * lc->n[2]) * scale);
+        if (n && out[n - 1].surfel == sc->hits[h].surfel) out[n - 1].weight += w;
+        else out[n++] = (lc_lcb_surfel_weight){sc->hits[h].surfel, w};
+    }
+    return n;
+}
+
+/* Per thread, the probe-ray scratch and an entry list; the surfel hash. */
+typedef struct {
+    links_ctx ctx;
+    lc_link_params prm;
+    lc_lcb_surfel_weight **entries; /* per thread: probe_rays entries */
+    int threads;
+} links_surfel_job;
+
+static void links_surfel_job_free(links_surfel_job *j) {
+    if (j->ctx.scratch)
+        for (int t = 0; t < j->threads; t++) {
+            free(j->ctx.scratch[t].hits);
+            free(j->ctx.scratch[t].cum);
+        }
+    if (j->entries)
+        for (int t = 0; t < j->threads; t++) free(j->entries[t]);
+    free(j->entries);
+    free(j->ctx.scratch);
+    lc_surfel_hash_free(&j->ctx.hash);
+}
+
+static int links_surfel_job_init(links_surfel_job *j, const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_surfels,
+                                 const lc_lcb_cache *caches, uint32_t probe_rays, uint64_t seed, int want_threads) {
+    memset(j, 0, sizeof *j);
+    j->threads = lc_parallel_threads(want_threads);
+    j->prm = (lc_link_params){
+        .links_per_cache = 1, .node_samples = 1, .final_samples = 1, .seed = seed, .probe_rays = probe_rays};
+    links_ctx *ctx = &j->ctx;
+    ctx->rt = rt, ctx->surfels = surfels, ctx->n_surfels = n_surfels, ctx->caches = caches, ctx->prm = &j->prm;
+    ctx->scratch = calloc((size_t)j->threads, sizeof *ctx->scratch);
+    j->entries = calloc((size_t)j->threads, sizeof *j->entries);
+    if (!ctx->scratch || !j->entries) goto oom;
+    for (int t = 0; t < j->threads; t++) {
+        ctx->scratch[t].hits = malloc(((size_t)probe_rays + 1) * sizeof *ctx->scratch[t].hits);
+        ctx->scratch[t].cum = malloc(3 * ((size_t)probe_rays + 1) * sizeof *ctx->scratch[t].cum);
+        j->entries[t] = malloc(((size_t)probe_rays + 1) * sizeof *j->entries[t]);
+        if (!ctx->scratch[t].hits || !ctx->scratch[t].cum || !j->entries[t]) goto oom;
+    }
+    if (lc_surfel_hash_build(&ctx->hash, surfels, n_surfels) != 0) goto oom;
+    return 0;
+oom:
+    lc_error("links", "out of memory for the per-surfel gather (%u probe rays, %u surfels)", probe_rays, n_surfels);
+    links_surfel_job_free(j);
+    return -1;
+}
+
+/* Casts cache ci's hemisphere rays; its (surfel, weight) list in j->entries[thread]. */
+static uint32_t links_surfel_list(links_surfel_job *j, uint32_t ci, int thread) {
+    links_cache lc;
+    if ((j->ctx.caches[ci].flags & LC_CACHE_INSIDE) || !links_cache_setup(&j->ctx, ci, &lc)) return 0;
+    links_probe(&j->ctx, &j->ctx.scratch[thread], &lc, 1);
+    return links_surfel_weights(&j->ctx.scratch[thread], &lc, j->entries[thread]);
+}
 
 typedef struct {
-    links_ctx *ctx;
+    links_surfel_job *job;
     const float *radiosity;
     float *irradiance;
-} links_gather_job;
+} links_bound_job;
 
-static void links_gather_range(void *arg, size_t begin, size_t end, int thread) {
-    const links_gather_job *job = arg;
-    const links_ctx *ctx = job->ctx;
-    links_scratch *sc = &ctx->scratch[thread];
+static void links_bound_range(void *arg, size_t begin, size_t end, int thread) {
+    const links_bound_job *b = arg;
     for (size_t i = begin; i < end; i++) {
-        float *out = job->irradiance + 3 * i;
-        out[0] = out[1] = out[2] = 0;
-        links_cache lc;
-        if ((ctx->caches[i].flags & LC_CACHE_INSIDE) || !links_cache_setup(ctx, (uint32_t)i, &lc)) continue;
-        links_probe(ctx, sc, &lc, 1);
-        double e[3] = {0, 0, 0};
-        for (uint32_t h = 0; h < sc->n_hits; h++) {
-            const float *b = job->radiosity + 3 * (size_t)sc->hits[h].surfel, *d = sc->hits[h].dir;
-            double cosn = d[0] * lc.n[0] + d[1] * lc.n[1] + d[2] * lc.n[2];
-            for (int k = 0; k < 3; k++) e[k] += b[k] * cosn; /* L = B / pi, times cos dw */
-        }
-        for (int k = 0; k < 3; k++) out[k] = (float)(e[k] * sc->ray_omega / M_PI);
+        uint32_t n = links_surfel_list(b->job, (uint32_t)i, thread);
+        const lc_lcb_surfel_weight *e = b->job->entries[thread];
+        double acc[3] = {0, 0, 0};
+        for (uint32_t k = 0; k < n; k++)
+            for (int ch = 0; ch < 3; ch++) acc[ch] += (double)e[k].weight * b->radiosity[3 * (size_t)e[k].surfel + ch];
+        for (int ch = 0; ch < 3; ch++) b->irradiance[3 * i + ch] = (float)acc[ch];
     }
 }
 
@@ -606,32 +667,77 @@ int lc_links_gather_bound(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_
         lc_error("links", "lc_links_gather_bound: NULL argument, no surfels or no probe rays");
         return -1;
     }
-    int threads = lc_parallel_threads(want_threads), rc = -1;
-    lc_link_params prm = {
-        .links_per_cache = 1, .node_samples = 1, .final_samples = 1, .seed = seed, .probe_rays = probe_rays};
-    links_ctx ctx = {0};
-    ctx.rt = rt, ctx.surfels = surfels, ctx.n_surfels = n_surfels, ctx.caches = caches, ctx.prm = &prm;
-    ctx.scratch = calloc((size_t)threads, sizeof *ctx.scratch);
-    if (!ctx.scratch) goto oom;
-    for (int t = 0; t < threads; t++) {
-        ctx.scratch[t].hits = malloc(((size_t)probe_rays + 1) * sizeof *ctx.scratch[t].hits);
-        ctx.scratch[t].cum = malloc(3 * ((size_t)probe_rays + 1) * sizeof *ctx.scratch[t].cum);
-        if (!ctx.scratch[t].hits || !ctx.scratch[t].cum) goto oom;
+    links_surfel_job job;
+    if (links_surfel_job_init(&job, rt, surfels, n_surfels, caches, probe_rays, seed, want_threads) != 0) return -1;
+    links_bound_job b = {&job, radiosity, irradiance};
+    lc_parallel_for(job.threads, n_caches, 16, links_bound_range, &b);
+    links_surfel_job_free(&job);
+    return 0;
+}
+
+typedef struct {
+    links_surfel_job *job;
+    uint32_t rays;
+    lc_lcb_surfel_weight *lists; /* rays entries per texel cache */
+    uint32_t *count;
+    lc_progress *progress;
+} links_texel_job;
+
+static void links_texel_range(void *arg, size_t begin, size_t end, int thread) {
+    const links_texel_job *t = arg;
+    for (size_t i = begin; i < end; i++) {
+        uint32_t n = links_surfel_list(t->job, (uint32_t)i, thread);
+        t->count[i] = n;
+        memcpy(t->lists + i * t->rays, t->job->entries[thread], (size_t)n * sizeof *t->lists);
     }
-    if (lc_surfel_hash_build(&ctx.hash, surfels, n_surfels) != 0) goto oom;
-    links_gather_job job = {&ctx, radiosity, irradiance};
-    lc_parallel_for(threads, n_caches, 16, links_gather_range, &job);
-    rc = 0;
-    goto done;
-oom:
-    lc_error("links", "out of memory for the gather bound (%u probe rays, %u surfels)", probe_rays, n_surfels);
-done:
-    if (ctx.scratch)
-        for (int t = 0; t < threads; t++) {
-            free(ctx.scratch[t].hits);
-            free(ctx.scratch[t].cum);
+    lc_progress_add(t->progress, end - begin);
+}
+
+int lc_links_texel_surfels(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_surfels,
+                           const lc_lcb_cache *caches, uint32_t n_texel_caches, uint32_t rays, uint64_t seed,
+                           int threads, uint32_t **first_out, lc_lcb_surfel_weight **entries_out, uint64_t *n_out) {
+    *first_out = NULL;
+    *entries_out = NULL;
+    *n_out = 0;
+    if (!rt || !surfels || !n_surfels || (n_texel_caches && !caches) || !rays) {
+        lc_error("links", "lc_links_texel_surfels: NULL argument, no surfels or no rays");
+        return -1;
+    }
+    links_surfel_job job;
+    if (links_surfel_job_init(&job, rt, surfels, n_surfels, caches, rays, seed, threads) != 0) return -1;
+    int rc = -1;
+    uint32_t *first = malloc(((size_t)n_texel_caches + 1) * sizeof *first);
+    uint32_t *count = malloc(((size_t)n_texel_caches + 1) * sizeof *count);
+    lc_lcb_surfel_weight *lists = malloc((size_t)n_texel_caches * rays * sizeof *lists + 1);
+    if (!first || !count || !lists) {
+        lc_error("links", "out of memory for the texel surfel lists (%u texel caches x %u rays)", n_texel_caches, rays);
+        goto done;
+    }
+    links_texel_job t = {&job, rays, lists, count, lc_progress_begin("texel surfel lists", n_texel_caches)};
+    lc_parallel_for(job.threads, n_texel_caches, 16, links_texel_range, &t);
+    lc_progress_end(t.progress);
+    uint64_t n = 0;
+    for (uint32_t i = 0; i < n_texel_caches; i++) {
+        first[i] = (uint32_t)n;
+        memmove(lists + n, lists + (size_t)i * rays, (size_t)count[i] * sizeof *lists); /* n <= i * rays */
+        n += count[i];
+        if (n > UINT32_MAX) {
+            lc_error("links", "texel surfel lists: over 2^32 entries; lower --texel-gather-rays");
+            goto done;
         }
-    free(ctx.scratch);
-    lc_surfel_hash_free(&ctx.hash);
+    }
+    first[n_texel_caches] = (uint32_t)n;
+    lc_lcb_surfel_weight *shrunk = realloc(lists, (size_t)n * sizeof *lists + 1);
+    *entries_out = shrunk ? shrunk : lists;
+    lists = NULL;
+    *first_out = first;
+    first = NULL;
+    *n_out = n;
+    rc = 0;
+done:
+    links_surfel_job_free(&job);
+    free(first);
+    free(count);
+    free(lists);
     return rc;
 }

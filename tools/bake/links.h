@@ -62,6 +62,16 @@ int lc_links_gather_bound(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_
                           uint32_t n_caches, uint32_t probe_rays, uint64_t seed, int threads, const float *radiosity,
                           float *irradiance);
 
+/* Per texel cache, the surfels its RAYS hemisphere rays hit with their weights (the bound's
+ * stratification, hit attribution and weights: E = sum weight x B is the bound at RAYS rays):
+ * *first_out n_texel_caches + 1 offsets into *entries_out (*n_out entries), each list in surfel
+ * order; inside caches get none. The engine then gathers texel caches per surfel (TSGF/TSGW).
+ * Deterministic for a seed regardless of threads. The caller frees both. Returns 0, or -1
+ * (logged). */
+int lc_links_texel_surfels(const lc_rt *rt, const lc_lcb_surfel *surfels, uint32_t n_surfels,
+                           const lc_lcb_cache *caches, uint32_t n_texel_caches, uint32_t rays, uint64_t seed,
+                           int threads, uint32_t **first_out, lc_lcb_surfel_weight **entries_out, uint64_t *n_out);
+
 /* Visible solid angle of surfel s seen from point p (disc approximation, no visibility):
  * cos(theta_s) * 2 pi (1 - d / sqrt(d^2 + A / pi)); 0 when the surfel faces away.
  * For texel caches (normal n != 0) also 0 when the surfel lies behind the cache's plane. */

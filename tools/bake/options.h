@@ -42,6 +42,8 @@ typedef struct lc_bake_settings {
     int exposure;         /* surfel areas weighted by how many caches see them (bake/exposure.h) */
     int hierarchy;
     int links;
+    int texel_gather;      /* LC_BAKE_TEXEL_GATHER_*: how PIC's texel caches gather */
+    int texel_gather_rays; /* hemisphere rays per texel cache for its surfel list */
     int node_samples;
     int final_samples;
     int probe_rays;       /* per cache, at least (the budget below may raise it) */
@@ -80,6 +82,12 @@ typedef struct lc_bake_settings {
     int probe_visibility; /* the thesis's visibility match (off: the naive, leaking weights) */
     int probe_unseen;     /* LC_PROBE_UNSEEN_*: unseen receiver rays gathered from their surfels */
 } lc_bake_settings;
+
+/* --texel-gather, in the option's order. */
+enum { LC_BAKE_TEXEL_GATHER_AUTO = 0, LC_BAKE_TEXEL_GATHER_LINKS, LC_BAKE_TEXEL_GATHER_SURFELS };
+/* Whether texel caches get surfel lists (TSGF/TSGW): surfels, or auto when the probe-ray budget
+ * is in force and did not raise the links' rays above --probe-rays (probe_rays: as used). */
+int lc_bake_texel_surfels(const lc_bake_settings *s, uint32_t probe_rays);
 
 /* The option table (NULL-terminated). */
 const lc_opt *lc_bake_options(void);

@@ -31,7 +31,7 @@ typedef struct {
     char file[512], backend[16], solver[8];
     uint32_t surfels, caches, links, bands, nodes;
     double stage_ms[LC_STAGE_COUNT], total_ms, peak_mib;
-    double gather_links; /* links evaluated per relight (all passes) */
+    double gather_links; /* links (or texel list entries) evaluated per relight (all passes) */
     double gather_bytes, gather_flops, pull_bytes;
     float *lightmap; /* W*H*3 of the last run (owned; the same state on every backend) */
     size_t lm_floats;
@@ -164,22 +164,28 @@ static int bench_one(const char *path, lc_backend_kind kind, uint32_t solver, in
         memcpy(row->radiosity, fr->surfel_radiosity, row->n_radiosity * sizeof(float));
     if (row->cache_sh && fr->cache_sh) memcpy(row->cache_sh, fr->cache_sh, row->n_cache_sh * sizeof(float));
     /* Work model of the gather (runtime projection): per used link 12 B link + 12 B node flux
-     * read; ~20 flops decode + bands^2 * (basis ~3 + weight 1 + 3 FMAs = 10). Earlier
-     * feedback passes gather only the caches surfels read. */
+     * read; ~20 flops decode + bands^2 * (basis ~3 + weight 1 + 3 FMAs = 10). A texel cache
+     * gathered per surfel (TSGF/TSGW) reads its list instead: per entry 8 B + 12 B radiosity,
+     * 6 flops. Earlier feedback passes gather only the caches surfels read. */
     {
-        double all = 0, feedback = 0;
+        const int lists = solver == LC_SOLVER_PIC && v->texel_surfels_first != NULL;
+        const double nc = (double)settings.bands * settings.bands;
+        double reads = 0, bytes = 0, flops = 0;
         unsigned char *fb = calloc(v->n_caches ? v->n_caches : 1, 1);
         for (uint32_t s = 0; fb && s < v->n_surfels; s++)
             if (v->surfels[s].cache != LC_NONE) fb[v->surfels[s].cache] = 1;
         for (uint32_t c = 0; c < v->n_caches; c++) {
-            all += v->caches[c].link_count;
-            if (fb && fb[c]) feedback += v->caches[c].link_count;
+            const int list = lists && c < v->n_texel_caches;
+            const double k = list ? v->texel_surfels_first[c + 1] - v->texel_surfels_first[c] : v->caches[c].link_count;
+            const double passes = 1.0 + (fb && fb[c] ? bounces : 0);
+            reads += k * passes;
+            bytes += k * passes * (list ? 20.0 : 24.0);
+            flops += k * passes * (list ? 6.0 : 20.0 + 10.0 * nc);
         }
         free(fb);
-        double nc = (double)settings.bands * settings.bands;
-        row->gather_links = all + bounces * feedback;
-        row->gather_bytes = row->gather_links * 24.0 + (double)v->n_caches * nc * 12.0 * (bounces + 1);
-        row->gather_flops = row->gather_links * (20.0 + 10.0 * nc);
+        row->gather_links = reads;
+        row->gather_bytes = bytes + (double)v->n_caches * nc * 12.0 * (bounces + 1);
+        row->gather_flops = flops;
         row->pull_bytes = (double)v->n_nodes * 36.0 * (bounces + 1);
     }
     for (int s = 0; s <= LC_STAGE_COUNT; s++) {
@@ -645,7 +651,7 @@ int main(int argc, char **argv) {
     bench_drt_print(crows, ncrows);
     double bw = bench_copy_bandwidth();
     printf("\nwhere the time goes (this machine: memcpy %.1f GB/s read+write):\n", bw);
-    printf("%-28s %-4s %12s %10s %10s %10s %10s\n", "bake", "bk", "links/relight", "gather MB", "GB/s", "GFLOP/s",
+    printf("%-28s %-4s %12s %10s %10s %10s %10s\n", "bake", "bk", "reads/relight", "gather MB", "GB/s", "GFLOP/s",
            "pull GB/s");
     for (int i = 0; i < nrows; i++) {
         const char *base = strrchr(rows[i].file, '/');

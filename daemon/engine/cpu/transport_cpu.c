@@ -108,9 +108,10 @@ typedef struct {
     tcpu *t;
     const uint32_t *list; /* cache indices, or NULL = all caches */
     int bands, chroma_bands;
-    int chroma;      /* flux is YCoCg: Co/Cg use chroma_bands only */
-    int texel_bands; /* bands gathered at texel caches (see lc_transport_texel_bands) */
-    int texel_band1; /* texel caches: band 1 from the precomputed weights (lc_transport_texel_band1) */
+    int chroma;        /* flux is YCoCg: Co/Cg use chroma_bands only */
+    int texel_bands;   /* bands gathered at texel caches (see lc_transport_texel_bands) */
+    int texel_band1;   /* texel caches: band 1 from the precomputed weights (lc_transport_texel_band1) */
+    int texel_surfels; /* texel caches from their surfel lists (lc_transport_texel_surfels) */
 } tcpu_gather_job;
 
 static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
@@ -298,6 +299,22 @@ static void tcpu_gather_generic(const tcpu *t, const lc_lcb_link *lk, uint32_t u
     }
 }
 
+/* A texel cache from its surfel list (TSGF/TSGW): E = sum weight x B, stored as
+ * lc_transport_texel_store; out holds nc coefficients. */
+static void tcpu_gather_texel_surfels(const tcpu *t, uint32_t c, int bands, float *out) {
+    const lc_lcb_view *v = t->v;
+    float e[3] = {0, 0, 0};
+    for (uint32_t k = v->texel_surfels_first[c]; k < v->texel_surfels_first[c + 1]; k++) {
+        const lc_lcb_surfel_weight *w = &v->texel_surfels[k];
+        const float *b = t->out.radiosity + 3 * (size_t)w->surfel;
+        e[0] += w->weight * b[0];
+        e[1] += w->weight * b[1];
+        e[2] += w->weight * b[2];
+    }
+    memset(out, 0, (size_t)bands * bands * 3 * sizeof *out);
+    lc_transport_texel_store(out, v->caches[c].normal, (uint32_t)bands, e);
+}
+
 static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
     (void)thread;
     const tcpu_gather_job *job = ctx;
@@ -308,6 +325,10 @@ static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
     const uint32_t nl = v->links_per_cache;
     for (size_t i = begin; i < end; i++) {
         uint32_t c = job->list ? job->list[i] : (uint32_t)i;
+        if (job->texel_surfels && c < v->n_texel_caches) {
+            tcpu_gather_texel_surfels(t, c, job->bands, t->out.cache_sh + (size_t)c * t->coeff_cap * 3);
+            continue;
+        }
         const lc_lcb_link *lk = v->links + (size_t)c * nl;
         uint32_t used = v->caches[c].link_count;
         const int bands = (v->caches[c].flags & LC_CACHE_TEXEL) ? job->texel_bands : job->bands;
@@ -582,7 +603,8 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
                                (int)st->chroma_bands,
                                chroma,
                                lc_transport_texel_bands(st),
-                               lc_transport_texel_band1(st)};
+                               lc_transport_texel_band1(st),
+                               lc_transport_texel_surfels(v, st)};
         uint32_t n_gather = last ? v->n_caches : t->n_feedback;
         if (probes || (last && st->grid_cells == LC_GRID_NEEDED)) {
             n_gather = lc_transport_needed(v, t->feedback_cache, in, last, t->need);

@@ -95,6 +95,7 @@ typedef struct tgl {
     GLuint gather[LC_SH_MAX_BANDS + 1][LC_SH_MAX_BANDS + 1]; /* [bands][Co/Cg bands], compiled on first use */
     /* Static (create): */
     GLuint b_surfels, b_nodes, b_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
+    GLuint b_tsg_first, b_tsg; /* the texel surfel lists (TSGF/TSGW), or one-entry dummies */
     uint32_t n_feedback;
     /* Per run: */
     GLuint b_b0, b_radiosity, b_e_ind, b_flux, b_cache_sh, b_sh9, b_lightmap, b_grid_sh, b_obj_pos, b_obj_sh;
@@ -133,10 +134,11 @@ static void tgl_release(void *impl) {
         if (t->dnrt_apply) glDeleteProgram(t->dnrt_apply);
         lc_drt_gl_release(t->drt);
         lc_probes_gl_release(t->probes);
-        GLuint bufs[] = {t->b_surfels, t->b_nodes,    t->b_links,  t->b_caches,   t->b_lm_index,  t->b_grid_index,
-                         t->b_cone,    t->b_shk,      t->b_list,   t->b_b0,       t->b_radiosity, t->b_e_ind,
-                         t->b_flux,    t->b_cache_sh, t->b_sh9,    t->b_lightmap, t->b_grid_sh,   t->b_obj_pos,
-                         t->b_obj_sh,  t->b_dn_obj,   t->b_dn_inc, t->b_dn_rec,   t->b_dn_list,   t->b_need_list};
+        GLuint bufs[] = {t->b_surfels,   t->b_nodes,    t->b_links,  t->b_caches,   t->b_lm_index,  t->b_grid_index,
+                         t->b_cone,      t->b_shk,      t->b_list,   t->b_b0,       t->b_radiosity, t->b_e_ind,
+                         t->b_flux,      t->b_cache_sh, t->b_sh9,    t->b_lightmap, t->b_grid_sh,   t->b_obj_pos,
+                         t->b_obj_sh,    t->b_dn_obj,   t->b_dn_inc, t->b_dn_rec,   t->b_dn_list,   t->b_need_list,
+                         t->b_tsg_first, t->b_tsg};
         glDeleteBuffers((GLsizei)(sizeof bufs / sizeof bufs[0]), bufs); /* 0 names are ignored */
         if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
         lc_gl_staging_release(&t->staging);
@@ -171,7 +173,7 @@ static GLuint tgl_gather_program(tgl *t, int bands, int ncc_bands, char *err, si
  * the first relight to create. Any valid buffer will do at each binding. Compute thread. */
 static void tgl_warm_up(tgl *t, GLuint prog) {
     glUseProgram(prog);
-    for (GLuint b = 0; b < 8; b++) lc_gl_bind(b, t->b_cone, 0, 256 * 8 * 4);
+    for (GLuint b = 0; b < 11; b++) lc_gl_bind(b, t->b_cone, 0, 256 * 8 * 4);
     glProgramUniform1ui(prog, 0, 0);
     glDispatchCompute(1, 1, 1);
     glUseProgram(0);
@@ -338,6 +340,30 @@ static int tgl_upload_links(tgl *t, char *err, size_t errlen) {
     return 0;
 }
 
+/* TSGF/TSGW as they are (gather.comp reads them for texel caches); a bake without them gets
+ * one-entry dummies, never read. */
+static int tgl_upload_texel_surfels(tgl *t, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
+    static const uint32_t none[2] = {0, 0};
+    const uint32_t n = v->texel_surfels_first ? v->texel_surfels_first[v->n_texel_caches] : 0;
+    if ((size_t)n * sizeof(lc_lcb_surfel_weight) > t->bind_limit) {
+        lc_set_err(err, errlen,
+                   "egl transport: %u texel surfel entries are over one binding (%zu bytes); rebake with fewer "
+                   "--texel-gather-rays",
+                   n, t->bind_limit);
+        return -1;
+    }
+    const int lists = v->texel_surfels_first != NULL;
+    if (!(t->b_tsg_first =
+              lc_gl_buffer(lists ? ((size_t)v->n_texel_caches + 1) * 4 : sizeof none,
+                           lists ? (const void *)v->texel_surfels_first : none, "texel surfel offsets", err, errlen)))
+        return -1;
+    return (t->b_tsg = lc_gl_buffer(n ? (size_t)n * sizeof(lc_lcb_surfel_weight) : sizeof none,
+                                    n ? (const void *)v->texel_surfels : none, "texel surfel lists", err, errlen))
+        ? 0
+        : -1;
+}
+
 /* The links (tgl_upload_links), the lightmap and grid indices and the cone table. */
 static int tgl_upload_tables(tgl *t, char *err, size_t errlen) {
     const lc_lcb_view *v = t->v;
@@ -347,7 +373,7 @@ static int tgl_upload_tables(tgl *t, char *err, size_t errlen) {
     float cone[256][8];
     lc_transport_cone_table(cone);
     if (!(t->b_cone = lc_gl_buffer(sizeof cone, cone, "cone table", err, errlen))) return -1;
-    return 0;
+    return tgl_upload_texel_surfels(t, err, errlen);
 }
 
 /* SH normalisation for the generic (> 4 bands) gather, computed as lc_sh_eval does. */
@@ -526,6 +552,13 @@ static void tgl_gather_setup(tgl *t, GLuint gather, const lc_engine_settings *st
     lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
     glProgramUniform1i(gather, 4, lc_transport_texel_bands(st) * lc_transport_texel_bands(st));
     glProgramUniform1i(gather, 5, lc_transport_texel_band1(st));
+    const int surfels = lc_transport_texel_surfels(v, st);
+    const size_t n_entries = v->texel_surfels_first ? v->texel_surfels_first[v->n_texel_caches] : 0;
+    lc_gl_bind(8, t->b_tsg_first, 0, v->texel_surfels_first ? ((size_t)v->n_texel_caches + 1) * 4 : 8);
+    lc_gl_bind(9, t->b_tsg, 0, n_entries ? n_entries * sizeof(lc_lcb_surfel_weight) : 8); /* as uploaded */
+    lc_gl_bind(10, t->b_radiosity, 0, (size_t)v->n_surfels * 12);
+    glProgramUniform1i(gather, 7, surfels);
+    glProgramUniform1ui(gather, 8, v->n_texel_caches);
 }
 
 /* The caches in `list` (n of them; one window only). */

@@ -456,7 +456,9 @@ out:
     free(corner);
 }
 
-static void test_cornell(const char *quality, int runs) {
+/* Bakes scenes/cornell-box with the cube asset (and its DNRT transfer grid) and FLAGS
+ * (NULL-terminated, at most 16). Returns fixture_bake's result; fails the test when it fails. */
+static int cornell_fixture(fixture *f, const char *const *flags) {
     char path[512];
     char *obj = slurp(check_source_path("scenes/cornell-box/cornell-box.obj", path, sizeof path));
     char *mtl = slurp(check_source_path("scenes/cornell-box/cornell-box.mtl", path, sizeof path));
@@ -464,24 +466,29 @@ static void test_cornell(const char *quality, int runs) {
     if (!obj || !mtl) {
         free(obj);
         free(mtl);
-        return;
+        return -1;
     }
     /* The fixture writes its own mtllib line: blank out the scene's. */
     for (char *p = strstr(obj, "mtllib"); p && *p && *p != '\n'; p++) *p = ' ';
-    /* The cube asset with its DNRT transfer grid (the bake's default --transfer). */
     char cube_arg[600];
     snprintf(cube_arg, sizeof cube_arg, "cube=%s", check_source_path("scenes/cornell-box/cube.obj", path, sizeof path));
-    /* With the probes solver's data too (both solvers on one bake: PIC's data is the same). */
-    const char *flags[] = {"--quality",     quality, "--asset",           cube_arg, "--solver", "both", "--probes", "8",
-                           "--probe-bands", "4",     "--probe-svd-error", "0.05",   NULL};
-    fixture f;
-    int rc = fixture_bake(&f, obj, mtl, flags);
+    const char *all[20] = {"--asset", cube_arg};
+    int n = 2;
+    for (int i = 0; flags[i] && n < 18; i++) all[n++] = flags[i];
+    all[n] = NULL;
+    int rc = fixture_bake(f, obj, mtl, all);
     free(obj);
     free(mtl);
-    if (rc != 0) {
-        CHECK(0, "cornell %s bake failed", quality);
-        return;
-    }
+    CHECK(rc == 0, "cornell bake failed");
+    return rc;
+}
+
+static void test_cornell(const char *quality, int runs) {
+    /* With the probes solver's data too (both solvers on one bake: PIC's data is the same). */
+    const char *flags[] = {"--quality",     quality, "--solver",          "both", "--probes", "8",
+                           "--probe-bands", "4",     "--probe-svd-error", "0.05", NULL};
+    fixture f;
+    if (cornell_fixture(&f, flags) != 0) return;
     char err[512];
     lc_engine *gpu = lc_engine_create(f.bake, LC_BACKEND_EGL, 0, err, sizeof err);
     CHECK(gpu != NULL, "egl engine: %s", err);
@@ -536,6 +543,52 @@ static void test_cornell(const char *quality, int runs) {
             test_cornell_drt(win, &f, quality);
             lc_engine_release(win);
         }
+    }
+    fixture_release(&f);
+}
+
+/* Texel caches gathered per surfel (--texel-gather surfels: TSGF/TSGW, gather.comp's
+ * texel_from_surfels) against the CPU: 3 and 1 bands, a DNRT cube, progressive, and in
+ * 256 KiB windows. */
+static void test_cornell_texel_surfels(void) {
+    const char *flags[] = {"--quality", "draft", "--texel-gather", "surfels", "--texel-gather-rays", "64", NULL};
+    fixture f;
+    if (cornell_fixture(&f, flags) != 0) return;
+    CHECK(f.v->texel_surfels_first && f.v->texel_surfels_first[f.v->n_texel_caches] > 0,
+          "texel surfels: the bake has list entries");
+    lc_engine_object obj = {.asset = 0, .scale = {1.5f, 1.5f, 1.5f}, .rotation = {0, 0, 0, 1}, .visible = 1};
+    snprintf(obj.id, sizeof obj.id, "cube");
+    obj.translation[0] = 0.3f, obj.translation[2] = 0.3f;
+    char err[512], label[96];
+    for (int windows = 0; windows < 2; windows++) {
+        lc_gl_test_window_limit = windows ? (size_t)256 << 10 : 0;
+        lc_engine *gpu = lc_engine_create(f.bake, LC_BACKEND_EGL, 0, err, sizeof err);
+        lc_gl_test_window_limit = 0;
+        CHECK(gpu != NULL, "egl engine: %s", err);
+        if (!gpu) break;
+        lc_engine_state st = {0};
+        st.settings = lc_engine_default_settings(f.bake);
+        st.settings.bounces = 2;
+        st.settings.progressive = !windows; /* a fresh engine in windows: the CPU's feedback is older */
+        double worst = 0;
+        for (int i = 0; i < 4; i++) {
+            st.settings.bands = i < 2 ? 3 : 1;
+            st.objects = i % 2 ? &obj : NULL;
+            st.n_objects = i % 2 ? 1 : 0;
+            st.revision = (uint64_t)(200 + 10 * windows + i);
+            snprintf(label, sizeof label, "texel surfels%s, bands %u%s", windows ? " in windows" : "",
+                     st.settings.bands, st.n_objects ? ", a DNRT cube" : "");
+            const lc_engine_frame *fg;
+            worst = fmax(worst, relight_both_frame(gpu, f.engine, f.v, &st, label, 0, &fg));
+            if (fg && i == 0) {
+                double sum = 0;
+                for (size_t k = 0; k < (size_t)fg->lightmap_width * fg->lightmap_height * 3; k++)
+                    sum += fg->lightmap[k];
+                CHECK(sum > 0, "%s: the lightmap is black", label);
+            }
+        }
+        fprintf(stderr, "texel surfels%s: worst EGL/CPU difference %.3g\n", windows ? " in windows" : "", worst);
+        lc_engine_release(gpu);
     }
     fixture_release(&f);
 }
@@ -777,6 +830,7 @@ int main(void) {
     test_compile_errors();
     test_auto(software);
     test_cornell("draft", 3);
+    test_cornell_texel_surfels();
     test_fuzz();
     if (getenv("LUCENT_EGL_BENCH")) test_cornell("moderate", 3); /* timings for the report */
     CHECK_DONE();

@@ -19,31 +19,27 @@ static double median_of(double *x, int n) {
     return n ? x[n / 2] : 0;
 }
 
-static void test_closed_box(void) {
+/* The closed emitting box (albedo 0.5, emission 1: E = pi L_e / (1 - rho) everywhere), baked
+ * with FLAGS after the common ones (NULL-terminated, at most 8). */
+static int closed_box_bake(fixture *f, const char *const *extra) {
     static char obj[1 << 16];
     obj[0] = 0;
     fixture_inward_box(obj, sizeof obj, 1.0f, 4, "wall", 1);
     const char *mtl = "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n";
-    const char *flags[] = {"--surfels",
-                           "4096",
-                           "--links",
-                           "160",
-                           "--atlas-size",
-                           "64",
-                           "--node-samples",
-                           "32",
-                           "--final-samples",
-                           "64",
-                           "--grid-max-dim",
-                           "5",
-                           "--bands",
-                           "3",
-                           NULL};
+    const char *flags[32] = {"--surfels",      "4096", "--links",         "160", "--atlas-size",   "64",
+                             "--node-samples", "32",   "--final-samples", "64",  "--grid-max-dim", "5",
+                             "--bands",        "3"};
+    int n = 14;
+    for (int i = 0; extra && extra[i] && n < 30; i++) flags[n++] = extra[i];
+    flags[n] = NULL;
+    int rc = fixture_bake(f, obj, mtl, flags);
+    CHECK(rc == 0, "closed box bake failed");
+    return rc;
+}
+
+static void test_closed_box(void) {
     fixture f;
-    if (fixture_bake(&f, obj, mtl, flags) != 0) {
-        CHECK(0, "closed box bake failed");
-        return;
-    }
+    if (closed_box_bake(&f, NULL) != 0) return;
     lc_engine_state st = {0};
     st.settings = lc_engine_default_settings(f.bake);
     st.settings.bounces = 10;
@@ -324,8 +320,50 @@ static void test_lights_and_occlusion(void) {
     fixture_release(&f);
 }
 
+/* Texel caches gathered per surfel (--texel-gather surfels, TSGF/TSGW): the closed box's
+ * lightmap converges to pi L_e / (1 - rho) as through the links; band 1 a cosine lobe (band 0
+ * and band 2 zero at texel caches); with the SH lightmap asked for, texel caches gather by
+ * links again (band 2 set) and give the same light within the links' error. */
+static void test_closed_box_texel_surfels(void) {
+    const char *extra[] = {"--texel-gather", "surfels", "--texel-gather-rays", "256", NULL};
+    fixture f;
+    if (closed_box_bake(&f, extra) != 0) return;
+    CHECK(f.v->texel_surfels_first && f.v->texel_surfels_first[f.v->n_texel_caches] > 0, "the bake has lists");
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f.bake);
+    st.settings.bounces = 10;
+    st.settings.progressive = 0;
+    const double expect = M_PI * 1.0 / (1.0 - 0.5);
+    for (int sh = 0; sh < 2; sh++) {
+        st.settings.sh_lightmap = sh;
+        const lc_engine_frame *fr;
+        char err[256];
+        CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+        if (!fr) break;
+        double sum = 0, worst = 0;
+        for (uint32_t c = 0; c < f.v->n_texel_caches; c++) {
+            double e = fr->lightmap[3 * (size_t)f.v->caches[c].index + 1];
+            sum += e;
+            worst = fmax(worst, fabs(e / expect - 1));
+        }
+        double mean = sum / f.v->n_texel_caches;
+        CHECK(fabs(mean / expect - 1) < 0.02 && worst < 0.03,
+              "texel surfels, SH lightmap %d: mean texel irradiance %.4f (worst %.1f%%), expected %.4f", sh, mean,
+              worst * 100, expect);
+        const float *t0 = fr->cache_sh; /* texel cache 0 */
+        int band0 = t0[1] != 0.0f, band1 = t0[3 + 1] != 0.0f || t0[6 + 1] != 0.0f || t0[9 + 1] != 0.0f, band2 = 0;
+        for (int j = 4; j < 9; j++) band2 |= t0[3 * j + 1] != 0.0f;
+        if (sh) CHECK(band2, "texel surfels with the SH lightmap: the links' band 2 is back");
+        else
+            CHECK(!band0 && band1 && !band2, "texel surfels: a band-1 lobe only (band 0 %d, 1 %d, 2 %d)", band0, band1,
+                  band2);
+    }
+    fixture_release(&f);
+}
+
 int main(void) {
     test_closed_box();
+    test_closed_box_texel_surfels();
     test_patch_form_factor();
     test_lights_and_occlusion();
     CHECK_DONE();

@@ -39,6 +39,7 @@ enum {
     N_BASIS = 16, /* cluster 0: rank 1 x (2 probes x 4); cluster 1: rank 2 x (1 probe x 4) */
     N_U = 5,      /* cluster 0: 1 row x rank 1; cluster 1: 2 rows x rank 2 */
     N_UNSEEN = 3, /* PRUS: row 0 two surfels, row 1 none, row 2 one */
+    N_TSG = 4,    /* TSGW: texel 0 two surfels, 1 none, 2 and 3 one each, 4 none */
     N_PROBE_SECS = 8
 };
 
@@ -66,7 +67,11 @@ typedef struct bake {
     lc_lcb_probe_unseen prus[N_UNSEEN];
     uint64_t n_pruf, n_prus; /* records written */
     int unseen;              /* bit 0: write PRUF, bit 1: PRUS */
-    uint64_t n_link;         /* LINK records as written */
+    uint32_t tsgf[N_TEXEL + 1];
+    lc_lcb_surfel_weight tsgw[N_TSG];
+    uint64_t n_tsgf, n_tsgw;
+    int tsg;         /* bit 0: write TSGF, bit 1: TSGW (0 by default: a bake gathering by links) */
+    uint64_t n_link; /* LINK records as written */
     int with_probes;
     int skip_probe;               /* index into probe_order to leave out, or -1 */
     uint64_t count[N_PROBE_SECS]; /* records written per probe section */
@@ -209,6 +214,13 @@ static void bake_init_probes(bake *b) {
     b->prus[2] = (lc_lcb_probe_unseen){0, -0.5f}; /* a grid row's weight may be negative */
     b->n_pruf = N_ROW + 1, b->n_prus = N_UNSEEN;
     b->unseen = 3;
+    static const uint32_t tfirst[N_TEXEL + 1] = {0, 2, 2, 3, N_TSG, N_TSG};
+    memcpy(b->tsgf, tfirst, sizeof tfirst);
+    b->tsgw[0] = (lc_lcb_surfel_weight){0, 0.5f};
+    b->tsgw[1] = (lc_lcb_surfel_weight){2, 0.25f};
+    b->tsgw[2] = (lc_lcb_surfel_weight){3, 0.75f};
+    b->tsgw[3] = (lc_lcb_surfel_weight){1, 1.0f};
+    b->n_tsgf = N_TEXEL + 1, b->n_tsgw = N_TSG;
 }
 
 static void bake_init(bake *b) {
@@ -254,6 +266,8 @@ static int bake_write(const bake *b, const char *path, char *err, size_t errlen)
         {"PRRU", 4, b->prru, b->count[7]},
         {"PRUF", 4, b->pruf, b->n_pruf},
         {"PRUS", sizeof(lc_lcb_probe_unseen), b->prus, b->n_prus},
+        {"TSGF", 4, b->tsgf, b->n_tsgf},
+        {"TSGW", sizeof(lc_lcb_surfel_weight), b->tsgw, b->n_tsgw},
     };
     const int first_probe = 11;
     lc_lcb_writer *w = lc_lcb_writer_create();
@@ -261,8 +275,10 @@ static int bake_write(const bake *b, const char *path, char *err, size_t errlen)
     if (!w) return -1;
     for (int i = 0; i < (int)(sizeof s / sizeof s[0]); i++) {
         int unseen_bit = !strcmp(s[i].id, "PRUF") ? 1 : !strcmp(s[i].id, "PRUS") ? 2 : 0;
-        if (unseen_bit ? !(b->unseen & unseen_bit)
-                       : i >= first_probe && (!b->with_probes || i - first_probe == b->skip_probe))
+        int tsg_bit = !strcmp(s[i].id, "TSGF") ? 1 : !strcmp(s[i].id, "TSGW") ? 2 : 0;
+        if (tsg_bit          ? !(b->tsg & tsg_bit)
+                : unseen_bit ? !(b->unseen & unseen_bit)
+                             : i >= first_probe && (!b->with_probes || i - first_probe == b->skip_probe))
             continue;
         if (lc_lcb_writer_add(w, s[i].id, s[i].rec, s[i].data, s[i].n) != 0) goto err;
     }
@@ -513,6 +529,51 @@ static void test_unseen(void) {
     CASE("PRUS weight inf", b.prus[0].weight = INFINITY, "PRUS", "entry 0 weight");
 }
 
+/* TSGF/TSGW (texel caches gathered per surfel): read back as written, with or without the
+ * probes; together, one offset per texel cache plus the end, entries in range. */
+static void test_texel_surfels(void) {
+    bake b;
+    char err[512] = "";
+    for (int probes = 0; probes < 2; probes++) {
+        bake_init(&b);
+        b.tsg = 3;
+        b.with_probes = probes;
+        b.unseen = probes ? 3 : 0;
+        size_t len = 0;
+        uint8_t *buf = bake_bytes(&b, &len);
+        lc_lcb *f = NULL;
+        CHECK(buf && lc_lcb_open_memory(buf, len, &f, err, sizeof err) == 0, "open with texel surfels: %s", err);
+        if (f) {
+            const lc_lcb_view *v = lc_lcb_get(f);
+            CHECK(v->texel_surfels_first && memcmp(v->texel_surfels_first, b.tsgf, sizeof b.tsgf) == 0 &&
+                      v->texel_surfels && memcmp(v->texel_surfels, b.tsgw, sizeof b.tsgw) == 0,
+                  "texel surfel lists differ (probes %d)", probes);
+            lc_lcb_close(f);
+        }
+        free(buf);
+        bake_free(&b);
+    }
+    bake_init(&b);
+    size_t len = 0;
+    uint8_t *buf = bake_bytes(&b, &len);
+    lc_lcb *f = NULL;
+    CHECK(buf && lc_lcb_open_memory(buf, len, &f, err, sizeof err) == 0, "open without texel surfels: %s", err);
+    if (f) {
+        CHECK(!lc_lcb_get(f)->texel_surfels_first && !lc_lcb_get(f)->texel_surfels, "texel surfels set without TSGF");
+        lc_lcb_close(f);
+    }
+    free(buf);
+    bake_free(&b);
+    CASE("TSGF alone", b.tsg = 1, "TSGW", "TSGF and TSGW come together");
+    CASE("TSGW alone", b.tsg = 2, "TSGF", "TSGF and TSGW come together");
+    CASE("TSGF one short", (b.tsg = 3, b.n_tsgf = N_TEXEL), "TSGF", "5 offsets, expected the texel caches + 1 = 6");
+    CASE("TSGF first", (b.tsg = 3, b.tsgf[0] = 1), "TSGF", "offset 0 is 1");
+    CASE("TSGF decreasing", (b.tsg = 3, b.tsgf[3] = 1), "TSGF", "row 2 ends at 1 before it starts (2)");
+    CASE("TSGF end", (b.tsg = 3, b.tsgf[5] = 5), "TSGF", "the rows end at entry 5, TSGW has 4 entries");
+    CASE("TSGW surfel", (b.tsg = 3, b.tsgw[2].surfel = N_SURF), "TSGW", "entry 2 surfel 4 >= 4");
+    CASE("TSGW weight NaN", (b.tsg = 3, b.tsgw[1].weight = NAN), "TSGW", "entry 1 weight is not finite");
+}
+
 static void test_clusters(void) {
     bake b;
     CASE("first cluster not at row 0", b.prcl[0].first_row = 1, "PRCL", "cluster 0 first_row 1, expected 0");
@@ -585,6 +646,7 @@ static void test_robustness(void) {
 static void write_corpus(const char *dir) {
     bake b;
     bake_init(&b);
+    b.tsg = 3; /* the texel surfel lists too */
     size_t len = 0;
     uint8_t *buf = bake_bytes(&b, &len);
     char path[1024];
@@ -609,6 +671,7 @@ int main(void) {
     test_presence_and_header();
     test_arrays();
     test_unseen();
+    test_texel_surfels();
     test_clusters();
     test_robustness();
     const char *corpus = getenv("LUCENT_WRITE_CORPUS");

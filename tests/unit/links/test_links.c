@@ -667,6 +667,74 @@ static void test_gather_bound(void) {
     world_free(&w);
 }
 
+/* lc_links_texel_surfels: in the closed box every ray hits a wall, so a texel cache's weights
+ * (cos x solid angle per ray / pi, summed per surfel) sum to the cosine-weighted hemisphere's
+ * 1; each list is in strictly increasing surfel order with positive weights; an inside cache
+ * gets none; sum weight x B is the bound at the same rays and seed; 1 and 2 threads give the
+ * same bytes. */
+static void test_texel_surfels(void) {
+    world w = {0};
+    build_closed_box(&w, 16);
+    lc_rt *rt = make_rt(&w);
+    if (!rt) return;
+    lc_lcb_cache caches[4];
+    caches[0] = texel_cache(lc_v3(0.5f, 1, 0.5f), lc_v3(0, -1, 0));
+    caches[1] = texel_cache(lc_v3(0.3f, 0.7f, 1), lc_v3(0, 0, -1));
+    caches[2] = texel_cache(lc_v3(0.5f, 0, 0.5f), lc_v3(0, 1, 0));
+    caches[2].flags |= LC_CACHE_INSIDE;
+    caches[3] = texel_cache(lc_v3(1, 0.25f, 0.6f), lc_v3(-1, 0, 0));
+    uint32_t *first[2] = {NULL, NULL};
+    lc_lcb_surfel_weight *list[2] = {NULL, NULL};
+    uint64_t n[2] = {0, 0};
+    for (int t = 0; t < 2; t++)
+        CHECK(lc_links_texel_surfels(rt, w.surfels, w.n_surfels, caches, 4, 512, 7, t + 1, &first[t], &list[t],
+                                     &n[t]) == 0,
+              "texel surfels, %d threads", t + 1);
+    float *b = malloc((size_t)w.n_surfels * 3 * sizeof *b), bound[4 * 3];
+    if (!first[0] || !first[1] || !b) goto done;
+    CHECK(n[0] == n[1] && memcmp(first[0], first[1], 5 * sizeof *first[0]) == 0 &&
+              memcmp(list[0], list[1], n[0] * sizeof *list[0]) == 0,
+          "1 and 2 threads give the same lists");
+    CHECK(first[0][0] == 0 && first[0][4] == n[0] && first[0][3] == first[0][2], "offsets; the inside cache has none");
+    for (uint32_t c = 0; c < 4; c++) {
+        double sum = 0;
+        int order = 1;
+        for (uint32_t k = first[0][c]; k < first[0][c + 1]; k++) {
+            sum += list[0][k].weight;
+            order &= list[0][k].weight > 0 && (k == first[0][c] || list[0][k].surfel > list[0][k - 1].surfel);
+        }
+        CHECK(order, "cache %u: surfels in increasing order, weights > 0", c);
+        if (c != 2) CHECK(fabs(sum - 1) < 0.01, "cache %u: weights sum to %.4f, the hemisphere's 1", c, sum);
+    }
+    for (uint32_t i = 0; i < w.n_surfels; i++) {
+        int floor = w.surfels[i].normal[1] > 0.5f;
+        b[3 * i] = floor ? 2.0f : 0.25f, b[3 * i + 1] = floor ? 1.0f : 0.5f, b[3 * i + 2] = 0.0f;
+    }
+    CHECK(lc_links_gather_bound(rt, w.surfels, w.n_surfels, caches, 4, 512, 7, 0, b, bound) == 0, "bound");
+    for (uint32_t c = 0; c < 4; c++)
+        for (int k = 0; k < 3; k++) {
+            double e = 0;
+            for (uint32_t j = first[0][c]; j < first[0][c + 1]; j++)
+                e += (double)list[0][j].weight * b[3 * list[0][j].surfel + k];
+            CHECK(fabs(e - bound[3 * c + k]) <= 1e-5 * (1 + fabs(e)), "cache %u channel %d: lists %.6f, bound %.6f", c,
+                  k, e, bound[3 * c + k]);
+        }
+    uint32_t *f0 = NULL;
+    lc_lcb_surfel_weight *l0 = NULL;
+    uint64_t n0 = 1;
+    CHECK(lc_links_texel_surfels(rt, w.surfels, w.n_surfels, caches, 4, 0, 7, 1, &f0, &l0, &n0) == -1 && !f0 && !l0 &&
+              n0 == 0,
+          "no rays: error, nothing returned");
+done:
+    for (int t = 0; t < 2; t++) {
+        free(first[t]);
+        free(list[t]);
+    }
+    free(b);
+    lc_rt_release(rt);
+    world_free(&w);
+}
+
 int main(void) {
     lc_progress_set_enabled(0);
     test_pack_roundtrip();
@@ -678,5 +746,6 @@ int main(void) {
     test_bad_params();
     test_closed_box_real();
     test_gather_bound();
+    test_texel_surfels();
     CHECK_DONE();
 }
