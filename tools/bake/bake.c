@@ -472,9 +472,10 @@ typedef struct bake_job {
     uint32_t *texel_surfels_first;       /* 9. --texel-gather surfels: per texel cache (TSGF) */
     lc_lcb_surfel_weight *texel_surfels; /* its (surfel, weight) list (TSGW) */
     uint64_t n_texel_surfels;
-    lc_probebake probes;   /* 10. the probes solver (--solver probes|both) */
-    bake_assets assets;    /* 11. dynamic-object assets */
-    lc_lcb_material *mats; /* 12. the file's sections */
+    uint32_t texel_gather_rays; /* per texel cache, as used (lc_bake_texel_gather_rays) */
+    lc_probebake probes;        /* 10. the probes solver (--solver probes|both) */
+    bake_assets assets;         /* 11. dynamic-object assets */
+    lc_lcb_material *mats;      /* 12. the file's sections */
     lc_lcb_vertex *verts;
     lc_lcb_triangle *tris;
     cJSON *meta;
@@ -702,15 +703,16 @@ static int bake_links(bake_job *b, char *err, size_t errlen) {
         lc_info("bake", "exposure: %u surfels (%.2f%% of the area) seen by no cache", b->es.unseen,
                 100.0 * b->es.unseen_area / lc_mesh_total_area(&b->scene.mesh));
     if (lc_bake_texel_surfels(s, b->probe_rays)) {
-        if (lc_links_texel_surfels(b->rt, b->surfels, b->n_surfels, b->caches, b->n_texel_caches,
-                                   (uint32_t)s->texel_gather_rays, (uint64_t)s->seed, s->threads,
-                                   &b->texel_surfels_first, &b->texel_surfels, &b->n_texel_surfels) != 0) {
+        b->texel_gather_rays = lc_bake_texel_gather_rays(s, b->n_texel_caches);
+        if (lc_links_texel_surfels(b->rt, b->surfels, b->n_surfels, b->caches, b->n_texel_caches, b->texel_gather_rays,
+                                   (uint64_t)s->seed, s->threads, &b->texel_surfels_first, &b->texel_surfels,
+                                   &b->n_texel_surfels) != 0) {
             lc_set_err(err, errlen, "texel surfel lists failed (out of memory? lower --texel-gather-rays)");
             return 1;
         }
         if (!s->quiet)
-            lc_info("bake", "texel surfel lists: %llu entries, %.1f per texel cache (%.1f MiB)",
-                    (unsigned long long)b->n_texel_surfels,
+            lc_info("bake", "texel surfel lists: %u rays, %llu entries, %.1f per texel cache (%.1f MiB)",
+                    b->texel_gather_rays, (unsigned long long)b->n_texel_surfels,
                     b->n_texel_caches ? (double)b->n_texel_surfels / b->n_texel_caches : 0.0,
                     (double)b->n_texel_surfels * sizeof(lc_lcb_surfel_weight) / (1 << 20));
     }
@@ -888,6 +890,7 @@ static int bake_meta(bake_job *b, char *err, size_t errlen) {
     cJSON_AddNumberToObject(jk, "probe_rays", b->probe_rays);
     cJSON_AddStringToObject(jk, "texel_gather", b->texel_surfels_first ? "surfels" : "links");
     cJSON_AddNumberToObject(jk, "texel_surfel_entries", (double)b->n_texel_surfels);
+    cJSON_AddNumberToObject(jk, "texel_gather_rays", b->texel_gather_rays);
     cJSON *jsv = cJSON_AddArrayToObject(meta, "solvers");
     if (s->solver != LC_BAKE_SOLVER_PROBES) cJSON_AddItemToArray(jsv, cJSON_CreateString("pic"));
     if (s->solver != LC_BAKE_SOLVER_PIC) {

@@ -90,7 +90,8 @@ static const lc_opt bake_options[] = {
      "leaves the links at --probe-rays (a large scene), links where it raises them (bench/fidelity.md)",
      NULL, NULL},
     {"texel-gather-rays", LC_OPT_INT, OFF(texel_gather_rays), 16, 8192, "256", NULL,
-     "PIC with --texel-gather surfels: hemisphere rays per texel cache (the list holds at most this many surfels)",
+     "PIC with texel lists: hemisphere rays per texel cache, at least (raised in powers of two within "
+     "--probe-ray-budget, as the links' rays; a list holds at most this many surfels)",
      NULL, NULL},
     {"node-samples", LC_OPT_INT, OFF(node_samples), 1, 256, "16", NULL,
      "visibility rays per node while refining the cut", NULL, NULL},
@@ -216,10 +217,18 @@ uint32_t lc_bake_probe_rays(const lc_bake_settings *s, uint32_t n_caches) {
     return rays;
 }
 
+uint32_t lc_bake_texel_gather_rays(const lc_bake_settings *s, uint32_t n_texel_caches) {
+    uint32_t rays = (uint32_t)s->texel_gather_rays;
+    if (!s->probe_ray_budget || !n_texel_caches) return rays;
+    while (rays * 2 <= LC_BAKE_PROBE_RAYS_MAX && (uint64_t)n_texel_caches * rays * 2 <= (uint64_t)s->probe_ray_budget)
+        rays *= 2;
+    return rays;
+}
+
 /* auto: a scene the budget gives many rays per cache is small, and there the links' rays beat
  * short lists (the Cornell box: links 3.0%, 256-ray lists 13.8%, 8192-ray lists 2.6% at 8x
  * the file); where the budget leaves --probe-rays, the links' node averages cost 4-5 points
- * of bias that the lists recover (Sibenik 14.8% -> 10.8%). */
+ * of bias that the lists recover (Sibenik 14.8% -> 10.5%). */
 int lc_bake_texel_surfels(const lc_bake_settings *s, uint32_t probe_rays) {
     if (s->solver == LC_BAKE_SOLVER_PROBES || s->texel_gather == LC_BAKE_TEXEL_GATHER_LINKS) return 0;
     if (s->texel_gather == LC_BAKE_TEXEL_GATHER_SURFELS) return 1;
