@@ -592,7 +592,7 @@ static uint32_t links_surfel_weights(const links_scratch *sc, const links_cache 
 typedef struct {
     links_ctx ctx;
     lc_link_params prm;
-    lc_lcb_surfel_weight **entries; /* per thread: probe_rays entries */
+    lc_lcb_surfel_weight **entries; /* per thread: probe_rays entries (the bound's list) */
     int threads;
 } links_surfel_job;
 
@@ -634,12 +634,13 @@ oom:
     return -1;
 }
 
-/* Casts cache ci's hemisphere rays; its (surfel, weight) list in j->entries[thread]. */
-static uint32_t links_surfel_list(links_surfel_job *j, uint32_t ci, int thread) {
+/* Casts cache ci's hemisphere rays; writes its (surfel, weight) list to out (room for
+ * probe_rays entries) and returns its length. */
+static uint32_t links_surfel_list(links_surfel_job *j, uint32_t ci, int thread, lc_lcb_surfel_weight *out) {
     links_cache lc;
     if ((j->ctx.caches[ci].flags & LC_CACHE_INSIDE) || !links_cache_setup(&j->ctx, ci, &lc)) return 0;
     links_probe(&j->ctx, &j->ctx.scratch[thread], &lc, 1);
-    return links_surfel_weights(&j->ctx.scratch[thread], &lc, j->entries[thread]);
+    return links_surfel_weights(&j->ctx.scratch[thread], &lc, out);
 }
 
 typedef struct {
@@ -651,8 +652,8 @@ typedef struct {
 static void links_bound_range(void *arg, size_t begin, size_t end, int thread) {
     const links_bound_job *b = arg;
     for (size_t i = begin; i < end; i++) {
-        uint32_t n = links_surfel_list(b->job, (uint32_t)i, thread);
-        const lc_lcb_surfel_weight *e = b->job->entries[thread];
+        lc_lcb_surfel_weight *e = b->job->entries[thread];
+        uint32_t n = links_surfel_list(b->job, (uint32_t)i, thread, e);
         double acc[3] = {0, 0, 0};
         for (uint32_t k = 0; k < n; k++)
             for (int ch = 0; ch < 3; ch++) acc[ch] += (double)e[k].weight * b->radiosity[3 * (size_t)e[k].surfel + ch];
@@ -686,9 +687,7 @@ typedef struct {
 static void links_texel_range(void *arg, size_t begin, size_t end, int thread) {
     const links_texel_job *t = arg;
     for (size_t i = begin; i < end; i++) {
-        uint32_t n = links_surfel_list(t->job, (uint32_t)i, thread);
-        t->count[i] = n;
-        memcpy(t->lists + i * t->rays, t->job->entries[thread], (size_t)n * sizeof *t->lists);
+        t->count[i] = links_surfel_list(t->job, (uint32_t)i, thread, t->lists + i * t->rays);
     }
     lc_progress_add(t->progress, end - begin);
 }

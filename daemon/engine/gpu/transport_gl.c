@@ -95,7 +95,8 @@ typedef struct tgl {
     GLuint gather[LC_SH_MAX_BANDS + 1][LC_SH_MAX_BANDS + 1]; /* [bands][Co/Cg bands], compiled on first use */
     /* Static (create): */
     GLuint b_surfels, b_nodes, b_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
-    GLuint b_tsg_first, b_tsg; /* the texel surfel lists (TSGF/TSGW), or one-entry dummies */
+    GLuint b_tsg_first, b_tsg;         /* the texel surfel lists (TSGF/TSGW), or one-entry dummies */
+    size_t tsg_first_bytes, tsg_bytes; /* ... their sizes as uploaded */
     uint32_t n_feedback;
     /* Per run: */
     GLuint b_b0, b_radiosity, b_e_ind, b_flux, b_cache_sh, b_sh9, b_lightmap, b_grid_sh, b_obj_pos, b_obj_sh;
@@ -354,14 +355,13 @@ static int tgl_upload_texel_surfels(tgl *t, char *err, size_t errlen) {
         return -1;
     }
     const int lists = v->texel_surfels_first != NULL;
-    if (!(t->b_tsg_first =
-              lc_gl_buffer(lists ? ((size_t)v->n_texel_caches + 1) * 4 : sizeof none,
-                           lists ? (const void *)v->texel_surfels_first : none, "texel surfel offsets", err, errlen)))
+    t->tsg_first_bytes = lists ? ((size_t)v->n_texel_caches + 1) * 4 : sizeof none;
+    t->tsg_bytes = n ? (size_t)n * sizeof(lc_lcb_surfel_weight) : sizeof none;
+    if (!(t->b_tsg_first = lc_gl_buffer(t->tsg_first_bytes, lists ? (const void *)v->texel_surfels_first : none,
+                                        "texel surfel offsets", err, errlen)))
         return -1;
-    return (t->b_tsg = lc_gl_buffer(n ? (size_t)n * sizeof(lc_lcb_surfel_weight) : sizeof none,
-                                    n ? (const void *)v->texel_surfels : none, "texel surfel lists", err, errlen))
-        ? 0
-        : -1;
+    t->b_tsg = lc_gl_buffer(t->tsg_bytes, n ? (const void *)v->texel_surfels : none, "texel surfel lists", err, errlen);
+    return t->b_tsg ? 0 : -1;
 }
 
 /* The links (tgl_upload_links), the lightmap and grid indices and the cone table. */
@@ -552,12 +552,10 @@ static void tgl_gather_setup(tgl *t, GLuint gather, const lc_engine_settings *st
     lc_gl_bind(7, t->b_shk, 0, TGL_CAP * 8);
     glProgramUniform1i(gather, 4, lc_transport_texel_bands(st) * lc_transport_texel_bands(st));
     glProgramUniform1i(gather, 5, lc_transport_texel_band1(st));
-    const int surfels = lc_transport_texel_surfels(v, st);
-    const size_t n_entries = v->texel_surfels_first ? v->texel_surfels_first[v->n_texel_caches] : 0;
-    lc_gl_bind(8, t->b_tsg_first, 0, v->texel_surfels_first ? ((size_t)v->n_texel_caches + 1) * 4 : 8);
-    lc_gl_bind(9, t->b_tsg, 0, n_entries ? n_entries * sizeof(lc_lcb_surfel_weight) : 8); /* as uploaded */
+    lc_gl_bind(8, t->b_tsg_first, 0, t->tsg_first_bytes);
+    lc_gl_bind(9, t->b_tsg, 0, t->tsg_bytes);
     lc_gl_bind(10, t->b_radiosity, 0, (size_t)v->n_surfels * 12);
-    glProgramUniform1i(gather, 7, surfels);
+    glProgramUniform1i(gather, 7, lc_transport_texel_surfels(v, st));
     glProgramUniform1ui(gather, 8, v->n_texel_caches);
 }
 
