@@ -29,12 +29,15 @@ layout(location = 5) uniform int u_texel_band1; // 1: texel caches carry band 1 
 layout(location = 6) uniform uint u_window;     // caches in the bound links window
 layout(location = 7) uniform int u_texel_surfels; // 1: texel caches from their surfel lists (lc_transport_texel_surfels)
 layout(location = 8) uniform uint u_n_texel;      // texel caches are [0, u_n_texel)
+layout(location = 9) uniform uint u_grid_rows;    // > 0: grid caches' links are in grid_links (GLNK), this many rows
 
 // The bake's texel surfel lists (TSGF/TSGW; one-entry dummies without them) and the radiosity.
 struct SurfelWeight { uint surfel; float weight; };
 layout(std430, binding = 8) readonly buffer TexelFirst { uint texel_first[]; };
 layout(std430, binding = 9) readonly buffer TexelSurfels { SurfelWeight texel_surfels[]; };
 layout(std430, binding = 10) readonly buffer Radiosity { float radiosity[]; };
+// GLNK, link-major over the grid caches (link k of grid cache g at k * u_grid_rows + g), bound whole.
+layout(std430, binding = 11) readonly buffer GridLinks { Link grid_links[]; };
 
 const int BAND_OF[64] = int[64](0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5,
                                 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7);
@@ -166,8 +169,9 @@ void main() {
     }
     uint used = caches[c].link_count;
     int nc_here = (caches[c].flags & 1u) != 0u ? min(u_texel_nc, NC) : NC; // 1 = LC_CACHE_TEXEL
+    bool grid_row = u_grid_rows != 0u && c >= u_n_texel;
     for (uint k = 0u; k < used; k++) {
-        Link lk = links[k * u_window + local];
+        Link lk = grid_row ? grid_links[k * u_grid_rows + (c - u_n_texel)] : links[k * u_window + local];
         vec3 d = oct_decode(lk.dir_cone);
         float y[NC];
         sh_eval(d.x, d.y, d.z, y);

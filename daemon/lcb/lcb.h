@@ -25,6 +25,9 @@
  *   GRID  uint32_t             grid samples dims[0]*dims[1]*dims[2] (x fastest): cache index
  *   LINK  lc_lcb_link          links_per_cache per cache, cache-major
  *   LKSH  uint16_t (half)      optional: per link, bands^2 projected SH transport
+ *   GLNK  lc_lcb_link          optional (--grid-links): META /links/grid_per_cache links per grid
+ *                              cache, grid-cache-major; grid caches then gather from these (their
+ *                              link_count counts them) and their LINK slots are all padding
  *   ASET  lc_lcb_asset         dynamic-object assets
  *   AVRT  lc_lcb_asset_vertex  asset vertices (asset-local, metres)
  *   AIDX  uint32_t[3]          asset triangles (indices relative to the asset's first vertex)
@@ -143,7 +146,7 @@ typedef struct lc_lcb_cache {
     float albedo[3]; /* texel caches: surface albedo; grid: zero */
     uint32_t flags;
     uint32_t index;      /* texel index (y*W + x) or grid sample index */
-    uint32_t link_count; /* links in use: the cache's slots [link_count, links_per_cache) are padding */
+    uint32_t link_count; /* links in use (lc_lcb_cache_links): the row's slots from link_count on are padding */
 } lc_lcb_cache;
 
 /* A link for runtime projection: cache radiance SH gains
@@ -156,6 +159,9 @@ typedef struct lc_lcb_link {
     float factor;
     uint32_t dir_cone; /* bits 0-11, 12-23: octahedral direction; bits 24-31: alpha/pi*255 */
 } lc_lcb_link;
+
+/* Links per grid cache in GLNK, at most (LINK's per cache: 1024). */
+#define LC_LCB_GRID_LINKS_MAX 4096u
 
 typedef struct lc_lcb_asset {
     char name[64];
@@ -395,7 +401,9 @@ typedef struct lc_lcb_view {
     float grid_cell;
     const lc_lcb_link *links;
     uint32_t links_per_cache;
-    const uint16_t *link_sh; /* NULL when absent */
+    const lc_lcb_link *grid_links; /* GLNK: NULL when grid caches use their LINK slots */
+    uint32_t grid_links_per_cache; /* 0 without GLNK */
+    const uint16_t *link_sh;       /* NULL when absent */
     uint32_t link_sh_bands;
     const lc_lcb_asset *assets;
     uint32_t n_assets;
@@ -428,6 +436,17 @@ typedef struct lc_lcb_view {
     const uint32_t *texel_surfels_first;       /* n_texel_caches + 1 */
     const lc_lcb_surfel_weight *texel_surfels; /* texel_surfels_first[n_texel_caches] entries */
 } lc_lcb_view;
+
+/* Cache c's links (LINK, or GLNK for a grid cache when the bake has it): link_count of them
+ * are used; *per_cache (optional) gets the row's length. */
+static inline const lc_lcb_link *lc_lcb_cache_links(const lc_lcb_view *v, uint32_t c, uint32_t *per_cache) {
+    if (v->grid_links && c >= v->n_texel_caches) {
+        if (per_cache) *per_cache = v->grid_links_per_cache;
+        return v->grid_links + (size_t)(c - v->n_texel_caches) * v->grid_links_per_cache;
+    }
+    if (per_cache) *per_cache = v->links_per_cache;
+    return v->links + (size_t)c * v->links_per_cache;
+}
 
 /* The asset's DNRT transfer grid, or NULL (no data: an older bake, or baked without). */
 static inline const lc_lcb_transfer *lc_lcb_asset_transfer(const lc_lcb_view *v, uint32_t asset) {

@@ -152,6 +152,9 @@ static void lcb_print_human(const lc_lcb *f, const lc_lcb_view *v, const cJSON *
             st->moved, st->inside);
     fprintf(out, "  links       %u per cache (%llu total), link SH bands %u, output SH bands %u\n", v->links_per_cache,
             (unsigned long long)v->n_caches * v->links_per_cache, v->link_sh_bands, v->sh_bands);
+    if (v->grid_links)
+        fprintf(out, "              grid caches: %u links each (GLNK, %llu total)\n", v->grid_links_per_cache,
+                (unsigned long long)(v->n_caches - v->n_texel_caches) * v->grid_links_per_cache);
     if (v->texel_surfels_first) {
         uint32_t n = v->texel_surfels_first[v->n_texel_caches];
         fprintf(out, "              texel caches gather per surfel: %u entries, %.1f per texel cache\n", n,
@@ -249,6 +252,7 @@ static int lcb_print_json(const lc_lcb *f, const lc_lcb_view *v, const cJSON *me
         {"inside_caches", st->inside},
         {"links_per_cache", v->links_per_cache},
         {"links", (double)v->n_caches * v->links_per_cache},
+        {"grid_links_per_cache", v->grid_links_per_cache},
         {"link_sh_bands", v->link_sh_bands},
         {"texel_surfel_entries", v->texel_surfels_first ? v->texel_surfels_first[v->n_texel_caches] : 0},
         {"sh_bands", v->sh_bands},

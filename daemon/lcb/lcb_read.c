@@ -80,6 +80,7 @@ enum {
     S_PRUS,
     S_TSGF,
     S_TSGW,
+    S_GLNK,
     S_COUNT
 };
 static const struct {
@@ -119,6 +120,7 @@ static const struct {
     {"PRUS", sizeof(lc_lcb_surfel_weight), 0, "lc_lcb_surfel_weight"},
     {"TSGF", sizeof(uint32_t), 0, "uint32_t"},
     {"TSGW", sizeof(lc_lcb_surfel_weight), 0, "lc_lcb_surfel_weight"},
+    {"GLNK", sizeof(lc_lcb_link), 0, "lc_lcb_link"},
 };
 
 /* What META says; the sections are checked against it. */
@@ -127,7 +129,7 @@ typedef struct lcb_meta {
     uint32_t lm_w, lm_h;
     float origin[3], cell;
     uint32_t dims[3];
-    uint64_t surfels, nodes, levels, caches, texel, per_cache, link_sh;
+    uint64_t surfels, nodes, levels, caches, texel, per_cache, grid_per_cache, link_sh;
 } lcb_meta;
 
 typedef struct lcb_ctx {
@@ -294,7 +296,8 @@ static int lcb_find_sections(lcb_ctx *c, const lc_lcb *f) {
                             lcb_known[k].id, s->record_size, lcb_known[k].record, lcb_known[k].what);
         /* The view counts in 32 bits; LINK/LKSH/PRBR have no count field there, and
          * PRCP/PRCB/PRRU count in 64 bits. */
-        int wide = k == S_LINK || k == S_LKSH || k == S_PRBR || k == S_PRCP || k == S_PRCB || k == S_PRRU;
+        int wide =
+            k == S_LINK || k == S_GLNK || k == S_LKSH || k == S_PRBR || k == S_PRCP || k == S_PRCB || k == S_PRRU;
         if (!wide && s->count > UINT32_MAX)
             return lcb_fail(c, "%s: %llu records, more than this reader supports (2^32-1)", lcb_known[k].id,
                             (unsigned long long)s->count);
@@ -415,6 +418,13 @@ static int lcb_meta_fields(lcb_ctx *c, const cJSON *root) {
      * so every bake keeps a solver. */
     if (lcb_meta_uint(c, root, "/links/per_cache", c->sec[S_PRBH] ? 0 : 1, 1024, &m->per_cache)) return -1;
     if (lcb_meta_uint(c, root, "/links/sh_bands", 0, 8, &m->link_sh)) return -1;
+    /* GLNK and /links/grid_per_cache come together (--grid-links). */
+    if ((lcb_json_at(root, "/links/grid_per_cache") != NULL) != (c->sec[S_GLNK] != NULL))
+        return lcb_fail(c, "%s" LCB_INCONSISTENT,
+                        c->sec[S_GLNK] ? "GLNK: present, but META has no /links/grid_per_cache"
+                                       : "GLNK: required section missing (META has /links/grid_per_cache)");
+    if (c->sec[S_GLNK] && lcb_meta_uint(c, root, "/links/grid_per_cache", 1, LC_LCB_GRID_LINKS_MAX, &m->grid_per_cache))
+        return -1;
     /* the scene's lights (optional): their ids become protocol light ids, so UTF-8 */
     const cJSON *lights = lcb_json_at(root, "/lights");
     int i = 0;
@@ -466,6 +476,14 @@ static int lcb_meta_counts(lcb_ctx *c) {
     if (lcb_count(c, S_LINK) != links)
         return lcb_fail(c, "LINK: %llu links, but META /caches/count x /links/per_cache is %llu" LCB_INCONSISTENT,
                         (unsigned long long)lcb_count(c, S_LINK), (unsigned long long)links);
+    uint64_t grid_links = (m->caches - m->texel) * m->grid_per_cache;
+    if (c->sec[S_GLNK] && lcb_count(c, S_GLNK) != grid_links)
+        return lcb_fail(c,
+                        "GLNK: %llu links, but META (/caches/count - /caches/texel) x /links/grid_per_cache is "
+                        "%llu" LCB_INCONSISTENT,
+                        (unsigned long long)lcb_count(c, S_GLNK), (unsigned long long)grid_links);
+    if (c->sec[S_GLNK] && m->link_sh)
+        return lcb_fail(c, "GLNK: present with LKSH (per-link SH transport covers LINK only)" LCB_INCONSISTENT);
     if (m->link_sh == 0) {
         if (c->sec[S_LKSH]) return lcb_fail(c, "LKSH: present, but META /links/sh_bands is 0" LCB_INCONSISTENT);
     } else {
@@ -674,25 +692,42 @@ static int lcb_check_caches(lcb_ctx *c) {
     return 0;
 }
 
-static int lcb_check_links(lcb_ctx *c) {
-    const lc_lcb_link *l = lcb_data(c, S_LINK);
+/* Every link of section k: its node in range, its factor finite and >= 0. */
+static int lcb_check_link_records(lcb_ctx *c, int k) {
+    const lc_lcb_link *l = lcb_data(c, k);
     uint64_t n_nodes = lcb_count(c, S_NODE);
-    for (uint64_t i = 0; i < lcb_count(c, S_LINK); i++)
+    for (uint64_t i = 0; i < lcb_count(c, k); i++)
         if (l[i].node >= n_nodes || !isfinite(l[i].factor) || !(l[i].factor >= 0))
             return lcb_fail(
-                c, "LINK: link %llu has node %u (of %llu) or a factor that is not finite and >= 0" LCB_INCONSISTENT,
-                (unsigned long long)i, l[i].node, (unsigned long long)n_nodes);
-    /* Used links first, padding after: runtimes stop at link_count. */
+                c, "%s: link %llu has node %u (of %llu) or a factor that is not finite and >= 0" LCB_INCONSISTENT,
+                lcb_known[k].id, (unsigned long long)i, l[i].node, (unsigned long long)n_nodes);
+    return 0;
+}
+
+static int lcb_check_links(lcb_ctx *c) {
+    if (lcb_check_link_records(c, S_LINK) || (c->sec[S_GLNK] && lcb_check_link_records(c, S_GLNK))) return -1;
+    /* Used links first, padding after: runtimes stop at link_count. With GLNK a grid cache's
+     * row is there and its LINK slots are all padding. */
+    const lc_lcb_link *l = lcb_data(c, S_LINK), *gl = c->sec[S_GLNK] ? lcb_data(c, S_GLNK) : NULL;
     const lc_lcb_cache *ca = lcb_data(c, S_CACH);
     for (uint64_t i = 0; i < lcb_count(c, S_CACH); i++) {
-        if (ca[i].link_count > c->m.per_cache)
-            return lcb_fail(c, "CACH: cache %llu has link_count %u > /links/per_cache %llu" LCB_INCONSISTENT,
-                            (unsigned long long)i, ca[i].link_count, (unsigned long long)c->m.per_cache);
-        for (uint64_t j = ca[i].link_count; j < c->m.per_cache; j++)
+        int grid_row = gl && i >= c->m.texel;
+        const char *sec = grid_row ? "GLNK" : "LINK", *per = grid_row ? "grid_per_cache" : "per_cache";
+        uint64_t n = grid_row ? c->m.grid_per_cache : c->m.per_cache;
+        const lc_lcb_link *row = grid_row ? gl + (i - c->m.texel) * n : l + i * n;
+        if (ca[i].link_count > n)
+            return lcb_fail(c, "CACH: cache %llu has link_count %u > /links/%s %llu" LCB_INCONSISTENT,
+                            (unsigned long long)i, ca[i].link_count, per, (unsigned long long)n);
+        for (uint64_t j = ca[i].link_count; j < n; j++)
+            if (row[j].factor != 0)
+                return lcb_fail(
+                    c, "%s: cache %llu slot %llu lies past its link_count %u but is not padding" LCB_INCONSISTENT, sec,
+                    (unsigned long long)i, (unsigned long long)j, ca[i].link_count);
+        for (uint64_t j = 0; grid_row && j < c->m.per_cache; j++)
             if (l[i * c->m.per_cache + j].factor != 0)
                 return lcb_fail(
-                    c, "LINK: cache %llu slot %llu lies past its link_count %u but is not padding" LCB_INCONSISTENT,
-                    (unsigned long long)i, (unsigned long long)j, ca[i].link_count);
+                    c, "LINK: grid cache %llu slot %llu is not padding (its links are in GLNK)" LCB_INCONSISTENT,
+                    (unsigned long long)i, (unsigned long long)j);
     }
     if (c->sec[S_LKSH]) {
         const uint16_t *h = lcb_data(c, S_LKSH);
@@ -1088,6 +1123,8 @@ static int lcb_load(lc_lcb *f, char *err, size_t errlen) {
     v->grid_cell = c.m.cell;
     v->links = LCB_ARR(S_LINK);
     v->links_per_cache = (uint32_t)c.m.per_cache;
+    v->grid_links = LCB_ARR(S_GLNK);
+    v->grid_links_per_cache = (uint32_t)c.m.grid_per_cache;
     v->link_sh = LCB_ARR(S_LKSH);
     v->link_sh_bands = (uint32_t)c.m.link_sh;
     v->assets = LCB_ARR(S_ASET);

@@ -463,10 +463,11 @@ typedef struct bake_job {
     uint32_t surfels_refined; /* of them placed by --surfel-refine */
     lc_hierarchy hier;        /* 8. hierarchy */
     uint32_t *perm, *tri_sorted;
-    lc_lcb_link *links; /* 9. links */
+    lc_lcb_link *links; /* 9. links: LINK's n_caches x --links, then GLNK's grid rows */
     uint16_t *link_sh;
-    uint64_t n_links;
-    uint32_t *seen; /* per surfel: caches that see it (--exposure only) */
+    uint64_t n_links;              /* LINK's and GLNK's */
+    uint32_t grid_links_per_cache; /* GLNK's row (lc_bake_grid_links; 0: none) */
+    uint32_t *seen;                /* per surfel: caches that see it (--exposure only) */
     lc_link_stats ls;
     lc_exposure_stats es;
     uint32_t *texel_surfels_first;       /* 9. --texel-gather surfels: per texel cache (TSGF) */
@@ -639,12 +640,23 @@ static int bake_hierarchy(bake_job *b, char *err, size_t errlen) {
     return 0;
 }
 
+/* Cache c's row of links: LINK's, or GLNK's for a grid cache when the bake has it. */
+static lc_lcb_link *bake_cache_links(const bake_job *b, uint32_t c, uint32_t *per_cache) {
+    const uint32_t per = (uint32_t)b->s->links;
+    if (b->grid_links_per_cache && c >= b->n_texel_caches) {
+        *per_cache = b->grid_links_per_cache;
+        return b->links + (size_t)b->n_caches * per + (size_t)(c - b->n_texel_caches) * b->grid_links_per_cache;
+    }
+    *per_cache = per;
+    return b->links + (size_t)c * per;
+}
+
 /* Links come used-first, padding after; records each cache's count so runtimes can stop
  * early. 1 with err if a used link follows padding. */
 static int bake_link_counts(bake_job *b, char *err, size_t errlen) {
-    const uint32_t per_cache = (uint32_t)b->s->links;
     for (uint32_t c = 0; c < b->n_caches; c++) {
-        const lc_lcb_link *cl = b->links + (size_t)c * per_cache;
+        uint32_t per_cache;
+        const lc_lcb_link *cl = bake_cache_links(b, c, &per_cache);
         uint32_t used = 0;
         while (used < per_cache && cl[used].factor > 0) used++;
         for (uint32_t j = used; j < per_cache; j++)
@@ -657,12 +669,36 @@ static int bake_link_counts(bake_job *b, char *err, size_t errlen) {
     return 0;
 }
 
+/* The cut for every cache; with GLNK, texel caches' rows in LINK and grid caches' in GLNK
+ * (their LINK slots stay padding), the stats as means over all caches. */
+static int bake_link_cuts(bake_job *b, lc_link_params *lp) {
+    if (!b->grid_links_per_cache)
+        return lc_links_build(b->rt, b->surfels, b->n_surfels, &b->hier, b->caches, b->n_caches, lp, b->links,
+                              b->link_sh, &b->ls);
+    const uint32_t n_texel = b->n_texel_caches, n_grid = b->n_caches - n_texel;
+    lc_link_stats ts = {0}, gs = {0};
+    if (lc_links_build(b->rt, b->surfels, b->n_surfels, &b->hier, b->caches, n_texel, lp, b->links, NULL, &ts) != 0)
+        return -1;
+    uint32_t per_cache;
+    lc_lcb_link *grid_rows = bake_cache_links(b, n_texel, &per_cache);
+    lp->links_per_cache = per_cache;
+    if (lc_links_build(b->rt, b->surfels, b->n_surfels, &b->hier, b->caches + n_texel, n_grid, lp, grid_rows, NULL,
+                       &gs) != 0)
+        return -1;
+    b->ls.mean_links_used = (ts.mean_links_used * n_texel + gs.mean_links_used * n_grid) / b->n_caches;
+    b->ls.mean_solid_angle = (ts.mean_solid_angle * n_texel + gs.mean_solid_angle * n_grid) / b->n_caches;
+    b->ls.rays = ts.rays + gs.rays;
+    return 0;
+}
+
 /* Per cache, a cut of the tree by visible solid angle; then, with --exposure, the surfel
  * areas weighed by how many caches see them. */
 static int bake_links(bake_job *b, char *err, size_t errlen) {
     const lc_bake_settings *s = b->s;
     if (s->solver == LC_BAKE_SOLVER_PROBES) return 0; /* no PIC: LINK stays empty, every link_count 0 */
-    b->n_links = (uint64_t)b->n_caches * (uint64_t)s->links;
+    b->grid_links_per_cache = lc_bake_grid_links(s, b->n_caches - b->n_texel_caches);
+    b->n_links = (uint64_t)b->n_caches * (uint64_t)s->links +
+        (uint64_t)(b->n_caches - b->n_texel_caches) * b->grid_links_per_cache;
     if (b->n_links > (1ull << 31) / sizeof(lc_lcb_link)) {
         lc_set_err(err, errlen, "%u caches x %d links is over 2 GiB of links; lower --links or --atlas-size",
                    b->n_caches, s->links);
@@ -687,8 +723,7 @@ static int bake_links(bake_job *b, char *err, size_t errlen) {
         if (!b->seen) return bake_oom(err, errlen);
         lp.surfel_seen = b->seen;
     }
-    if (lc_links_build(b->rt, b->surfels, b->n_surfels, &b->hier, b->caches, b->n_caches, &lp, b->links, b->link_sh,
-                       &b->ls) != 0) {
+    if (bake_link_cuts(b, &lp) != 0) {
         lc_set_err(err, errlen, "link generation failed (out of memory?)");
         return 1;
     }
@@ -883,6 +918,7 @@ static int bake_meta(bake_job *b, char *err, size_t errlen) {
     cJSON_AddNumberToObject(jc, "inside", b->rs.inside);
     cJSON *jk = cJSON_AddObjectToObject(meta, "links");
     cJSON_AddNumberToObject(jk, "per_cache", s->solver == LC_BAKE_SOLVER_PROBES ? 0 : s->links);
+    if (b->grid_links_per_cache) cJSON_AddNumberToObject(jk, "grid_per_cache", b->grid_links_per_cache);
     cJSON_AddNumberToObject(jk, "sh_bands", s->link_sh ? s->bands : 0);
     cJSON_AddNumberToObject(jk, "mean_used", b->ls.mean_links_used);
     cJSON_AddNumberToObject(jk, "mean_solid_angle", b->ls.mean_solid_angle);
@@ -935,7 +971,9 @@ static int bake_add_sections(bake_job *b, char *err, size_t errlen) {
     add_rc |= lc_lcb_writer_add(w, "LMAP", sizeof(uint32_t), b->lm.texel_cache, (uint64_t)b->lm.width * b->lm.height);
     add_rc |= lc_lcb_writer_add(w, "GRID", sizeof(uint32_t), b->cell_cache,
                                 (uint64_t)b->grid.dims[0] * b->grid.dims[1] * b->grid.dims[2]);
-    add_rc |= lc_lcb_writer_add(w, "LINK", sizeof(lc_lcb_link), b->links, b->n_links);
+    const uint64_t n_glnk = (uint64_t)(b->n_caches - b->n_texel_caches) * b->grid_links_per_cache;
+    add_rc |= lc_lcb_writer_add(w, "LINK", sizeof(lc_lcb_link), b->links, b->n_links - n_glnk);
+    if (n_glnk) add_rc |= lc_lcb_writer_add(w, "GLNK", sizeof(lc_lcb_link), b->links + b->n_links - n_glnk, n_glnk);
     if (b->link_sh)
         add_rc |= lc_lcb_writer_add(w, "LKSH", sizeof(uint16_t), b->link_sh, b->n_links * s->bands * s->bands);
     if (b->texel_surfels_first) {

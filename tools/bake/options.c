@@ -84,6 +84,10 @@ static const lc_opt bake_options[] = {
     {"hierarchy", LC_OPT_ENUM, OFF(hierarchy), 0, 0, "aac", "aac|kdtree",
      "surfel hierarchy: agglomerative clustering (PIC metric) or kd-tree", NULL, NULL},
     {"links", LC_OPT_INT, OFF(links), 1, 1024, "128", NULL, "links per cache (n_L)", NULL, NULL},
+    {"grid-links", LC_OPT_INT, OFF(grid_links), 0, 4096, "0", NULL,
+     "links per grid cache, when more than --links (moderate: 256; --link-sh keeps --links): grid "
+     "caches are few, and the SH grid, objects and DNRT read them (bench/fidelity.md)",
+     NULL, NULL},
     {"texel-gather", LC_OPT_ENUM, OFF(texel_gather), 0, 0, "auto", "auto|links|surfels",
      "PIC: how texel caches gather. surfels: each from the surfels its --texel-gather-rays rays hit (a list per "
      "texel; grid caches keep their links); links: through the links; auto: surfels where the probe-ray budget "
@@ -182,15 +186,19 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
      * (docs/ARCHITECTURE.md, Decisions: "Quality presets"). */
     typedef struct {
         int atlas, surfels, links, bands, node_samples, final_samples, probe_rays, grid_max_dim, grid_max_samples,
-            relax, reloc_rays, exposure, probe_ray_budget;
+            relax, reloc_rays, exposure, probe_ray_budget, grid_links;
     } bake_preset;
-    /* Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
+    /* moderate's grid caches get 256 links: twice its cut takes the interiors' SH grid from
+     * 12-15% to 10.4-11.3%; 512 gains another 0.5-1 point but its deep cuts' directional noise
+     * breaks the DNRT closed form (1.1% -> 4.9%), and 1024 is worse on Sponza (bench/fidelity.md,
+     * "Grid caches with their own links"). high and ultra already give every cache 254 / 512.
+     * Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
      * so a cube-shaped room does not get 24^3 grid caches (more than its texel caches). */
     static const bake_preset presets[] = {
-        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0, 0}, /* draft: previews, bake time first */
-        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 1, 1 << 25},
-        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25},
-        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25},
+        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0, 0, 0}, /* draft: previews, bake time first */
+        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 1, 1 << 25, 256},
+        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0},
+        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0},
     };
     const bake_preset *p = &presets[q];
     s->quality = (int)q;
@@ -207,6 +215,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     s->reloc_rays = p->reloc_rays;
     s->exposure = p->exposure;
     s->probe_ray_budget = p->probe_ray_budget;
+    s->grid_links = p->grid_links;
 }
 
 uint32_t lc_bake_probe_rays(const lc_bake_settings *s, uint32_t n_caches) {
@@ -215,6 +224,14 @@ uint32_t lc_bake_probe_rays(const lc_bake_settings *s, uint32_t n_caches) {
     while (rays * 2 <= LC_BAKE_PROBE_RAYS_MAX && (uint64_t)n_caches * rays * 2 <= (uint64_t)s->probe_ray_budget)
         rays *= 2;
     return rays;
+}
+
+uint32_t lc_bake_grid_links(const lc_bake_settings *s, uint32_t n_grid_caches) {
+    /* A cut holds at most the hierarchy's nodes (as --links is checked against): a small scene
+     * under the moderate preset just gets them all. */
+    int grid_links = s->grid_links < 2 * s->surfels - 1 ? s->grid_links : 2 * s->surfels - 1;
+    if (s->solver == LC_BAKE_SOLVER_PROBES || s->link_sh || !n_grid_caches || grid_links <= s->links) return 0;
+    return (uint32_t)grid_links;
 }
 
 uint32_t lc_bake_texel_gather_rays(const lc_bake_settings *s, uint32_t n_texel_caches) {

@@ -42,6 +42,7 @@ typedef struct lc_bake_settings {
     int exposure;         /* surfel areas weighted by how many caches see them (bake/exposure.h) */
     int hierarchy;
     int links;
+    int grid_links;        /* links per grid cache in GLNK when above --links (lc_bake_grid_links) */
     int texel_gather;      /* LC_BAKE_TEXEL_GATHER_*: how PIC's texel caches gather */
     int texel_gather_rays; /* hemisphere rays per texel cache for its surfel list */
     int node_samples;
@@ -88,6 +89,10 @@ enum { LC_BAKE_TEXEL_GATHER_AUTO = 0, LC_BAKE_TEXEL_GATHER_LINKS, LC_BAKE_TEXEL_
 /* Whether texel caches get surfel lists (TSGF/TSGW): surfels, or auto when the probe-ray budget
  * is in force and did not raise the links' rays above --probe-rays (probe_rays: as used). */
 int lc_bake_texel_surfels(const lc_bake_settings *s, uint32_t probe_rays);
+
+/* Links per grid cache in their own section (GLNK), or 0 when grid caches keep --links in LINK
+ * (--grid-links not above --links, --link-sh, the probes solver alone, no grid caches). */
+uint32_t lc_bake_grid_links(const lc_bake_settings *s, uint32_t n_grid_caches);
 
 /* Rays per texel cache for its surfel list: --texel-gather-rays, raised like the links' probe
  * rays (lc_bake_probe_rays) while n_texel_caches x rays stays within --probe-ray-budget. A sunlit

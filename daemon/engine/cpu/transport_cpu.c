@@ -329,7 +329,7 @@ static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
             tcpu_gather_texel_surfels(t, c, job->bands, t->out.cache_sh + (size_t)c * t->coeff_cap * 3);
             continue;
         }
-        const lc_lcb_link *lk = v->links + (size_t)c * nl;
+        const lc_lcb_link *lk = lc_lcb_cache_links(v, c, NULL);
         uint32_t used = v->caches[c].link_count;
         const int bands = (v->caches[c].flags & LC_CACHE_TEXEL) ? job->texel_bands : job->bands;
         const int ncu = bands * bands, ncc = ncc_all < ncu ? ncc_all : ncu;

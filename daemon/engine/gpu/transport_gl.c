@@ -97,6 +97,8 @@ typedef struct tgl {
     GLuint b_surfels, b_nodes, b_links, b_caches, b_lm_index, b_grid_index, b_cone, b_shk, b_list;
     GLuint b_tsg_first, b_tsg;         /* the texel surfel lists (TSGF/TSGW), or one-entry dummies */
     size_t tsg_first_bytes, tsg_bytes; /* ... their sizes as uploaded */
+    GLuint b_grid_links;               /* GLNK link-major (tgl_upload_grid_links), or a one-link dummy */
+    size_t grid_links_bytes;
     uint32_t n_feedback;
     /* Per run: */
     GLuint b_b0, b_radiosity, b_e_ind, b_flux, b_cache_sh, b_sh9, b_lightmap, b_grid_sh, b_obj_pos, b_obj_sh;
@@ -135,11 +137,11 @@ static void tgl_release(void *impl) {
         if (t->dnrt_apply) glDeleteProgram(t->dnrt_apply);
         lc_drt_gl_release(t->drt);
         lc_probes_gl_release(t->probes);
-        GLuint bufs[] = {t->b_surfels,   t->b_nodes,    t->b_links,  t->b_caches,   t->b_lm_index,  t->b_grid_index,
-                         t->b_cone,      t->b_shk,      t->b_list,   t->b_b0,       t->b_radiosity, t->b_e_ind,
-                         t->b_flux,      t->b_cache_sh, t->b_sh9,    t->b_lightmap, t->b_grid_sh,   t->b_obj_pos,
-                         t->b_obj_sh,    t->b_dn_obj,   t->b_dn_inc, t->b_dn_rec,   t->b_dn_list,   t->b_need_list,
-                         t->b_tsg_first, t->b_tsg};
+        GLuint bufs[] = {t->b_surfels,   t->b_nodes,    t->b_links,     t->b_caches,   t->b_lm_index,  t->b_grid_index,
+                         t->b_cone,      t->b_shk,      t->b_list,      t->b_b0,       t->b_radiosity, t->b_e_ind,
+                         t->b_flux,      t->b_cache_sh, t->b_sh9,       t->b_lightmap, t->b_grid_sh,   t->b_obj_pos,
+                         t->b_obj_sh,    t->b_dn_obj,   t->b_dn_inc,    t->b_dn_rec,   t->b_dn_list,   t->b_need_list,
+                         t->b_tsg_first, t->b_tsg,      t->b_grid_links};
         glDeleteBuffers((GLsizei)(sizeof bufs / sizeof bufs[0]), bufs); /* 0 names are ignored */
         if (t->queries[0]) glDeleteQueries(TGL_MAX_STAMPS, t->queries);
         lc_gl_staging_release(&t->staging);
@@ -364,10 +366,37 @@ static int tgl_upload_texel_surfels(tgl *t, char *err, size_t errlen) {
     return t->b_tsg ? 0 : -1;
 }
 
-/* The links (tgl_upload_links), the lightmap and grid indices and the cone table. */
+/* GLNK link-major over the grid caches (link k of grid cache g at k * n_grid + g, as the
+ * windows' links), bound whole; a bake without it gets a one-link dummy, never read. */
+static int tgl_upload_grid_links(tgl *t, char *err, size_t errlen) {
+    const lc_lcb_view *v = t->v;
+    static const lc_lcb_link none = {0, 0, 0};
+    const size_t n_grid = v->n_caches - v->n_texel_caches, per = v->grid_links_per_cache;
+    const size_t n = v->grid_links ? n_grid * per : 0;
+    t->grid_links_bytes = n ? n * sizeof(lc_lcb_link) : sizeof none;
+    if (t->grid_links_bytes > t->bind_limit) {
+        lc_set_err(err, errlen,
+                   "egl transport: %zu grid-cache links are over one binding (%zu bytes); rebake with fewer "
+                   "--grid-links",
+                   n, t->bind_limit);
+        return -1;
+    }
+    lc_lcb_link *tmp = n ? malloc(t->grid_links_bytes) : NULL;
+    if (n && !tmp) {
+        lc_set_err(err, errlen, "out of memory");
+        return -1;
+    }
+    for (size_t g = 0; g < n_grid && n; g++)
+        for (size_t k = 0; k < per; k++) tmp[k * n_grid + g] = v->grid_links[g * per + k];
+    t->b_grid_links = lc_gl_buffer(t->grid_links_bytes, n ? (const void *)tmp : &none, "grid links", err, errlen);
+    free(tmp);
+    return t->b_grid_links ? 0 : -1;
+}
+
+/* The links (tgl_upload_links and tgl_upload_grid_links), the lightmap and grid indices and the cone table. */
 static int tgl_upload_tables(tgl *t, char *err, size_t errlen) {
     const lc_lcb_view *v = t->v;
-    if (tgl_upload_links(t, err, errlen) != 0) return -1;
+    if (tgl_upload_links(t, err, errlen) != 0 || tgl_upload_grid_links(t, err, errlen) != 0) return -1;
     if (!(t->b_lm_index = lc_gl_buffer(t->texels * 4, v->lightmap, "lightmap index", err, errlen))) return -1;
     if (!(t->b_grid_index = lc_gl_buffer((size_t)t->cells * 4, v->grid, "grid index", err, errlen))) return -1;
     float cone[256][8];
@@ -557,6 +586,8 @@ static void tgl_gather_setup(tgl *t, GLuint gather, const lc_engine_settings *st
     lc_gl_bind(10, t->b_radiosity, 0, (size_t)v->n_surfels * 12);
     glProgramUniform1i(gather, 7, lc_transport_texel_surfels(v, st));
     glProgramUniform1ui(gather, 8, v->n_texel_caches);
+    lc_gl_bind(11, t->b_grid_links, 0, t->grid_links_bytes);
+    glProgramUniform1ui(gather, 9, v->grid_links ? v->n_caches - v->n_texel_caches : 0);
 }
 
 /* The caches in `list` (n of them; one window only). */

@@ -550,12 +550,21 @@ static void test_cornell(const char *quality, int runs) {
 /* Texel caches gathered per surfel (--texel-gather surfels: TSGF/TSGW, gather.comp's
  * texel_from_surfels) against the CPU: 3 and 1 bands, a DNRT cube, progressive, and in
  * 256 KiB windows. */
+/* Texel caches from their surfel lists and grid caches from their own, longer rows of links
+ * (GLNK): the same light on both backends. */
 static void test_cornell_texel_surfels(void) {
-    const char *flags[] = {"--quality", "draft", "--texel-gather", "surfels", "--texel-gather-rays", "64", NULL};
+    const char *flags[] = {
+        "--quality", "draft", "--texel-gather", "surfels", "--texel-gather-rays", "64", "--grid-links", "160", NULL};
     fixture f;
     if (cornell_fixture(&f, flags) != 0) return;
     CHECK(f.v->texel_surfels_first && f.v->texel_surfels_first[f.v->n_texel_caches] > 0,
           "texel surfels: the bake has list entries");
+    uint32_t longest = 0;
+    for (uint32_t c = f.v->n_texel_caches; c < f.v->n_caches; c++)
+        longest = f.v->caches[c].link_count > longest ? f.v->caches[c].link_count : longest;
+    CHECK(f.v->grid_links && f.v->grid_links_per_cache == 160 && longest > f.v->links_per_cache,
+          "grid links: GLNK with 160 per grid cache, some grid cache using more than LINK's %u (longest %u)",
+          f.v->links_per_cache, longest);
     lc_engine_object obj = {.asset = 0, .scale = {1.5f, 1.5f, 1.5f}, .rotation = {0, 0, 0, 1}, .visible = 1};
     snprintf(obj.id, sizeof obj.id, "cube");
     obj.translation[0] = 0.3f, obj.translation[2] = 0.3f;

@@ -361,9 +361,56 @@ static void test_closed_box_texel_surfels(void) {
     fixture_release(&f);
 }
 
+/* Grid caches with their own rows of links (--grid-links, GLNK): in the closed box every
+ * interior grid sample still reads pi L_e / (1 - rho); the grid caches' LINK slots are padding
+ * and some grid cache uses more links than LINK's row holds. */
+static void test_closed_box_grid_links(void) {
+    const char *extra[] = {"--grid-links", getenv("GL") ? getenv("GL") : "480", NULL};
+    fixture f;
+    if (closed_box_bake(&f, extra) != 0) return;
+    const lc_lcb_view *v = f.v;
+    CHECK(v->grid_links && v->grid_links_per_cache == 480, "the bake has GLNK with 480 links per grid cache");
+    uint32_t longest = 0, link_slots_used = 0;
+    for (uint32_t c = v->n_texel_caches; c < v->n_caches; c++) {
+        longest = v->caches[c].link_count > longest ? v->caches[c].link_count : longest;
+        for (uint32_t k = 0; k < v->links_per_cache; k++)
+            link_slots_used += v->links[(size_t)c * v->links_per_cache + k].factor != 0;
+    }
+    CHECK(longest > v->links_per_cache && link_slots_used == 0,
+          "grid caches: longest row %u (LINK holds %u), %u used LINK slots (want 0)", longest, v->links_per_cache,
+          link_slots_used);
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f.bake);
+    st.settings.bounces = 10;
+    st.settings.progressive = 0;
+    const lc_engine_frame *fr;
+    char err[256];
+    CHECK(lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0, "relight: %s", err);
+    const double expect = M_PI * 1.0 / (1.0 - 0.5);
+    double gsum = 0, worst = 0;
+    int ng = 0;
+    for (uint32_t i = 0; fr && i < fr->grid_dims[0] * fr->grid_dims[1] * fr->grid_dims[2]; i++) {
+        uint32_t c = v->grid[i];
+        const float *p = v->caches[c].position;
+        if (v->caches[c].flags & LC_CACHE_INSIDE) continue;
+        if (p[0] < 0.1f || p[0] > 0.9f || p[1] < 0.1f || p[1] > 0.9f || p[2] < 0.1f || p[2] > 0.9f) continue;
+        const float *g = fr->grid_sh + 27 * (size_t)i; /* irradiance for +y */
+        double e = g[1] * 0.282094791774 + g[2 * 3 + 1] * 0.488602511903 + g[6 * 3 + 1] * 0.315391565253 * 2.0;
+        gsum += e;
+        worst = fmax(worst, fabs(e / expect - 1));
+        ng++;
+    }
+    fprintf(stderr, "GRIDDBG %d %.5f %.4f\n", ng, gsum / ng / expect, worst);
+    CHECK(ng > 0 && fabs(gsum / ng / expect - 1) < 0.02 && worst < 0.04,
+          "grid links: %d interior samples, mean irradiance %.4f (worst %.1f%%), expected %.4f", ng,
+          ng ? gsum / ng : 0.0, worst * 100, expect);
+    fixture_release(&f);
+}
+
 int main(void) {
     test_closed_box();
     test_closed_box_texel_surfels();
+    test_closed_box_grid_links();
     test_patch_form_factor();
     test_lights_and_occlusion();
     CHECK_DONE();

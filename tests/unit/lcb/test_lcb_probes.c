@@ -40,6 +40,8 @@ enum {
     N_U = 5,      /* cluster 0: 1 row x rank 1; cluster 1: 2 rows x rank 2 */
     N_UNSEEN = 3, /* PRUS: row 0 two surfels, row 1 none, row 2 one */
     N_TSG = 4,    /* TSGW: texel 0 two surfels, 1 none, 2 and 3 one each, 4 none */
+    GRID_PER = 4, /* GLNK: links per grid cache (bake_use_grid_links), 3 used */
+    N_GLNK = N_CELL * GRID_PER,
     N_PROBE_SECS = 8
 };
 
@@ -70,7 +72,10 @@ typedef struct bake {
     uint32_t tsgf[N_TEXEL + 1];
     lc_lcb_surfel_weight tsgw[N_TSG];
     uint64_t n_tsgf, n_tsgw;
-    int tsg;         /* bit 0: write TSGF, bit 1: TSGW (0 by default: a bake gathering by links) */
+    int tsg; /* bit 0: write TSGF, bit 1: TSGW (0 by default: a bake gathering by links) */
+    lc_lcb_link glnk[N_GLNK];
+    uint64_t n_glnk;
+    int glnk_parts;  /* bit 0: write GLNK, bit 1: META /links/grid_per_cache (bake_use_grid_links) */
     uint64_t n_link; /* LINK records as written */
     int with_probes;
     int skip_probe;               /* index into probe_order to leave out, or -1 */
@@ -81,7 +86,7 @@ typedef struct bake {
 static const char *const probe_order[N_PROBE_SECS] = {"PRBH", "PRBP", "PRBR", "PRCL", "PRCP", "PRCB", "PRRW", "PRRU"};
 static char tmpdir[256];
 
-static char *bake_meta(int per_cache) {
+static char *bake_meta(int per_cache, int grid_per_cache) {
     cJSON *m = cJSON_CreateObject();
     cJSON_AddStringToObject(m, "format", "lucent-bake");
     cJSON_AddStringToObject(m, "source", "tests/quad.obj");
@@ -106,6 +111,7 @@ static char *bake_meta(int per_cache) {
     cJSON_AddNumberToObject(c, "texel", N_TEXEL);
     cJSON *l = cJSON_AddObjectToObject(m, "links");
     cJSON_AddNumberToObject(l, "per_cache", per_cache);
+    if (grid_per_cache >= 0) cJSON_AddNumberToObject(l, "grid_per_cache", grid_per_cache);
     cJSON_AddNumberToObject(l, "sh_bands", 0);
     char *text = cJSON_PrintUnformatted(m);
     cJSON_Delete(m);
@@ -230,7 +236,25 @@ static void bake_init(bake *b) {
     b->n_link = N_LINK;
     bake_init_scene(b);
     bake_init_probes(b);
-    b->meta = bake_meta(PER_CACHE);
+    b->meta = bake_meta(PER_CACHE, -1);
+}
+
+/* Grid caches with their own rows (GLNK, GRID_PER each, 3 used) and padding LINK slots;
+ * META says so unless what & 2 is clear, GLNK is written unless what & 1 is. */
+static void bake_use_grid_links(bake *b, int what) {
+    float dir[3] = {0, 0.6f, 0.8f};
+    for (int g = 0; g < N_CELL; g++) {
+        uint32_t c = N_TEXEL + (uint32_t)g;
+        memset(&b->link[c * PER_CACHE], 0, PER_CACHE * sizeof b->link[0]);
+        for (int k = 0; k < 3; k++)
+            b->glnk[g * GRID_PER + k] =
+                (lc_lcb_link){(uint32_t)((g + k) % N_NODE), 0.05f * (float)(k + 1), lc_link_pack(dir, 0.2f)};
+        b->cache[c].link_count = 3;
+    }
+    b->n_glnk = N_GLNK;
+    b->glnk_parts = what;
+    free(b->meta);
+    b->meta = bake_meta(PER_CACHE, what & 2 ? GRID_PER : -1);
 }
 
 static void bake_free(bake *b) {
@@ -268,6 +292,7 @@ static int bake_write(const bake *b, const char *path, char *err, size_t errlen)
         {"PRUS", sizeof(lc_lcb_probe_unseen), b->prus, b->n_prus},
         {"TSGF", 4, b->tsgf, b->n_tsgf},
         {"TSGW", sizeof(lc_lcb_surfel_weight), b->tsgw, b->n_tsgw},
+        {"GLNK", sizeof(lc_lcb_link), b->glnk, b->n_glnk},
     };
     const int first_probe = 11;
     lc_lcb_writer *w = lc_lcb_writer_create();
@@ -276,6 +301,7 @@ static int bake_write(const bake *b, const char *path, char *err, size_t errlen)
     for (int i = 0; i < (int)(sizeof s / sizeof s[0]); i++) {
         int unseen_bit = !strcmp(s[i].id, "PRUF") ? 1 : !strcmp(s[i].id, "PRUS") ? 2 : 0;
         int tsg_bit = !strcmp(s[i].id, "TSGF") ? 1 : !strcmp(s[i].id, "TSGW") ? 2 : 0;
+        if (!strcmp(s[i].id, "GLNK") && !(b->glnk_parts & 1)) continue;
         if (tsg_bit          ? !(b->tsg & tsg_bit)
                 : unseen_bit ? !(b->unseen & unseen_bit)
                              : i >= first_probe && (!b->with_probes || i - first_probe == b->skip_probe))
@@ -433,7 +459,7 @@ static void test_probes_only(void) {
     bake b;
     bake_init(&b);
     free(b.meta);
-    b.meta = bake_meta(0);
+    b.meta = bake_meta(0, -1);
     b.n_link = 0;
     for (int c = 0; c < N_CACHE; c++) b.cache[c].link_count = 0;
     size_t len = 0;
@@ -574,6 +600,50 @@ static void test_texel_surfels(void) {
     CASE("TSGW weight NaN", (b.tsg = 3, b.tsgw[1].weight = NAN), "TSGW", "entry 1 weight is not finite");
 }
 
+/* GLNK (--grid-links): grid caches' rows read back, lc_lcb_cache_links picks them; GLNK and
+ * /links/grid_per_cache together, rows padded after link_count, the grid caches' LINK slots
+ * all padding. */
+static void test_grid_links(void) {
+    bake b;
+    char err[512] = "";
+    bake_init(&b);
+    bake_use_grid_links(&b, 3);
+    size_t len = 0;
+    uint8_t *buf = bake_bytes(&b, &len);
+    lc_lcb *f = NULL;
+    CHECK(buf && lc_lcb_open_memory(buf, len, &f, err, sizeof err) == 0, "open with grid links: %s", err);
+    if (f) {
+        const lc_lcb_view *v = lc_lcb_get(f);
+        uint32_t per = 0;
+        const lc_lcb_link *row = lc_lcb_cache_links(v, N_TEXEL + 2, &per);
+        const lc_lcb_link *texel_row = lc_lcb_cache_links(v, 1, NULL);
+        CHECK(v->grid_links && v->grid_links_per_cache == GRID_PER && memcmp(v->grid_links, b.glnk, sizeof b.glnk) == 0,
+              "GLNK differs as read");
+        CHECK(row == v->grid_links + 2 * GRID_PER && per == GRID_PER && texel_row == v->links + PER_CACHE,
+              "lc_lcb_cache_links: a grid cache's row in GLNK, a texel cache's in LINK");
+        char *info = info_text(f, 1);
+        CHECK(info && strstr(info, "\"grid_links_per_cache\":\t4"), "info JSON: grid_links_per_cache (%s)", info);
+        free(info);
+        lc_lcb_close(f);
+    }
+    free(buf);
+    bake_free(&b);
+    CASE("GLNK without META", bake_use_grid_links(&b, 1), "GLNK", "META has no /links/grid_per_cache");
+    CASE("META without GLNK", bake_use_grid_links(&b, 2), "GLNK", "required section missing");
+    CASE("grid_per_cache 0", (bake_use_grid_links(&b, 3), free(b.meta), b.meta = bake_meta(PER_CACHE, 0)), "META",
+         "/links/grid_per_cache must be an integer in 1..4096");
+    CASE("GLNK one short", (bake_use_grid_links(&b, 3), b.n_glnk = N_GLNK - 1), "GLNK",
+         "31 links, but META (/caches/count - /caches/texel) x /links/grid_per_cache is 32");
+    CASE("GLNK node", (bake_use_grid_links(&b, 3), b.glnk[5].node = N_NODE), "GLNK", "link 5 has node 7 (of 7)");
+    CASE("GLNK factor NaN", (bake_use_grid_links(&b, 3), b.glnk[1].factor = NAN), "GLNK", "link 1 has node");
+    CASE("GLNK past link_count", (bake_use_grid_links(&b, 3), b.glnk[GRID_PER + 3].factor = 0.5f), "GLNK",
+         "cache 6 slot 3 lies past its link_count 3");
+    CASE("grid link_count", (bake_use_grid_links(&b, 3), b.cache[N_TEXEL].link_count = GRID_PER + 1), "CACH",
+         "cache 5 has link_count 5 > /links/grid_per_cache 4");
+    CASE("grid cache LINK slot", (bake_use_grid_links(&b, 3), b.link[(N_TEXEL + 1) * PER_CACHE + 1].factor = 0.1f),
+         "LINK", "grid cache 6 slot 1 is not padding");
+}
+
 static void test_clusters(void) {
     bake b;
     CASE("first cluster not at row 0", b.prcl[0].first_row = 1, "PRCL", "cluster 0 first_row 1, expected 0");
@@ -672,6 +742,7 @@ int main(void) {
     test_arrays();
     test_unseen();
     test_texel_surfels();
+    test_grid_links();
     test_clusters();
     test_robustness();
     const char *corpus = getenv("LUCENT_WRITE_CORPUS");
