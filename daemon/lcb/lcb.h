@@ -28,6 +28,7 @@
  *   GLNK  lc_lcb_link          optional (--grid-links): META /links/grid_per_cache links per grid
  *                              cache, grid-cache-major; grid caches then gather from these (their
  *                              link_count counts them) and their LINK slots are all padding
+ *                              (a reader without GLNK refuses it where link_count > per_cache)
  *   ASET  lc_lcb_asset         dynamic-object assets
  *   AVRT  lc_lcb_asset_vertex  asset vertices (asset-local, metres)
  *   AIDX  uint32_t[3]          asset triangles (indices relative to the asset's first vertex)

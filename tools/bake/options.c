@@ -189,7 +189,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
             relax, reloc_rays, exposure, probe_ray_budget, grid_links;
     } bake_preset;
     /* moderate's grid caches get 256 links: twice its cut takes the interiors' SH grid from
-     * 12-15% to 10.4-11.3%; 512 gains another 0.5-1 point but its deep cuts' directional noise
+     * 11.8-15% to 10.4-11.3%; 512 gains another 0.5-1 point but its deep cuts' directional noise
      * breaks the DNRT closed form (1.1% -> 4.9%), and 1024 is worse on Sponza (bench/fidelity.md,
      * "Grid caches with their own links"). high and ultra already give every cache 254 / 512.
      * Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
