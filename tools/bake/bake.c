@@ -312,8 +312,9 @@ static const char *bake_light_type_name(lc_light_type t) {
 /* Buried surfels: a surfel whose hemisphere mostly sees back faces lies inside closed
  * geometry (the floor under a column base, faces covered by other faces). No cache can see
  * it and no light reaches it, but in the hierarchy it shares nodes with visible surfels, so
- * it pulls every node average down (docs/ARCHITECTURE.md, Decisions). Opt-in (--drop-buried):
- * fewer surfels than --surfels remain. BAKE_BURIED_RAYS fixed directions (a spherical
+ * it pulls every node average down, and a texel list gives it the hits beside the column
+ * (docs/ARCHITECTURE.md, Decisions). --drop-buried, on past draft: fewer surfels than
+ * --surfels remain. BAKE_BURIED_RAYS fixed directions (a spherical
  * Fibonacci hemisphere in the surfel's frame): deterministic for any thread count. */
 #define BAKE_BURIED_RAYS 32u
 #define BAKE_BURIED_FRACTION 0.5f

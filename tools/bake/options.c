@@ -74,7 +74,9 @@ static const lc_opt bake_options[] = {
     {"surfels", LC_OPT_INT, OFF(surfels), 16, 4194304, "32768", NULL, "number of surfels", NULL, NULL},
     {"relax", LC_OPT_INT, OFF(relax), 0, 64, "4", NULL, "surfel relaxation iterations", NULL, NULL},
     {"drop-buried", LC_OPT_BOOL, OFF(drop_buried), 0, 1, "false", NULL,
-     "drop surfels inside geometry (fewer than --surfels remain)", NULL, NULL},
+     "drop surfels inside geometry (fewer than --surfels remain; on in moderate, high and ultra: a hit beside a "
+     "column base is otherwise given the dark buried surfel under it)",
+     NULL, NULL},
     {"surfel-refine", LC_OPT_FLOAT, OFF(surfel_refine), 0, 0.75, "0", NULL,
      "share of --surfels placed where caches see surfaces without a surfel of their own; surfel areas then follow "
      "the surface each covers (see bake/surfel_refine.h)",
@@ -186,19 +188,22 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
      * (docs/ARCHITECTURE.md, Decisions: "Quality presets"). */
     typedef struct {
         int atlas, surfels, links, bands, node_samples, final_samples, probe_rays, grid_max_dim, grid_max_samples,
-            relax, reloc_rays, exposure, probe_ray_budget, grid_links;
+            relax, reloc_rays, exposure, probe_ray_budget, grid_links, drop_buried;
     } bake_preset;
-    /* moderate's grid caches get 256 links: twice its cut takes the interiors' SH grid from
+    /* Buried surfels dropped past draft: with the texel lists (each hit given its nearest
+     * surfel) they took 0.4-1.1 points of mean error and 0.7-2.7 of dark bias on the interiors
+     * (bench/fidelity.md, "Buried surfels dropped by default").
+     * moderate's grid caches get 256 links: twice its cut takes the interiors' SH grid from
      * 11.8-15% to 10.4-11.3%; 512 gains another 0.5-1 point but its deep cuts' directional noise
      * breaks the DNRT closed form (1.1% -> 4.9%), and 1024 is worse on Sponza (bench/fidelity.md,
      * "Grid caches with their own links"). high and ultra already give every cache 254 / 512.
      * Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
      * so a cube-shaped room does not get 24^3 grid caches (more than its texel caches). */
     static const bake_preset presets[] = {
-        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0, 0, 0}, /* draft: previews, bake time first */
-        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 1, 1 << 25, 256},
-        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0},
-        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0},
+        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0, 0, 0, 0}, /* draft: previews, bake time first */
+        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 1, 1 << 25, 256, 1},
+        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0, 1},
+        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0, 1},
     };
     const bake_preset *p = &presets[q];
     s->quality = (int)q;
@@ -216,6 +221,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     s->exposure = p->exposure;
     s->probe_ray_budget = p->probe_ray_budget;
     s->grid_links = p->grid_links;
+    s->drop_buried = p->drop_buried;
 }
 
 uint32_t lc_bake_probe_rays(const lc_bake_settings *s, uint32_t n_caches) {

@@ -716,7 +716,7 @@ static void test_robustness(void) {
 static void write_corpus(const char *dir) {
     bake b;
     bake_init(&b);
-    b.tsg = 3; /* the texel surfel lists too */
+    b.tsg = 3;                  /* the texel surfel lists too */
     bake_use_grid_links(&b, 3); /* and the grid caches' own links */
     size_t len = 0;
     uint8_t *buf = bake_bytes(&b, &len);
