@@ -596,8 +596,11 @@ static int bake_relocate(bake_job *b, char *err, size_t errlen) {
 
 static int bake_surfels(bake_job *b, char *err, size_t errlen) {
     const lc_bake_settings *s = b->s;
-    const uint32_t extra = (uint32_t)floor(s->surfel_refine * s->surfels);
-    lc_surfel_params sp = {.target_count = (uint32_t)s->surfels - extra,
+    const uint32_t share = (uint32_t)floor(s->surfel_refine * s->surfels);
+    /* The caches are placed, so whether the texel caches will gather per surfel is known. */
+    const int lists = lc_bake_texel_surfels(s, lc_bake_probe_rays(s, b->n_caches));
+    const uint32_t extra = share + (lists ? (uint32_t)floor(s->list_refine * s->surfels) : 0);
+    lc_surfel_params sp = {.target_count = (uint32_t)s->surfels - share,
                            .relax_iterations = (uint32_t)s->relax,
                            .seed = (uint64_t)s->seed,
                            .threads = s->threads};

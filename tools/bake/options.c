@@ -81,6 +81,10 @@ static const lc_opt bake_options[] = {
      "share of --surfels placed where caches see surfaces without a surfel of their own; surfel areas then follow "
      "the surface each covers (see bake/surfel_refine.h)",
      NULL, NULL},
+    {"list-refine", LC_OPT_FLOAT, OFF(list_refine), 0, 1, "0", NULL,
+     "when texel caches gather per surfel (--texel-gather), add this x --surfels surfels by refinement on top "
+     "(moderate: 0.25; a hit is given to its nearest surfel, so a surface without its own reads another's light)",
+     NULL, NULL},
     {"exposure", LC_OPT_BOOL, OFF(exposure), 0, 1, "false", NULL,
      "weigh surfels by how many caches see them (see bake/exposure.h; on in moderate, high and ultra)", NULL, NULL},
     {"hierarchy", LC_OPT_ENUM, OFF(hierarchy), 0, 0, "aac", "aac|kdtree",
@@ -189,6 +193,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     typedef struct {
         int atlas, surfels, links, bands, node_samples, final_samples, probe_rays, grid_max_dim, grid_max_samples,
             relax, reloc_rays, exposure, probe_ray_budget, grid_links, drop_buried;
+        double list_refine;
     } bake_preset;
     /* Buried surfels dropped past draft: with the texel lists (each hit given its nearest
      * surfel) they took 0.4-1.1 points of mean error and 0.7-2.7 of dark bias on the interiors
@@ -197,13 +202,18 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
      * 11.8-15% to 10.4-11.3%; 512 gains another 0.5-1 point but its deep cuts' directional noise
      * breaks the DNRT closed form (1.1% -> 4.9%), and 1024 is worse on Sponza (bench/fidelity.md,
      * "Grid caches with their own links"). high and ultra already give every cache 254 / 512.
+     * moderate's texel lists get a quarter more surfels, placed by refinement where the caches
+     * see a surface without its own: Sponza's bias -6.4% -> -4.9% at +1.5% relight time; not
+     * as a share of the equal-area budget (that starves the large surfaces: grid 11.5 -> 13.1%),
+     * nor with links (Cornell's bias -1.8 -> -2.0%) (bench/fidelity.md, "Refined surfels for
+     * the texel lists"). high and ultra are unchanged (not measured with it).
      * Grid: 24 samples along the longest axis as the paper's Sponza grid (24x8x12), capped
      * so a cube-shaped room does not get 24^3 grid caches (more than its texel caches). */
     static const bake_preset presets[] = {
-        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0, 0, 0, 0}, /* draft: previews, bake time first */
-        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 1, 1 << 25, 256, 1},
-        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0, 1},
-        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0, 1},
+        {64, 8192, 64, 2, 4, 8, 256, 16, 1024, 2, 16, 0, 0, 0, 0, 0}, /* draft: previews, bake time first */
+        {128, 32768, 128, 3, 16, 32, 1024, 24, 4096, 4, 32, 1, 1 << 25, 256, 1, 0.25},
+        {128, 131072, 254, 4, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0, 1, 0},
+        {128, 131072, 512, 3, 16, 32, 2048, 24, 8192, 4, 32, 1, 1 << 25, 0, 1, 0},
     };
     const bake_preset *p = &presets[q];
     s->quality = (int)q;
@@ -222,6 +232,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
     s->probe_ray_budget = p->probe_ray_budget;
     s->grid_links = p->grid_links;
     s->drop_buried = p->drop_buried;
+    s->list_refine = p->list_refine;
 }
 
 uint32_t lc_bake_probe_rays(const lc_bake_settings *s, uint32_t n_caches) {

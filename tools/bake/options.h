@@ -39,6 +39,7 @@ typedef struct lc_bake_settings {
     int relax;
     int drop_buried;      /* drop surfels inside geometry (changes the surfel count) */
     double surfel_refine; /* share of the surfels placed by bake/surfel_refine.h (0 = equal-area only) */
+    double list_refine;   /* with texel surfel lists: this x --surfels more, placed by refinement */
     int exposure;         /* surfel areas weighted by how many caches see them (bake/exposure.h) */
     int hierarchy;
     int links;

@@ -1,7 +1,8 @@
 /* --surfel-refine end to end: the Cornell box baked with a quarter of its surfels refined keeps
  * the surfel count and the surface area, records the refined surfels in META (the rest of the
  * quarter goes by area), and its surfel areas follow the surface each covers; the equal-area
- * bake records none. */
+ * bake records none. --list-refine adds its surfels on top, only when the texel caches gather
+ * per surfel. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -16,8 +17,10 @@
 
 static char tmp[64];
 
-/* Bakes the Cornell box (draft, 2048 surfels) into tmp/NAME with --surfel-refine refine. */
-static int bake(const char *name, const char *refine, char *out, size_t cap) {
+/* Bakes the Cornell box (draft, 2048 surfels) into tmp/NAME with --surfel-refine refine,
+ * --list-refine list_refine and --texel-gather gather. */
+static int bake(const char *name, const char *refine, const char *list_refine, const char *gather, char *out,
+                size_t cap) {
     char src[512];
     snprintf(out, cap, "%s/%s", tmp, name);
     char *argv[] = {"lucent-bake",
@@ -37,7 +40,11 @@ static int bake(const char *name, const char *refine, char *out, size_t cap) {
                     "0",
                     "--no-transfer",
                     "--surfel-refine",
-                    (char *)refine};
+                    (char *)refine,
+                    "--list-refine",
+                    (char *)list_refine,
+                    "--texel-gather",
+                    (char *)gather};
     static lc_bake_settings s;
     char err[512] = "", *pos[2];
     if (lc_bake_parse_args(&s, (int)(sizeof argv / sizeof *argv), argv, 2, pos, 2, err, sizeof err) != 1) {
@@ -83,10 +90,16 @@ int main(void) {
     if (!mkdtemp(tmp)) return 1;
     char plain_path[128], refined_path[128];
     surfel_summary plain, refined;
-    CHECK(bake("plain.lcb", "0", plain_path, sizeof plain_path) == 0 &&
-              bake("refined.lcb", "0.25", refined_path, sizeof refined_path) == 0,
+    char lists_path[128], links_path[128];
+    surfel_summary lists, links;
+    CHECK(bake("plain.lcb", "0", "0", "links", plain_path, sizeof plain_path) == 0 &&
+              bake("refined.lcb", "0.25", "0", "links", refined_path, sizeof refined_path) == 0 &&
+              bake("lists.lcb", "0", "0.25", "surfels", lists_path, sizeof lists_path) == 0 &&
+              bake("links.lcb", "0", "0.25", "links", links_path, sizeof links_path) == 0,
           "bakes");
-    CHECK(summarise(plain_path, &plain) == 0 && summarise(refined_path, &refined) == 0, "read back");
+    CHECK(summarise(plain_path, &plain) == 0 && summarise(refined_path, &refined) == 0 &&
+              summarise(lists_path, &lists) == 0 && summarise(links_path, &links) == 0,
+          "read back");
     fprintf(stderr, "plain: %u surfels, area %.4f; refined: %u surfels (%g refined), area %.4f, %.4f-%.4f\n", plain.n,
             plain.area_sum, refined.n, refined.refined, refined.area_sum, refined.area_min, refined.area_max);
     CHECK(plain.refined == 0 && plain.area_max == plain.area_min, "equal-area bake: equal areas, none refined");
@@ -97,6 +110,17 @@ int main(void) {
     CHECK(fabs(refined.area_sum - plain.area_sum) < 1e-4 * plain.area_sum, "the surface area kept (%.6f vs %.6f)",
           refined.area_sum, plain.area_sum);
     CHECK(refined.area_max > refined.area_min, "areas follow the surface each surfel covers");
+    /* --list-refine: a quarter more surfels, on top of the equal-area 2048, with texel lists only */
+    fprintf(stderr, "lists: %u surfels (%g refined), area %.4f; links: %u surfels (%g refined)\n", lists.n,
+            lists.refined, lists.area_sum, links.n, links.refined);
+    CHECK(lists.n == 2048 + 512 && lists.refined <= 512 && lists.area_max > lists.area_min,
+          "texel lists: 2048 + 512 surfels, unequal areas (%u, %g refined)", lists.n, lists.refined);
+    CHECK(fabs(lists.area_sum - plain.area_sum) < 1e-4 * plain.area_sum, "the surface area kept (%.6f vs %.6f)",
+          lists.area_sum, plain.area_sum);
+    CHECK(links.n == 2048 && links.refined == 0 && links.area_max == links.area_min,
+          "links: --list-refine adds nothing (%u, %g refined)", links.n, links.refined);
+    unlink(lists_path);
+    unlink(links_path);
     unlink(plain_path);
     unlink(refined_path);
     rmdir(tmp);

@@ -35,12 +35,13 @@ int main(void) {
     s.probe_ray_budget = 1 << 25;
     s.probe_rays = 0;
     CHECK(lc_bake_probe_rays(&s, 100) == 0, "--probe-rays 0 (surfel sampling only) stays 0");
+    CHECK(s.list_refine == 0.25, "moderate: texel lists get a quarter more surfels by refinement (%g)", s.list_refine);
     const char *draft[] = {"scene.obj", "--quality", "draft"};
     CHECK(parse(&s, draft, 3) == 1 && s.probe_rays == 256 && s.probe_ray_budget == 0 && !s.exposure,
           "draft: 256 probe rays exactly, no exposure (previews: bake time first)");
     const char *high[] = {"scene.obj", "--quality", "high"};
     CHECK(parse(&s, high, 3) == 1, "high");
-    CHECK(s.surfels == 131072 && s.links == 254 && s.bands == 4 && s.exposure, "high preset");
+    CHECK(s.surfels == 131072 && s.links == 254 && s.bands == 4 && s.exposure && s.list_refine == 0, "high preset");
     const char *ultra[] = {"scene.obj", "--quality", "ultra"};
     CHECK(parse(&s, ultra, 3) == 1, "ultra");
     CHECK(s.quality == LC_QUALITY_ULTRA && s.surfels == 131072 && s.links == 512 && s.bands == 3 && s.exposure &&
