@@ -203,7 +203,7 @@ void lc_bake_apply_preset(lc_bake_settings *s, lc_bake_quality q) {
      * breaks the DNRT closed form (1.1% -> 4.9%), and 1024 is worse on Sponza (bench/fidelity.md,
      * "Grid caches with their own links"). high and ultra already give every cache 254 / 512.
      * moderate's texel lists get a quarter more surfels, placed by refinement where the caches
-     * see a surface without its own: Sponza's bias -6.4% -> -4.9% at +1.5% relight time; not
+     * see a surface without its own: Sponza's bias -6.4% -> -4.9%, its relight unchanged; not
      * as a share of the equal-area budget (that starves the large surfaces: grid 11.5 -> 13.1%),
      * nor with links (Cornell's bias -1.8 -> -2.0%) (bench/fidelity.md, "Refined surfels for
      * the texel lists"). high and ultra are unchanged (not measured with it).
