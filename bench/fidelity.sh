@@ -163,8 +163,9 @@ EOF
   converge_row sponza-served "$tmp/sponza.lcb" "$work/sponza-reference/reference_texels.bin" \
     '{"type": "light.set", "light": {"id": "sun", "type": "directional", "color": [1, 0.95, 0.9], "intensity": 100000, "direction": [0.4136, -0.8678, 0.2757]}}' \
     "$tmp/sun.json" || echo "fidelity: sponza-served convergence failed" >&2
-  for v in "surfels=65536:--surfels 65536" "surfels=131072:--surfels 131072" "links=512:--links 512" "exposure:--exposure" \
-           "links=256:--links 256" "high:--quality high" "ultra:--quality ultra"; do
+  for v in "list-refine=0:--list-refine 0" "surfels=65536:--surfels 65536" "surfels=131072:--surfels 131072" \
+           "links=512:--links 512" "exposure:--exposure" "links=256:--links 256" "high:--quality high" \
+           "ultra:--quality ultra"; do
     name="${v%%:*}"; flags="${v#*:}"
     echo "fidelity: sponza $name..." >&2
     # shellcheck disable=SC2086
