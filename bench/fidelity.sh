@@ -15,6 +15,8 @@
 # Usage: bench/fidelity.sh BUILD_DIR [OUT_JSON]   (default OUT_JSON: bench/out/fidelity.json)
 # Environment: CORNELL_SPP (8192), SPONZA_SPP (8192), OTHER_SPP (4096: sibenik, conference),
 #              THREADS (0 = all cores), TRADEOFF=0 to skip step 2, SHARED (../shared),
+#              PRESETS (draft high ultra: the presets baked beside sibenik's and the conference
+#              room's moderate for the preset trade-off rows, "scene-preset-P"; "" for none),
 #              FIDELITY_WORK (bench/out/fidelity: the per-step outputs),
 #              SERVED=0 to skip the served rows, SERVED_BACKEND (cpu), SERVED_FLAGS (extra lucentd
 #              flags for the served runs, e.g. "--refine-passes 4 --refine-tolerance 0"; default none).
@@ -48,9 +50,9 @@ cornell_obj="$root/scenes/cornell-box/cornell-box.obj"
 cornell_flags=(--quality moderate --atlas-size 64 --grid-max-samples 1024 --seed 1 --quiet --no-write-glb
                --threads "$threads")
 
-bake() { # OUT.lcb SCENE flags...
+bake() { # OUT.lcb SCENE flags...; OUT.lcb.time: wall seconds and peak RSS KiB of the bake
   local out="$1" scene="$2"; shift 2
-  "$bin/lucent-bake" bake "$scene" -o "$out" "$@" >/dev/null
+  /usr/bin/time -f '%e %M' -o "$out.time" "$bin/lucent-bake" bake "$scene" -o "$out" "$@" >/dev/null
 }
 
 fidelity() { # NAME BAKE REFDIR [extra lucent-ref flags]; prints the fidelity.json path
@@ -65,6 +67,25 @@ convergence=()
 # The fields lucent-ref adds when it evaluates texels at their surface points (null before).
 surface_fields='lightmap_moved: (.lightmap_moved // null), lightmap_unmoved: (.lightmap_unmoved // null),
   blotch: (.blotch // null), texel_spacing_m: (.texel_spacing_m // null)'
+# The preset trade-off (issue 16: error against relight time and memory, per scene): the presets
+# baked beside each scene's moderate, against the same reference.
+read -r -a other_presets <<<"${PRESETS-draft high ultra}"
+
+preset_row() { # SCENE PRESET BAKE FIDELITY_JSON: error (the converged engine), relight, memory, bake cost
+  local scene="$1" preset="$2" lcb="$3" f="$4" bench="$work/$1-preset-$2-bench.json" bake_s bake_kb
+  "$bin/lucent-bench" --runs 9 --backend cpu --grid needed --no-dnrt --json "$bench" "$lcb" >"$bench.txt" 2>&1 ||
+    { cat "$bench.txt" >&2; return 1; }
+  read -r bake_s bake_kb <"$lcb.time"
+  results+=("$(jq -c --arg sc "$scene" --arg p "$preset" --argjson bs "$bake_s" --argjson bk "$bake_kb" \
+    --argjson fb "$(stat -c %s "$lcb")" --slurpfile b "$bench" '{name: ($sc + "-preset-" + $p), scene: $sc,
+    preset: $p, tradeoff: true, links: .links_per_cache, surfels: .surfels, bands: .bands, texel_caches,
+    lightmap, grid, bound, blotch: (.blotch // null), relight_cpu_ms: $b[0].results[0].total_ms,
+    relight_peak_rss_mib: $b[0].results[0].peak_rss_mib, file_mib: ($fb / 1048576), bake_s: $bs,
+    bake_peak_rss_mib: ($bk / 1024)}' "$f")")
+  jq -r '"  preset \(.preset): lightmap mean \(.lightmap.mean*100)% grid \(.grid.mean*100)% relight \(.relight_cpu_ms) ms"' \
+    <<<"${results[-1]}" >&2
+}
+
 served_flags=()
 for fl in ${SERVED_FLAGS:-}; do served_flags+=("--daemon-arg=$fl"); done
 
@@ -103,6 +124,7 @@ results+=("$(jq -c '{name: "cornell-moderate", scene: "cornell-box (embedded)", 
   preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands,
   lightmap, grid, bound, reference, relights, b0_power_engine, b0_power_reference, '"$surface_fields"'}' "$f")")
 jq -r '"  lightmap mean \(.lightmap.mean*100)% p95 \(.lightmap.p95*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
+preset_row cornell moderate "$tmp/cornell.lcb" "$f" || echo "fidelity: cornell preset moderate failed" >&2
 # served: the daemon's initial state is the reference's (the lamp, no lights); one change: a point
 # light added under the ceiling, off the lamp
 served_row cornell-served cornell-moderate "cornell-box (embedded)" "$tmp/cornell.lcb" "$work/cornell-reference" ||
@@ -125,6 +147,7 @@ if [ "${TRADEOFF:-1}" != 0 ]; then
             "surfels=8192:--surfels 8192" "surfels=16384:--surfels 16384" "surfels=65536:--surfels 65536"
             "surfels=131072:--surfels 131072"
             "bands=1:--bands 1" "bands=2:--bands 2" "bands=4:--bands 4"
+            "draft:--quality draft --atlas-size 64 --grid-max-samples 1024"
             "high:--quality high --atlas-size 64 --grid-max-samples 1024"
             "ultra:--quality ultra --atlas-size 64 --grid-max-samples 1024")
   for v in "${variants[@]}"; do
@@ -135,6 +158,9 @@ if [ "${TRADEOFF:-1}" != 0 ]; then
     f="$(fidelity "cornell-$name" "$tmp/cornell-v.lcb" "$work/cornell-reference")" || continue
     results+=("$(jq -c --arg n "cornell-$name" --arg fl "$flags" '{name: $n, bake_flags: $fl, links: .links_per_cache,
       surfels: .surfels, bands: .bands, ms_first_relight, lightmap, grid, bound}' "$f")")
+    case "$name" in draft|high|ultra)
+      preset_row cornell "$name" "$tmp/cornell-v.lcb" "$f" || echo "fidelity: cornell preset $name failed" >&2 ;;
+    esac
   done
 fi
 
@@ -157,6 +183,7 @@ EOF
     preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, bound, reference,
     relights, b0_power_engine, b0_power_reference, '"$surface_fields"'}' "$f")")
   jq -r '"  lightmap mean \(.lightmap.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
+  preset_row sponza-dabrovic moderate "$tmp/sponza.lcb" "$f" || echo "fidelity: sponza preset moderate failed" >&2
   served_row sponza-sun-served sponza-moderate-sun sponza-dabrovic "$tmp/sponza.lcb" "$work/sponza-reference" \
     "$tmp/sun.json" || echo "fidelity: sponza-sun-served failed" >&2
   # one change: the sun 10 degrees lower (elevation 70.2 -> 60.2 degrees, same azimuth)
@@ -164,8 +191,8 @@ EOF
     '{"type": "light.set", "light": {"id": "sun", "type": "directional", "color": [1, 0.95, 0.9], "intensity": 100000, "direction": [0.4136, -0.8678, 0.2757]}}' \
     "$tmp/sun.json" || echo "fidelity: sponza-served convergence failed" >&2
   for v in "list-refine=0:--list-refine 0" "surfels=65536:--surfels 65536" "surfels=131072:--surfels 131072" \
-           "links=512:--links 512" "exposure:--exposure" "links=256:--links 256" "high:--quality high" \
-           "ultra:--quality ultra"; do
+           "links=512:--links 512" "exposure:--exposure" "links=256:--links 256" \
+           "draft:--quality draft" "high:--quality high" "ultra:--quality ultra"; do
     name="${v%%:*}"; flags="${v#*:}"
     echo "fidelity: sponza $name..." >&2
     # shellcheck disable=SC2086
@@ -173,6 +200,9 @@ EOF
     f="$(fidelity "sponza-$name" "$tmp/sponza-v.lcb" "$work/sponza-reference" --state "$tmp/sun.json")" || continue
     results+=("$(jq -c --arg n "sponza-$name" --arg fl "$flags" '{name: $n, bake_flags: $fl, links: .links_per_cache,
       surfels: .surfels, bands: .bands, lightmap, grid, bound}' "$f")")
+    case "$name" in draft|high|ultra)
+      preset_row sponza-dabrovic "$name" "$tmp/sponza-v.lcb" "$f" || echo "fidelity: sponza preset $name failed" >&2 ;;
+    esac
   done
 else
   echo "fidelity: skip sponza-dabrovic: $sponza absent" >&2
@@ -203,9 +233,19 @@ for entry in "${others[@]}"; do
     preset: "moderate", links: .links_per_cache, surfels: .surfels, bands: .bands, lightmap, grid, bound, reference,
     relights, '"$surface_fields"'}' "$f")")
   jq -r '"  lightmap mean \(.lightmap.mean*100)% bound \(.bound.mean*100)% (ref noise \(.lightmap.ref_noise*100)%)"' "$f" >&2
+  preset_row "$name" moderate "$tmp/$name.lcb" "$f" || echo "fidelity: $name preset moderate failed" >&2
   served_row "$name-points-served" "$name-moderate-points" "$name" "$tmp/$name.lcb" "$work/$name-reference" \
     "$work/$name-points-state.json" || echo "fidelity: $name-points-served failed" >&2
   rm -f "$tmp/$name.lcb"
+  for preset in ${other_presets[@]+"${other_presets[@]}"}; do
+    echo "fidelity: $name $preset..." >&2
+    # shellcheck disable=SC2086
+    bake "$tmp/$name-v.lcb" "$file" --quality "$preset" --quiet --no-write-glb --threads "$threads" $flags
+    f="$(fidelity "$name-$preset" "$tmp/$name-v.lcb" "$work/$name-reference" --state "$work/$name-points-state.json")" ||
+      continue
+    preset_row "$name" "$preset" "$tmp/$name-v.lcb" "$f" || echo "fidelity: $name preset $preset failed" >&2
+    rm -f "$tmp/$name-v.lcb"
+  done
 done
 
 conv_file="$tmp/convergence.jsonl"

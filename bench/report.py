@@ -23,7 +23,12 @@ TARGETS = {
     "fidelity_scene_mean": 0.12, "fidelity_scene_bias": 0.05, "fidelity_scene_p95": 0.35, "fidelity_scene_grid_mean": 0.12,
     "fidelity_cornell_mean": 0.04, "fidelity_cornell_p95": 0.10, "fidelity_cornell_bias": 0.02,
     "fidelity_texel_spacing_p95_m": 0.5, "fidelity_blotch_ratio": 1.2, "fidelity_t_within_1pct_ms": 500,
+    "relight_sponza_needed_cpu_ms": 25, "latency_10_p50_ms": 40,
 }
+# issue 16's update -> frame target: 10 clients on these scenes (latency JSON "scene")
+LATENCY_SCENES = (("Sponza", "sponza-dabrovic"), ("the conference room", "conference-room"))
+PRESETS = ("draft", "moderate", "high", "ultra")
+PRESET_SCENES = ("cornell", "sponza-dabrovic", "sibenik", "conference-room")
 # issue 16's scenes: the served row and, for the texel spacing of the same bake, its converged row
 FIDELITY_SCENES = (("sponza-dabrovic, sun", "sponza-sun-served", "sponza-moderate-sun"),
                    ("sibenik, 3 point lights", "sibenik-points-served", "sibenik-moderate-points"),
@@ -105,7 +110,21 @@ def bake_section(b, md):
     md.append("")
 
 
-def relight_section(r, md):
+def relight_needed_rows(r, md):
+    """lucent-bench once more on the CPU with --grid needed: only the grid cells objects and
+    surfels read, as lucentd relights while no client takes the shgrid stream."""
+    if not r:
+        return
+    md.append("\nCPU, `--grid needed` (as lucentd relights while no client takes the shgrid stream):\n")
+    md.append("| bake | surfels | caches | links | grid ms | total ms | peak RSS MiB |")
+    md.append("|---|---|---|---|---|---|---|")
+    for row in r["results"]:
+        md.append("| %s | %d | %d | %d | %.2f | %.1f | %.0f |" % (
+            os.path.basename(row["bake"]), row["surfels"], row["caches"], row["links"],
+            row["stages_ms"].get("grid", 0), row["total_ms"], row.get("peak_rss_mib", 0)))
+
+
+def relight_section(r, needed, md):
     md.append("## Relight after one light change (median, `lucent-bench`, 1 feedback bounce)\n")
     if not r:
         md.append("not run\n")
@@ -130,6 +149,7 @@ def relight_section(r, md):
         if rows:
             md.append("\nTarget: Sponza %s CPU ≤ %d ms — %s (%.1f ms)." % (
                 preset, TARGETS[key], ok(rows[0]["total_ms"] <= TARGETS[key]), rows[0]["total_ms"]))
+    relight_needed_rows(needed, md)
     md.append("\nThe EGL rows run on whatever EGL device the machine has (Mesa llvmpipe when there is no GPU:"
               " the same cores as the CPU backend).\n")
 
@@ -212,6 +232,8 @@ def fidelity_table(f, md):
     served = {r.get("converged_row"): r for r in f["results"] if r.get("served")}
     rows = []
     for r in f["results"]:
+        if r.get("tradeoff"):
+            continue  # the preset table's
         if r.get("served") and r.get("converged_row") in {x["name"] for x in f["results"]}:
             continue  # placed under its converged row
         rows.append(r)
@@ -257,6 +279,32 @@ def convergence_table(f, md):
             pct(c.get("snapshot_dist"), "%.2f%%")))
 
 
+def preset_table(f, md):
+    """Issue 16's trade-off per scene: each preset's error (converged engine, the scene's reference)
+    against its CPU relight time, its memory and its bake."""
+    rows = [r for r in f["results"] if r.get("tradeoff")]
+    md.append("\n### Presets: error against relight time and memory, per scene (`bench/fidelity.sh` preset rows)\n")
+    if not rows:
+        md.append("not run\n")
+        return
+    md.append("Converged engine against the scene's reference (the state and reference of its rows above); relight: "
+              "`lucent-bench --backend cpu --grid needed`, median of 9, 1 feedback bounce; relight RSS: lucent-bench's "
+              "peak with only that bake loaded (what lucentd holds for it, about); bake: `lucent-bake bake --quality P` "
+              "wall time and peak RSS on this machine.\n")
+    md.append("| scene | preset | surfels | links | bands | lightmap mean | p95 | bias | grid mean | blotch ratio | "
+              "relight ms | relight RSS MiB | file MiB | bake s | bake peak MiB |")
+    md.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    key = lambda r: (PRESET_SCENES.index(r["scene"]) if r["scene"] in PRESET_SCENES else len(PRESET_SCENES),
+                     r["scene"], PRESETS.index(r["preset"]) if r["preset"] in PRESETS else len(PRESETS))
+    for r in sorted(rows, key=key):
+        lm, g, bl = r.get("lightmap") or {}, r.get("grid") or {}, r.get("blotch") or {}
+        md.append("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+            r["scene"], r["preset"], r.get("surfels", "–"), r.get("links", "–"), r.get("bands", "–"),
+            pct(lm.get("mean")), pct(lm.get("p95")), pct(lm.get("bias")), pct(g.get("mean")),
+            fmt(bl.get("ratio"), "{:.2f}"), fmt(r.get("relight_cpu_ms")), fmt(r.get("relight_peak_rss_mib"), "{:.0f}"),
+            fmt(r.get("file_mib")), fmt(r.get("bake_s")), fmt(r.get("bake_peak_rss_mib"), "{:.0f}")))
+
+
 def target_row(md, what, target, value, cond, shown):
     """One line of the targets table: met / not met with the measured value, or not measured."""
     if value is None:
@@ -265,7 +313,7 @@ def target_row(md, what, target, value, cond, shown):
         md.append("| %s | %s | %s | %s |" % (what, target, shown, ok(cond(value))))
 
 
-def fidelity_targets(f, md):
+def fidelity_targets(f, relight_needed, lat, md):
     T = TARGETS
     by = {r["name"]: r for r in f["results"]}
     md.append("\n### Targets (issue 16: lucentd's defaults, what a client receives once refinement stops)\n")
@@ -314,11 +362,23 @@ def fidelity_targets(f, md):
         else:
             target_row(md, label + ": a frame within 1% of converged after one change",
                        "≤ %d ms" % T["fidelity_t_within_1pct_ms"], v, lambda x: x <= T["fidelity_t_within_1pct_ms"], shown)
+    rows = [x for x in (relight_needed or {}).get("results", [])
+            if os.path.basename(x["bake"]).startswith("sponza-moderate") and x["backend"] == "cpu"]
+    v = rows[0]["total_ms"] if rows else None
+    target_row(md, "Sponza: CPU relight after one light change (`lucent-bench --grid needed`, as lucentd relights)",
+               "≤ %d ms" % T["relight_sponza_needed_cpu_ms"], v, lambda x: x <= T["relight_sponza_needed_cpu_ms"],
+               "%s ms" % fmt(v))
+    for label, scene in LATENCY_SCENES:
+        r = next((r for j in lat or [] if j["scene"] == scene and j["backend"] == "cpu"
+                  for r in j["results"] if r["clients"] == 10), None)
+        v = r["latency_ms"]["p50"] if r else None
+        target_row(md, "%s: update → frame at the client, 10 clients, p50" % label, "≤ %d ms" % T["latency_10_p50_ms"],
+                   v, lambda x: x <= T["latency_10_p50_ms"], "%s ms" % fmt(v))
     md.append("\nThe texel spacing is judged on its p95 over the compared texels (`texel_spacing_m.p95` of lucent-ref "
               "compare; the max is shown beside it); rows without the data say \"not measured\", never \"met\".")
 
 
-def fidelity_section(f, md):
+def fidelity_section(f, relight_needed, lat, md):
     md.append("## Fidelity against the path-traced reference (`bench/fidelity.sh`, details in `bench/fidelity.md`)\n")
     if not f:
         md.append("not run\n")
@@ -344,7 +404,8 @@ def fidelity_section(f, md):
         md.append("")
         md += notes
     convergence_table(f, md)
-    fidelity_targets(f, md)
+    preset_table(f, md)
+    fidelity_targets(f, relight_needed, lat, md)
     md.append("")
 
 
@@ -518,6 +579,7 @@ def main():
     a = ap.parse_args()
     bake = load(os.path.join(a.out_dir, "bake.json"))
     relight = load(os.path.join(a.out_dir, "relight.json"))
+    relight_needed = load(os.path.join(a.out_dir, "relight-grid-needed.json"))
     lat = [j for j in (load(p) for p in sorted(glob.glob(os.path.join(a.out_dir, "latency-*.json")))) if j]
     fid = load(os.path.join(a.out_dir, "fidelity.json"))
     dnrt = load(os.path.join(a.out_dir, "dnrt", "dnrt.json"))
@@ -537,17 +599,18 @@ def main():
           "surfels) CPU 21.1 ms (i7-4790S) / 33.8 ms (i7-4510U, 2 cores), GPU 3.65 ms (GTX 980); high (4 bands, "
           "254 links, 128k surfels) CPU 131 ms / GPU 7.17 ms; 32.2 MiB at moderate.", ""]
     bake_section(bake, md)
-    relight_section(relight, md)
+    relight_section(relight, relight_needed, md)
     latency_section(lat, md)
     dnrt_section(dnrt, relight, md)
     mr_section(mr, relight, md)
     replicas_section(ack, loads, md)
-    fidelity_section(fid, md)
+    fidelity_section(fid, relight_needed, lat, md)
     md += kept_sections(a.md, md)
     with open(a.md, "w") as fh:
         fh.write("\n".join(md) + "\n")
     with open(a.json, "w") as fh:
         json.dump({"machine": m, "paper": PAPER, "targets": TARGETS, "bake": bake, "relight": relight,
+                   "relight_grid_needed": relight_needed,
                    "latency": lat, "dnrt": dnrt, "mr": mr, "ack": ack, "load": loads, "fidelity": fid}, fh, indent=1)
 
 
