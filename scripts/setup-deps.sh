@@ -18,6 +18,8 @@ command -v npm >/dev/null || packages+=(npm)
 if [ "${1:-}" != "--build" ]; then
   packages+=(
     python3-websockets python3-pytest python3-jsonschema python3-yaml jq
+    # bench/fidelity.sh: a bake's wall time and peak memory
+    time
     # scripts/fuzz.sh: clang + its libFuzzer/sanitizer runtimes, llvm-symbolizer for the reports
     clang libclang-rt-14-dev llvm
     # lucentd --cluster's tests start their own Redis
