@@ -350,7 +350,7 @@ def fidelity_targets(f, relight_needed, lat, md):
         sp = (by.get(sname) or {}).get("texel_spacing_m") or (by.get(cname) or {}).get("texel_spacing_m") or {}
         target_row(md, label + ": texel spacing (p95 of the texels; max %s)" % fmt(sp.get("max"), "{:.2f} m"),
                    "≤ %.1f m" % T["fidelity_texel_spacing_p95_m"], sp.get("p95"),
-                   lambda v: v <= T["fidelity_texel_spacing_p95_m"], fmt(sp.get("p95"), "{:.2f} m"))
+                   lambda v: v <= T["fidelity_texel_spacing_p95_m"] + 1e-4, fmt(sp.get("p95"), "{:.4f} m"))
     for label, sname, cname in scenes:
         bl = (by.get(sname) or {}).get("blotch") or {}
         target_row(md, label + " served: blotch ratio (neighbour variation / the reference's)",
@@ -381,7 +381,7 @@ def fidelity_targets(f, relight_needed, lat, md):
         target_row(md, "%s: update → frame at the client, 10 clients, p50" % label, "≤ %d ms" % T["latency_10_p50_ms"],
                    v, lambda x: x <= T["latency_10_p50_ms"], "%s ms" % fmt(v))
     md.append("\nThe texel spacing is judged on its p95 over the compared texels (`texel_spacing_m.p95` of lucent-ref "
-              "compare; the max is shown beside it); rows without the data say \"not measured\", never \"met\".")
+              "compare; the max is shown beside it; 0.1 mm of float rounding allowed: the bake places 2 texels/m exactly, and lucent-ref's spacing of those texels reads 0.500001 m); rows without the data say \"not measured\", never \"met\".")
 
 
 def fidelity_section(f, relight_needed, lat, md):
