@@ -431,9 +431,9 @@ static int bench_drt(const char *path, lc_backend_kind backend, int runs, int n_
         st.objects = objs;
         st.n_objects = (uint32_t)n_objects;
         if (lc_engine_relight(e, &st, &fr, err, sizeof err) != 0) {
-            /* a device's buffer limit (llvmpipe binds 128 MiB) refuses this many objects: a
-             * property of the device, reported, not a failure of the benchmark */
-            if (backend == LC_BACKEND_EGL && strstr(err, "limit")) {
+            /* drt_gl.c's refusal ("... binding limit": llvmpipe binds 128 MiB) is a property of
+             * the device, reported, not a failure of the benchmark */
+            if (backend == LC_BACKEND_EGL && strstr(err, "binding limit")) {
                 fprintf(stderr, "\nlucent-bench: %s: %d clutter objects not run on this EGL device: %s\n", path,
                         n_objects, err);
                 rc = 5;
