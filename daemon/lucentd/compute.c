@@ -161,7 +161,9 @@ static int compute_refine_done(compute_refine *r, double change, double toleranc
     if (change == 0) return 1;
     if (last <= 0) return 0; /* one change says nothing about the rate */
     double q = change / last;
-    return q < 1 && change * q / (1 - q) <= tolerance;
+    double to_come = q < 1 ? change * q / (1 - q) : -1; /* -1: the changes are not falling */
+    lc_debug("compute", "refinement: change %.6f ratio %.4f light to come %.6f", change, q, to_come);
+    return to_come >= 0 && to_come <= tolerance;
 }
 
 static void *compute_main(void *arg) {
