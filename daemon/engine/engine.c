@@ -68,6 +68,8 @@ struct lc_engine {
     lc_lmfilter *lmfilter;          /* same-surface 3x3 smoothing of the lightmap (lightmap_filter.h) */
     float *lightmap;                /* W*H*3: the filtered lightmap the frame points at */
     lc_engine_frame frame;
+    lc_engine_interrupt_fn interrupt; /* lc_engine_set_interrupt */
+    void *interrupt_arg;
 };
 
 lc_engine_settings lc_engine_default_settings(const lc_lcb *bake) {
@@ -680,6 +682,11 @@ static int engine_compute_b0(lc_engine *e, const lc_engine_state *st, const floa
 
 void lc_engine_reset_feedback(lc_engine *e) { e->reset_next = 1; }
 
+void lc_engine_set_interrupt(lc_engine *e, lc_engine_interrupt_fn fn, void *arg) {
+    e->interrupt = fn;
+    e->interrupt_arg = arg;
+}
+
 int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_frame **frame, char *err,
                       size_t errlen) {
     const lc_lcb_view *v = e->v;
@@ -761,12 +768,15 @@ int lc_engine_relight(lc_engine *e, const lc_engine_state *st, const lc_engine_f
                              .n_objects = st->n_objects,
                              .dnrt = dnrt->n_objects ? dnrt : NULL,
                              .drt = e->clutter_active,
-                             .n_drt = e->n_clutter_active};
+                             .n_drt = e->n_clutter_active,
+                             .interrupt = e->interrupt,
+                             .interrupt_arg = e->interrupt_arg};
     lc_engine_frame fr;
     memset(&fr, 0, sizeof fr);
-    if (e->ops->run(e->impl, &in, &fr, err, errlen) != 0) {
+    int rc = e->ops->run(e->impl, &in, &fr, err, errlen);
+    if (rc != 0) { /* interrupted too: the last state stays the one to compare with */
         free(emission);
-        return -1;
+        return rc == LC_ENGINE_INTERRUPTED ? rc : -1;
     }
     if (engine_copy_state(e, st) != 0) {
         free(emission);

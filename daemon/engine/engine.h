@@ -187,6 +187,20 @@ void lc_engine_reset_feedback(lc_engine *e);
 int lc_engine_relight(lc_engine *e, const lc_engine_state *state, const lc_engine_frame **frame, char *err,
                       size_t errlen);
 
+/* What lc_engine_relight returns when the interrupt (below) stopped it: no frame, err untouched. */
+#define LC_ENGINE_INTERRUPTED 1
+/* Asked during a relight whether to stop it (lucentd: a progressive refinement pass that a
+ * new update makes moot). It may be called from the relight's worker threads at once, so it
+ * must be thread-safe and cheap (an atomic load). When it returns nonzero the relight stops
+ * before the feedback of the pass it is in and returns LC_ENGINE_INTERRUPTED: the engine
+ * keeps its previous state for change detection, and the carried indirect light is that of
+ * the last completed feedback pass (with settings.bounces 0: the previous relight's), so the
+ * next relight is what it would have been had the interrupted one not started. The CPU
+ * backend asks within the gather (every 64 caches) and between passes; the EGL backend's
+ * relight is one submission and never asks. NULL (the default) = never interrupted. */
+typedef int (*lc_engine_interrupt_fn)(void *arg);
+void lc_engine_set_interrupt(lc_engine *e, lc_engine_interrupt_fn fn, void *arg);
+
 /* Clutter operators (engine/drt.h) built for one object's placement. The engine takes
  * ownership of `ops` (on failure too) and replaces any it holds for the same object id.
  * They apply from the next relight while the state holds that object, visible, with the

@@ -35,6 +35,8 @@ typedef struct lc_transport_input {
     const lc_dnrt_frame *dnrt; /* objects in the indirect light, applied after each gather; NULL = none */
     lc_drt_ops *const *drt;    /* clutter operators (engine/drt.h), applied after DNRT in each pass */
     uint32_t n_drt;
+    lc_engine_interrupt_fn interrupt; /* NULL = never; see lc_engine_set_interrupt */
+    void *interrupt_arg;
 } lc_transport_input;
 
 typedef struct lc_transport_ops {
@@ -46,6 +48,7 @@ typedef struct lc_transport_ops {
      * records are LC_SH_MAX_COEFFS coefficients wide) and the stage timings BOUNCE..DNRT.
      * The engine fills the dimensions. */
     int (*run)(void *impl, const lc_transport_input *in, lc_engine_frame *frame, char *err, size_t errlen);
+    /* run returns LC_ENGINE_INTERRUPTED when in->interrupt stopped it before a feedback pass. */
 } lc_transport_ops;
 
 /* Bands a texel cache gathers. Its irradiance reads band 1 only (band 0 with one band), so

@@ -4,6 +4,7 @@
 
 #include <math.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -52,7 +53,18 @@ struct lc_compute {
     uint32_t n_clutter_in, clutter_in_cap; /* guarded by lock */
     int grid_whole;                        /* guarded by lock: relight with settings.grid_cells ALL */
     int regrid;                            /* guarded by lock: relight the last state for the whole grid */
+    /* Set under lock with any of pending, stop, clutter_in or regrid; cleared under lock when the
+     * compute thread takes that work; read without the lock to interrupt a refinement pass. */
+    atomic_int work_waiting;
+    uint64_t interrupted; /* compute thread only: refinement passes an update interrupted */
 };
+
+/* Compute thread and its relight workers (lc_engine_set_interrupt): a refinement pass stops
+ * once an update (or other work) waits, so the update's frame need not wait for the pass. */
+static int compute_work_waiting(void *arg) {
+    lc_compute *c = arg;
+    return atomic_load_explicit(&c->work_waiting, memory_order_relaxed);
+}
 
 static void compute_job_free(compute_job *j) {
     if (!j) return;
@@ -217,6 +229,7 @@ static void *compute_main(void *arg) {
         c->n_clutter_in = c->clutter_in_cap = 0;
         const int regrid = c->regrid, grid_whole = c->grid_whole;
         c->regrid = 0;
+        atomic_store(&c->work_waiting, 0);
         pthread_mutex_unlock(&c->lock);
         for (uint32_t i = 0; i < n_clutter; i++)
             if (lc_engine_clutter_attach(e, clutter[i], err, sizeof err) != 0)
@@ -240,7 +253,17 @@ static void *compute_main(void *arg) {
         const lc_engine_frame *fr;
         lc_published *p = NULL;
         last->st.settings.grid_cells = grid_whole ? LC_GRID_ALL : LC_GRID_NEEDED;
-        if (lc_engine_relight(e, &last->st, &fr, err, sizeof err) != 0) {
+        lc_engine_set_interrupt(e, fresh ? NULL : compute_work_waiting, c); /* a new solution always finishes */
+        int rc = lc_engine_relight(e, &last->st, &fr, err, sizeof err);
+        if (rc == LC_ENGINE_INTERRUPTED) { /* the work waiting comes first; the pass is redone after */
+            refine_left++;
+            pass--;
+            c->interrupted++;
+            lc_debug("compute", "refinement pass %d interrupted (%llu so far)", pass + 1,
+                     (unsigned long long)c->interrupted);
+            continue;
+        }
+        if (rc != 0) {
             lc_error("compute", "relight of revision %llu failed: %s", (unsigned long long)last->st.revision, err);
             refine_left = 0;
         } else {
@@ -357,6 +380,7 @@ int lc_compute_submit(lc_compute *c, const lc_state *state, uint64_t *job) {
     compute_job *old = c->pending; /* latest wins */
     c->pending = j;
     pthread_cond_signal(&c->cond);
+    atomic_store(&c->work_waiting, 1);
     pthread_mutex_unlock(&c->lock);
     compute_job_free(old);
     return 0;
@@ -426,6 +450,7 @@ void lc_compute_want_grid(lc_compute *c, int whole) {
     if (whole && c->latest && !c->latest->grid_complete) {
         c->regrid = 1;
         pthread_cond_signal(&c->cond);
+        atomic_store(&c->work_waiting, 1);
     }
     pthread_mutex_unlock(&c->lock);
 }
@@ -458,6 +483,7 @@ void lc_compute_clutter_give(lc_compute *c, lc_drt_ops *ops) {
     }
     c->clutter_in[c->n_clutter_in++] = ops;
     pthread_cond_broadcast(&c->cond);
+    atomic_store(&c->work_waiting, 1);
     pthread_mutex_unlock(&c->lock);
 }
 
@@ -465,9 +491,10 @@ void lc_compute_stop(lc_compute *c) {
     if (!c) return;
     pthread_mutex_lock(&c->lock);
     c->stop = 1;
-    compute_job *pending = c->pending; /* not started: dropped; the one in flight finishes */
+    compute_job *pending = c->pending; /* not started: dropped; a relight in flight finishes, a refinement pass stops */
     c->pending = NULL;
     pthread_cond_broadcast(&c->cond);
+    atomic_store(&c->work_waiting, 1);
     pthread_mutex_unlock(&c->lock);
     compute_job_free(pending);
     pthread_join(c->thread, NULL);

@@ -1,6 +1,7 @@
 /* transport_cpu: the reference implementation of the transport pipeline (transport.h) in
  * C11 with lc_parallel_for across caches. Runs on the engine's (compute) thread. */
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -108,11 +109,22 @@ typedef struct {
     tcpu *t;
     const uint32_t *list; /* cache indices, or NULL = all caches */
     int bands, chroma_bands;
-    int chroma;        /* flux is YCoCg: Co/Cg use chroma_bands only */
-    int texel_bands;   /* bands gathered at texel caches (see lc_transport_texel_bands) */
-    int texel_band1;   /* texel caches: band 1 from the precomputed weights (lc_transport_texel_band1) */
-    int texel_surfels; /* texel caches from their surfel lists (lc_transport_texel_surfels) */
+    int chroma;                   /* flux is YCoCg: Co/Cg use chroma_bands only */
+    int texel_bands;              /* bands gathered at texel caches (see lc_transport_texel_bands) */
+    int texel_band1;              /* texel caches: band 1 from the precomputed weights (lc_transport_texel_band1) */
+    int texel_surfels;            /* texel caches from their surfel lists (lc_transport_texel_surfels) */
+    const lc_transport_input *in; /* its interrupt, asked once per range */
+    atomic_int *interrupted;      /* set once the interrupt said stop: the other ranges skip */
 } tcpu_gather_job;
+
+/* Any of the relight's threads: whether to stop this relight now (lc_engine_set_interrupt). */
+static int tcpu_interrupted(const lc_transport_input *in, atomic_int *interrupted) {
+    if (!in->interrupt) return 0;
+    if (atomic_load_explicit(interrupted, memory_order_relaxed)) return 1;
+    if (!in->interrupt(in->interrupt_arg)) return 0;
+    atomic_store_explicit(interrupted, 1, memory_order_relaxed);
+    return 1;
+}
 
 static inline void tcpu_oct_decode(uint32_t packed, float d[3]) {
     float u = (float)(packed & 0xFFFu) * (2.0f / 4095.0f) - 1.0f;
@@ -334,6 +346,7 @@ static void tcpu_gather_range(void *ctx, size_t begin, size_t end, int thread) {
     const tcpu_gather_job *job = ctx;
     tcpu *t = job->t;
     const lc_lcb_view *v = t->v;
+    if (job->in && tcpu_interrupted(job->in, job->interrupted)) return;
     const int nc = job->bands * job->bands;
     const int ncc_all = job->chroma ? job->chroma_bands * job->chroma_bands : nc;
     const uint32_t nl = v->links_per_cache;
@@ -599,8 +612,10 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
     const int probes = st->solver == LC_SOLVER_PROBES;
     if (probes && !t->probes && !(t->probes = lc_probes_create(v, err, errlen))) return -1;
 
+    atomic_int interrupted = 0;
     for (uint32_t pass = 0; pass <= st->bounces; pass++) {
         int last = pass == st->bounces;
+        if (tcpu_interrupted(in, &interrupted)) return LC_ENGINE_INTERRUPTED;
         t1 = lc_clock_ms();
         tcpu_radiosity(t, in->b0);
         double t2 = lc_clock_ms();
@@ -618,7 +633,9 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
                                chroma,
                                lc_transport_texel_bands(st),
                                lc_transport_texel_band1(st),
-                               lc_transport_texel_surfels(v, st)};
+                               lc_transport_texel_surfels(v, st),
+                               in,
+                               &interrupted};
         uint32_t n_gather = last ? v->n_caches : t->n_feedback;
         if (probes || (last && st->grid_cells == LC_GRID_NEEDED)) {
             n_gather = lc_transport_needed(v, t->feedback_cache, in, last, t->need);
@@ -632,6 +649,9 @@ static int tcpu_run(void *impl, const lc_transport_input *in, lc_engine_frame *f
             lc_probes_gather(t->probes, t->out.radiosity, (uint32_t)bands, t->out.cache_sh, t->coeff_cap, t->need,
                              t->threads);
         else lc_parallel_for(t->threads, n_gather, 64, tcpu_gather_range, &job);
+        /* Past here a pass writes the carried light (feedback): stop before it or not at all. */
+        if (tcpu_interrupted(in, &interrupted)) return LC_ENGINE_INTERRUPTED;
+        job.in = NULL; /* the DNRT's few caches below gather whole */
         double t4 = lc_clock_ms();
         ms_gather += t4 - t3;
         if (last) { /* the objects' SH before any object changes the caches */

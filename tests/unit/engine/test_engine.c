@@ -1,8 +1,10 @@
 /* Relight engine (CPU backend) against closed forms: a closed emitting box converges to
  * pi*Le/(1-rho); a small emitting patch gives the analytic form factor on a floor; a light
  * hidden by an occluder contributes nothing; the pull conserves energy; a point light and a
- * constant sky light the surfels as I cos/d^2 and pi*L; bad state is refused by field. */
+ * constant sky light the surfels as I cos/d^2 and pi*L; bad state is refused by field; an
+ * interrupted progressive relight leaves no trace. */
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -406,11 +408,69 @@ static void test_closed_box_grid_links(void) {
     fixture_release(&f);
 }
 
+/* lc_engine_set_interrupt: interrupt_at returns nonzero from its `interrupt_after`-th call on. */
+static atomic_int interrupt_calls;
+static int interrupt_after;
+static int interrupt_at(void *arg) {
+    (void)arg;
+    return atomic_fetch_add(&interrupt_calls, 1) + 1 >= interrupt_after;
+}
+
+/* A progressive relight interrupted before its gather or in the middle of it returns
+ * LC_ENGINE_INTERRUPTED and leaves no trace: the relights after it give, bit for bit, what an
+ * engine that never saw it gives (lucentd interrupts refinement passes this way). */
+static void test_interrupted_relight(void) {
+    fixture f;
+    if (closed_box_bake(&f, NULL) != 0) return;
+    char err[256];
+    lc_engine *plain = lc_engine_create(f.bake, LC_BACKEND_CPU, 0, err, sizeof err);
+    CHECK(plain != NULL, "second engine: %s", err);
+    if (!plain) {
+        fixture_release(&f);
+        return;
+    }
+    lc_engine_state st = {0};
+    st.settings = lc_engine_default_settings(f.bake);
+    st.settings.bounces = 0;
+    st.settings.progressive = 1;
+    const lc_engine_frame *fr;
+    const size_t texels = (size_t)f.v->lightmap_width * f.v->lightmap_height * 3;
+    float *two = malloc(texels * sizeof *two), *three = malloc(texels * sizeof *three);
+    int ok = two && three;
+    for (int i = 0; ok && i < 3; i++) {
+        ok = lc_engine_relight(plain, &st, &fr, err, sizeof err) == 0;
+        if (ok) memcpy(i == 1 ? two : three, fr->lightmap, texels * sizeof *two);
+    }
+    CHECK(ok, "plain relights: %s", err);
+    /* The check can fail: a pass more or less changes the light. */
+    CHECK(ok && memcmp(two, three, texels * sizeof *two) != 0, "the third pass changes the lightmap");
+    ok = ok && lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0;
+    lc_engine_set_interrupt(f.engine, interrupt_at, NULL);
+    const int after[] = {1, 5}; /* the first ask is before the pass; the 5th is within the gather */
+    for (int k = 0; ok && k < 2; k++) {
+        interrupt_after = after[k];
+        atomic_store(&interrupt_calls, 0);
+        int rc = lc_engine_relight(f.engine, &st, &fr, err, sizeof err);
+        CHECK(rc == LC_ENGINE_INTERRUPTED && atomic_load(&interrupt_calls) >= after[k],
+              "interrupt at ask %d: relight returned %d after %d asks", after[k], rc, atomic_load(&interrupt_calls));
+    }
+    CHECK(f.v->n_caches / 64 > 5, "the gather has more than 5 ranges (%u caches)", f.v->n_caches);
+    lc_engine_set_interrupt(f.engine, NULL, NULL);
+    for (int i = 0; ok && i < 2; i++) ok = lc_engine_relight(f.engine, &st, &fr, err, sizeof err) == 0;
+    CHECK(ok && memcmp(fr->lightmap, three, texels * sizeof *three) == 0,
+          "after two interrupted relights the engine's third pass equals the plain engine's");
+    free(two);
+    free(three);
+    lc_engine_release(plain);
+    fixture_release(&f);
+}
+
 int main(void) {
     test_closed_box();
     test_closed_box_texel_surfels();
     test_closed_box_grid_links();
     test_patch_form_factor();
     test_lights_and_occlusion();
+    test_interrupted_relight();
     CHECK_DONE();
 }
