@@ -4,7 +4,9 @@
 # (when present) at moderate, then runs lucent-bench on both backends (and once more on the CPU
 # with --grid needed, as lucentd relights: FILE-grid-needed.json). Prints lucent-bench's tables
 # (per-stage ms, where the time goes, the paper's figures) and writes JSON (default
-# bench/relight-results.json).
+# bench/relight-results.json). The --grid needed runs use lucentd's own --bounces 0 (an update's
+# relight is one transport pass; refinement adds the bounces after its frame) and, beside it,
+# the tables' 1 feedback bounce (FILE-grid-needed-b1.json).
 # Usage: relight_bench.sh [--runs N] [--out FILE]
 set -euo pipefail
 root="$(cd "$(dirname "$0")/../.." && pwd)"
@@ -52,8 +54,12 @@ for entry in "sibenik|$shared/scenes/sibenik/sibenik.obj|" \
 done
 "$bin/lucent-bench" --runs "$runs" --backend both --json "$out" "${bakes[@]}"
 echo "wrote $out"
-# As lucentd relights while no client takes the shgrid stream (only the grid cells objects and
-# surfels read): the CPU rows issue 16's relight target is judged on.
+# As lucentd relights an update while no client takes the shgrid stream (only the grid cells
+# objects and surfels read, lucentd's --bounces 0): the CPU rows issue 16's relight target is
+# judged on; then the same with one feedback bounce, as the tables above.
 needed="${out%.json}-grid-needed.json"
-"$bin/lucent-bench" --runs "$runs" --backend cpu --grid needed --no-dnrt --json "$needed" "${bakes[@]}"
+"$bin/lucent-bench" --runs "$runs" --backend cpu --grid needed --bounces 0 --no-dnrt --json "$needed" "${bakes[@]}"
 echo "wrote $needed"
+"$bin/lucent-bench" --runs "$runs" --backend cpu --grid needed --bounces 1 --no-dnrt \
+    --json "${out%.json}-grid-needed-b1.json" "${bakes[@]}"
+echo "wrote ${out%.json}-grid-needed-b1.json"
