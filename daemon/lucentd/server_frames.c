@@ -318,6 +318,26 @@ static void frames_commit_keyframe(lc_frames_copy *cp, const lc_frames_job *j, l
     }
 }
 
+/* 1 when a lightmap frame for this copy must be a keyframe whatever the delta: the copy holds
+ * none of this size yet, or the stream's keyframe interval is due. */
+static int frames_lightmap_keyframe_due(const lc_frames_copy *cp, const lc_frames_job *j) {
+    const size_t texels = (size_t)j->frame->lm_w * j->frame->lm_h, tb = lc_frame_texel_bytes(j->enc);
+    return !cp->lm_sent || cp->lm_sent_texels != texels || (j->residual && cp->lm_held_bytes != texels * tb) ||
+        (j->sequence - 1) % (uint64_t)j->keyframe_interval == 0;
+}
+
+/* 1 when memo m already holds the delta from copy state `from` to j's publication. */
+static int frames_memo_serves(const lc_delta_memo *m, uint64_t from, const lc_frames_job *j) {
+    return from && m->valid && m->from_state == from && m->pub_seq == j->pub_seq && m->tile == j->tile &&
+        m->thr == (float)j->delta_threshold;
+}
+
+int lc_frames_would_deflate(const lc_frames *f, const lc_frames_copy *cp, const lc_frames_job *j) {
+    if (j->stream != LC_STREAM_LIGHTMAP || !j->residual || j->force_key || frames_lightmap_keyframe_due(cp, j))
+        return 0;
+    return !frames_memo_serves(&f->lm_residual[j->enc], cp->lm_held_state, j);
+}
+
 /* Lightmap frame: a keyframe when forced, first, every keyframe_interval frames or when the
  * delta would not be smaller; otherwise a delta of the tiles where some texel moved by more
  * than delta_threshold (relative) from what this client last received: whole tiles, or
@@ -333,21 +353,20 @@ static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_
     const int residual_sub = j->residual;
     const uint8_t *words = frames_lightmap_words(f, j, enc);
     if (!words) return 0;
-    int key = force_key || !cp->lm_sent || cp->lm_sent_texels != texels ||
-        (residual_sub && cp->lm_held_bytes != texels * tb) || (h->sequence - 1) % (uint64_t)j->keyframe_interval == 0;
+    int key = force_key || frames_lightmap_keyframe_due(cp, j);
     const lc_delta_memo *delta = NULL;
     if (!key) {
         const float thr = (float)j->delta_threshold, floor_v = 1e-3f * frames_lightmap_peak(f, j);
         lc_delta_memo *m = residual_sub ? &f->lm_residual[enc] : &f->lm_tiles[enc];
         const uint64_t from = residual_sub ? cp->lm_held_state : cp->lm_sent_state;
-        if (!(from && m->valid && m->from_state == from && m->pub_seq == j->pub_seq && m->tile == S && m->thr == thr)) {
+        if (!frames_memo_serves(m, from, j)) {
             int rc = residual_sub ? frames_residual_compute(m, cp, j, enc, words, S, thr, floor_v)
                                   : frames_tiles_compute(m, cp, j, words, tb, S, thr, floor_v);
             if (rc != 0) return 0;
             m->from_state = from;
             m->pub_seq = j->pub_seq;
             m->tile = S;
-            m->thr = thr;
+            m->thr = thr; /* the key frames_memo_serves compares */
             m->to_state = ++f->delta_states;
         }
         key = m->keyframe;

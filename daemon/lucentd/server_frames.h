@@ -64,6 +64,11 @@ typedef struct lc_frames_vpl_object {
 size_t lc_frames_encode_vpl(lc_frames_copy *cp, const lc_frames_vpl_object *objects, uint32_t n_objects,
                             lc_encoding enc, uint64_t revision, uint64_t sequence, uint64_t timestamp_us, size_t pre);
 
+/* 1 when lc_frames_encode of j for this copy would compute a residual delta (deflate the
+ * dirty tiles: milliseconds on a large lightmap) instead of a keyframe or a delta another
+ * client in the same state already had computed. The server writes cheap frames first. */
+int lc_frames_would_deflate(const lc_frames *f, const lc_frames_copy *cp, const lc_frames_job *j);
+
 /* Encodes job's frame into cp->out + job->pre and updates what the copy holds (a lightmap
  * keyframe or delta is assumed delivered). Returns the frame's length, 0 when out of memory. */
 size_t lc_frames_encode(lc_frames *f, lc_frames_copy *cp, const lc_frames_job *j);

@@ -70,6 +70,7 @@ typedef struct lc_session {
     lc_frames_copy copy; /* the client's lightmap copy and frame buffer */
     lc_published *frame; /* newest result for this session (a reference) */
     uint64_t frame_seq;
+    uint64_t deferred_seq; /* the publication whose residual delta waited once for cheaper frames */
     uint8_t *tx;
     size_t tx_cap;
 } lc_session;

@@ -138,10 +138,23 @@ int main(void) {
     if (pl) memcpy(held, pl, sizeof held);
     CHECK(n1 == n2, "two clients' keyframes have the same length");
     j = lightmap_job(&p2, 2, 2, LC_ENC_RGB9E5, 1);
+    /* The server writes cheap frames before residual deltas it must deflate (server.c). */
+    CHECK(lc_frames_would_deflate(f, &r1, &j) && lc_frames_would_deflate(f, &r2, &j),
+          "a residual delta not computed yet for this state and publication would deflate");
     n1 = lc_frames_encode(f, &r1, &j);
+    CHECK(!lc_frames_would_deflate(f, &r2, &j), "a client in the state another's residual delta left reuses it");
     n2 = lc_frames_encode(f, &r2, &j);
     CHECK(n1 == n2 && n1 > 0 && !memcmp(r1.out + j.pre, r2.out + j.pre, n1),
           "clients holding the same copy get the same residual delta");
+    {
+        lc_frames_job whole = lightmap_job(&p2, 2, 2, LC_ENC_RGB9E5, 0), forced = j, due = j;
+        forced.force_key = 1;
+        due.sequence = 1 + (uint64_t)j.keyframe_interval; /* the interval's keyframe */
+        lc_frames_job later = lightmap_job(&p1, 3, 3, LC_ENC_RGB9E5, 1);
+        CHECK(!lc_frames_would_deflate(f, &r1, &whole) && !lc_frames_would_deflate(f, &r1, &forced) &&
+                  !lc_frames_would_deflate(f, &r1, &due) && lc_frames_would_deflate(f, &r1, &later),
+              "whole-tile deltas and keyframes never deflate; the next publication's residual does");
+    }
     pl = parse(&r1, n1, j.pre, &h, &tiles);
     CHECK(pl && (h.flags & LC_FRAME_RESIDUAL) && h.tile_count == 1, "a residual delta of one tile");
     if (pl && (h.flags & LC_FRAME_RESIDUAL)) {
