@@ -363,10 +363,11 @@ static size_t frames_encode_lightmap(lc_frames *f, lc_frames_copy *cp, const lc_
             int rc = residual_sub ? frames_residual_compute(m, cp, j, enc, words, S, thr, floor_v)
                                   : frames_tiles_compute(m, cp, j, words, tb, S, thr, floor_v);
             if (rc != 0) return 0;
+            /* the key frames_memo_serves compares */
             m->from_state = from;
             m->pub_seq = j->pub_seq;
             m->tile = S;
-            m->thr = thr; /* the key frames_memo_serves compares */
+            m->thr = thr;
             m->to_state = ++f->delta_states;
         }
         key = m->keyframe;
