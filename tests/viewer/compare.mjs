@@ -5,8 +5,8 @@
 import { execFileSync } from 'node:child_process';
 import { writeFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { CORNELL, LUCENT_REF, SHOTS, check, connect, meanAbsDiff, openViewer, requirePrereqs, run, screenshot, skip, waitQuiet,
-  waitShown } from './lib.mjs';
+import { CORNELL, LUCENT_REF, SHOTS, check, connect, meanAbsDiff, openViewer, requirePrereqs, run, screenshot, skip,
+  waitConverged } from './lib.mjs';
 import { readPng, writePng } from './png.mjs';
 
 const W = 320, H = 240, MARGIN = 3, SPP = 128;
@@ -38,8 +38,8 @@ await run('viewer.compare', async ({ d, browser }) => {
     ['point', { type: 'light.set', light: { id: 'p1', type: 'point', position: [0.2, 0.42, 0.15], intensity: 0.05 } }],
   ];
   for (const [name, op] of cases) {
-    if (op) await waitShown(page, (await c.request(op)).revision);
-    await waitQuiet(page, 1000);
+    const waited = await waitConverged(page, op ? (await c.request(op)).revision : 0);
+    console.log(`${name}: the converged frame shown after ${waited} ms`);
     const shotPath = await screenshot(page, `compare_${name}_viewer`);
     const state = await c.state();
     const statePath = join(d.dir, `${name}.state.json`);

@@ -93,10 +93,19 @@ export async function openViewer(browser, port, query, { width = 320, height = 2
 /** Waits until the page has drawn a lightmap frame of revision >= rev; returns the ms waited. */
 export async function waitShown(page, rev, timeoutMs = 15000) {
   const t0 = Date.now();
+  // revision() changes in draw() after the render that used the frame: the canvas has it.
   await page.waitForFunction((r) => window.lucentViewer.revision() >= r, rev, { timeout: timeoutMs, polling: 20 });
-  // One more drawn frame, so the screenshot is of the canvas after that upload.
-  const n = await page.evaluate(() => window.lucentViewer.frameCount());
-  await page.waitForFunction((k) => window.lucentViewer.frameCount() >= k, n, { timeout: 5000 }).catch(() => {});
+  return Date.now() - t0;
+}
+
+/** Waits until the page has drawn its revision's last lightmap frame (converged, PROTOCOL.md
+ *  §6.1.1) of revision >= rev; returns the ms waited. Unlike waitQuiet it cannot return between
+ *  two refinement passes that are slower than the quiet time (as they are under ASan). */
+export async function waitConverged(page, rev, timeoutMs = 30000) {
+  const t0 = Date.now();
+  await page.waitForFunction((r) => window.lucentViewer.revision() >= r && window.lucentViewer.converged(), rev,
+    { timeout: timeoutMs, polling: 20 }).catch((e) => fail(`no converged frame of revision >= ${rev} shown within ` +
+      `${timeoutMs} ms (${e.message.split('\n')[0]})`));
   return Date.now() - t0;
 }
 
@@ -149,6 +158,26 @@ export function meanAbsDiff(a, b, margin) {
     n += 3;
   }
   return s / n;
+}
+
+/** How far b is from being a again: the share of pixels whose R+G+B differ by 3 levels or
+ *  more, and the largest such difference. lucentd's refinement of a new solution starts from
+ *  the light of the one before (warm, outside --cluster) and stops at --refine-tolerance, so
+ *  the same state reached from another state converges to light a little different: in the
+ *  Cornell box ~0.5% of the pixels by 3-8 levels (summed). A real difference (an object's
+ *  shadow, a light) moves ~20% of the pixels by up to ~250. */
+export function differenceFromSame(a, b) {
+  if (a.width !== b.width || a.height !== b.height) fail(`image sizes differ: ${a.width}x${a.height} vs ${b.width}x${b.height}`);
+  let n = 0, max = 0;
+  for (let i = 0; i < a.width * a.height; i++) {
+    let d = 0;
+    for (let k = 0; k < 3; k++) d += Math.abs(a.data[4 * i + k] - b.data[4 * i + k]);
+    if (d >= 3) n++;
+    max = Math.max(max, d);
+  }
+  const share = n / (a.width * a.height);
+  return { share, max, same: share < 0.02 && max <= 24,
+    text: `${(100 * share).toFixed(2)}% of the pixels differ by 3+ levels (R+G+B), at most ${max}; same: < 2%, <= 24` };
 }
 
 export function readText(path) {

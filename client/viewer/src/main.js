@@ -1,7 +1,7 @@
 // lucent's browser viewer: connects to the lucentd that served the page, loads the bake's
 // geometry (welcome.scene.geometry), streams the lightmap, the objects' SH and (for the probe
 // view) the SH grid, and renders in physical units (see shading.js for the formula).
-// Test hook: window.lucentViewer = { ready, revision(), lastLatencyMs(), role(), lastError(),
+// Test hook: window.lucentViewer = { ready, revision(), converged(), lastLatencyMs(), role(), lastError(),
 // camera(), frameCount(), overlay() } — the only global.
 import * as THREE from 'three';
 import { LucentClient } from '../../js/lucent.js';
@@ -35,6 +35,7 @@ class Viewer {
     this.errors = [];
     this.frames = 0;
     this.shownRevision = null;
+    this.shownConverged = false; // the shown lightmap frame is its revision's last (PROTOCOL.md §6.1.1)
     this.serverRevision = 0;
     this.renderQueued = false;
     this.hud = new Hud();
@@ -369,6 +370,7 @@ class Viewer {
     if (p) {
       this.pendingShown = null;
       this.shownRevision = p.revision;
+      this.shownConverged = p.converged;
       this.hud.revision(this.serverRevision, p.revision);
       this.hud.pass(p.pass, p.converged);
       this.latency.shown(p.revision);
@@ -381,6 +383,7 @@ class Viewer {
     return {
       ready: null,
       revision: () => v.shownRevision,
+      converged: () => v.shownConverged,
       lastLatencyMs: () => v.latency.last,
       role: () => (v.client ? v.client.role : null),
       lastError: () => (v.errors.length ? v.errors[v.errors.length - 1] : null),
