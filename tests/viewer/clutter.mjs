@@ -59,7 +59,8 @@ function transportEvent(c, id, transport, ms = 30000) {
 }
 
 // --clutter-rest 3: the DNRT image must converge before the cube is promoted, so that it can
-// be the reference for the image after demotion (under ASan a refinement series takes ~1 s).
+// be the reference for the image after demotion (0.2-0.3 s under ASan; 3 s leaves room on a
+// loaded machine).
 await run('viewer.clutter', async ({ d, browser }) => {
   const c = await connect(d.port);
   check(c.welcome.scene.clutter && c.welcome.scene.clutter.rest === 3, `welcome.scene.clutter (${JSON.stringify(c.welcome.scene.clutter)})`);

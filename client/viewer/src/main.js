@@ -1,8 +1,8 @@
 // lucent's browser viewer: connects to the lucentd that served the page, loads the bake's
 // geometry (welcome.scene.geometry), streams the lightmap, the objects' SH and (for the probe
 // view) the SH grid, and renders in physical units (see shading.js for the formula).
-// Test hook: window.lucentViewer = { ready, revision(), converged(), lastLatencyMs(), role(), lastError(),
-// camera(), frameCount(), overlay() } — the only global.
+// Test hook: window.lucentViewer = { ready, revision(), converged(), lastLatencyMs(), role(),
+// lastError(), camera(), frameCount(), overlay() } — the only global.
 import * as THREE from 'three';
 import { LucentClient } from '../../js/lucent.js';
 import { readView, writeView } from './urlstate.js';
