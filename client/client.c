@@ -770,13 +770,10 @@ static int client_lws_callback(struct lws *wsi, enum lws_callback_reasons reason
     return lws_callback_http_dummy(wsi, reason, user, in, len);
 }
 
-/* tx_packet_size: lws cuts every send() to it (0: to the 64 KiB rx buffer), so a 640x480 MR
- * upload (2.4 MB) left in 38 pieces, one per service-loop round: acknowledged after 55-60 ms
- * (p50), now 47-49. One send() takes what the kernel's buffer holds; lws keeps the rest and
- * sends it as the socket drains (as lucentd does). */
-#define CLIENT_TX_PACKET_MAX (64u << 20)
+/* LC_PROTO_WS_TX_PACKET_MAX: a 640x480 MR upload (2.4 MB) left in 38 pieces before,
+ * acknowledged after 55-60 ms (p50), now 47-49. */
 static const struct lws_protocols client_protocols[] = {
-    {LC_PROTO_SUBPROTOCOL, client_lws_callback, 0, 65536, 0, NULL, CLIENT_TX_PACKET_MAX},
+    {LC_PROTO_SUBPROTOCOL, client_lws_callback, 0, 65536, 0, NULL, LC_PROTO_WS_TX_PACKET_MAX},
     {NULL, NULL, 0, 0, 0, NULL, 0},
 };
 

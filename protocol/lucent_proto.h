@@ -15,6 +15,11 @@
 
 #define LC_PROTO_NAME "lucent/1"
 #define LC_PROTO_SUBPROTOCOL "lucent.v1"
+/* The lws_protocols tx_packet_size of both ends: lws cuts every send() to it (0: to the rx
+ * buffer, 16 or 64 KiB), so a large frame or upload left in pieces, one per service-loop
+ * round. With this, one send() takes what the kernel's buffer holds; lws keeps the rest and
+ * sends it as the socket drains. */
+#define LC_PROTO_WS_TX_PACKET_MAX (64u << 20)
 #define LC_PROTO_VERSION "1.1" /* welcome "version" (§8.1); absent = 1.0 */
 #define LC_PROTO_ID_MAX 64     /* bytes in a light/object id or request id string */
 #define LC_PROTO_NAME_MAX 128  /* client names */

@@ -448,15 +448,11 @@ static void server_tick(lws_sorted_usec_list_t *sul) {
     lws_sul_schedule(s->ctx, 0, &s->tick, server_tick, 250 * LWS_US_PER_MS);
 }
 
-/* tx_packet_size: lws cuts every send() to it (0: to the 16 KiB rx buffer), so a 600 KiB
- * lightmap frame left in 40 pieces, one piece per client per service-loop round: with ten
- * clients (conference room) the frame's relight-to-client time was 14-15 ms, now 7-8. One
- * send() takes what the kernel's buffer holds; lws keeps the rest and sends it as the socket
- * drains. */
-#define SERVER_TX_PACKET_MAX (64u << 20)
+/* LC_PROTO_WS_TX_PACKET_MAX: a 600 KiB lightmap frame left in 40 pieces before; with ten
+ * clients (conference room) its relight-to-client time was 14-15 ms, now 7-8. */
 static const struct lws_protocols server_protocols[] = {
     {"http", server_http_callback, sizeof(server_http_tx), 0, 0, NULL, 0},
-    {LC_PROTO_SUBPROTOCOL, server_ws_callback, sizeof(lc_session), 16384, 0, NULL, SERVER_TX_PACKET_MAX},
+    {LC_PROTO_SUBPROTOCOL, server_ws_callback, sizeof(lc_session), 16384, 0, NULL, LC_PROTO_WS_TX_PACKET_MAX},
     {NULL, NULL, 0, 0, 0, NULL, 0},
 };
 
